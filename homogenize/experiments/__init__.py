@@ -1,0 +1,2 @@
+"""Measured data, the seed model, causes and their extensions, and ``diagnose``."""
+__all__: list[str] = []

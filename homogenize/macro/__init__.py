@@ -1,0 +1,2 @@
+"""Macro solvers: cantilever and channel, closed forms, exporters for Elmer and Abaqus."""
+__all__: list[str] = []

@@ -1,0 +1,63 @@
+"""Input validation shared by every layer: one clear message per bad input.
+
+Every public function that takes user-facing parameters checks them here and raises
+:class:`InputError`, whose message names the parameter, its value, its unit and the allowed
+range. The CLI turns an ``InputError`` into one line on stderr and exit code 2.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["InputError", "check_finite", "check_positive", "check_range", "check_choice"]
+
+
+class InputError(ValueError):
+    """Unusable input: the message names what is wrong and what is allowed."""
+
+
+def _fmt(unit: str) -> str:
+    return f" {unit}" if unit else ""
+
+
+def check_finite(name: str, value, unit: str = ""):
+    """Return ``value`` (scalar or array) if every entry is a finite real number."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number{_fmt(unit)}, got {value!r}") from None
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} must be finite{_fmt(unit)}, got {value!r}")
+    return value
+
+
+def check_positive(name: str, value, unit: str = "", allow_zero: bool = False) -> float:
+    """Return ``float(value)`` if it is finite and > 0 (>= 0 with ``allow_zero``)."""
+    check_finite(name, value, unit)
+    v = float(value)
+    if v < 0 or (v == 0 and not allow_zero):
+        rng = ">= 0" if allow_zero else "> 0"
+        raise InputError(f"{name} must be {rng}{_fmt(unit)}, got {v:g}")
+    return v
+
+
+def check_range(name: str, value, lo: float, hi: float, unit: str = "",
+                lo_open: bool = False, hi_open: bool = False) -> float:
+    """Return ``float(value)`` if it lies in the interval [lo, hi] (ends open as asked)."""
+    check_finite(name, value, unit)
+    v = float(value)
+    bad_lo = v <= lo if lo_open else v < lo
+    bad_hi = v >= hi if hi_open else v > hi
+    if bad_lo or bad_hi or math.isnan(v):
+        left = "(" if lo_open else "["
+        right = ")" if hi_open else "]"
+        raise InputError(f"{name} must be in {left}{lo:g}, {hi:g}{right}{_fmt(unit)}, got {v:g}")
+    return v
+
+
+def check_choice(name: str, value, choices) -> str:
+    """Return ``value`` if it is one of ``choices``."""
+    if value not in choices:
+        raise InputError(f"{name} must be one of {', '.join(map(str, choices))}; got {value!r}")
+    return value
