@@ -13,7 +13,374 @@ import numpy as np
 # ---------------------------------------------------------------------------------------------
 # Placement (cell lists, overlap tests) -- owned by particles.py
 # ---------------------------------------------------------------------------------------------
+# A cell list is a linked list per cell: ``head[c]`` is the last particle inserted in cell c
+# (-1: empty), ``nxt[i]`` the particle inserted before i in the same cell. Cells are cubes of
+# edge >= the largest contact distance 2 r_max + gap, so every possible overlap partner lies in
+# the 27 cells around a particle's cell (all cells when there are fewer than 3 per edge).
+# Separations use the minimum image d - L rint(d / L): if the nearest image does not overlap,
+# no image does, whatever the box size.
+
+
+@nb.njit(cache=True)
+def placement_cell_of(p, box, ncell):
+    """Flat index of the cell holding position p (3,) in a periodic box cut in ncell^3 cells."""
+    c = 0
+    for k in range(3):
+        q = int(np.floor(p[k] / box * ncell))
+        q = q % ncell
+        c = c * ncell + q
+    return c
+
+
+@nb.njit(cache=True)
+def placement_overlaps(p, r, gap, centers, radii, head, nxt, box, ncell):
+    """True if a sphere (p, r) comes closer than ``gap`` to any sphere in the cell list."""
+    ci = placement_cell_of(p, box, ncell)
+    cz = ci % ncell
+    cy = (ci // ncell) % ncell
+    cx = ci // (ncell * ncell)
+    span = 1 if ncell >= 3 else 0
+    lo = -1 if ncell >= 3 else 0
+    hi = 1 if ncell >= 3 else ncell - 1
+    for ax in range(lo, hi + 1):
+        for ay in range(lo, hi + 1):
+            for az in range(lo, hi + 1):
+                if span == 1:
+                    c = (((cx + ax) % ncell) * ncell + (cy + ay) % ncell) * ncell + (cz + az) % ncell
+                else:
+                    c = (ax * ncell + ay) * ncell + az
+                j = head[c]
+                while j >= 0:
+                    s2 = 0.0
+                    for k in range(3):
+                        d = centers[j, k] - p[k]
+                        d -= box * np.rint(d / box)
+                        s2 += d * d
+                    lim = r + radii[j] + gap
+                    if s2 < lim * lim:
+                        return True
+                    j = nxt[j]
+    return False
+
+
+@nb.njit(cache=True)
+def placement_rsa_bodies(offsets, radii, body_start, candidates, gap, box, ncell, head, nxt,
+                         centers, state, max_attempts):
+    """Random sequential addition of rigid bodies of spheres, consuming a stream of candidates.
+
+    Body b is made of spheres ``body_start[b] <= i < body_start[b+1]`` with centres
+    ``candidate + offsets[i]`` (wrapped). Candidates (M, 3) are tried in order; a body is
+    accepted when none of its spheres comes closer than ``gap`` to a sphere already placed.
+    ``state`` (int64, 3) = [next body, failed attempts on it, total attempts] is updated in
+    place so that the caller can continue with a new batch of candidates.
+    Returns 0 when all bodies are placed, 1 when the candidates ran out, 2 when a body failed
+    ``max_attempts`` times in a row.
+    """
+    nbody = body_start.shape[0] - 1
+    p = np.empty(3)
+    for m in range(candidates.shape[0]):
+        b = state[0]
+        if b >= nbody:
+            return 0
+        if state[1] >= max_attempts:
+            return 2
+        state[1] += 1
+        state[2] += 1
+        ok = True
+        for i in range(body_start[b], body_start[b + 1]):
+            for k in range(3):
+                p[k] = (candidates[m, k] + offsets[i, k]) % box
+            if placement_overlaps(p, radii[i], gap, centers, radii, head, nxt, box, ncell):
+                ok = False
+                break
+        if ok:
+            for i in range(body_start[b], body_start[b + 1]):
+                for k in range(3):
+                    centers[i, k] = (candidates[m, k] + offsets[i, k]) % box
+                c = placement_cell_of(centers[i], box, ncell)
+                nxt[i] = head[c]
+                head[c] = i
+            state[0] = b + 1
+            state[1] = 0
+    if state[0] >= nbody:
+        return 0
+    return 2 if state[1] >= max_attempts else 1
 
 # ---------------------------------------------------------------------------------------------
 # Dipoles (direct sums, Ewald real space, forces) -- owned by dipoles.py
 # ---------------------------------------------------------------------------------------------
+import math  # noqa: E402  (dipole kernels use math.erfc/exp/sqrt)
+
+# Conventions: fields are returned WITHOUT the 1/(4 pi) of H = (3 r (m.r)/r^5 - m/r^3) / (4 pi)
+# and forces without mu0/(4 pi); the Python wrappers in dipoles.py apply them. Ewald kernels
+# work in box units (cube of edge 1, centres in [0, 1)). ``B1, B2, B3`` are the Ewald screened
+# radial functions B_l(r) = [(2l-1) B_{l-1} + (2 a^2)^l e^{-a^2 r^2} / (a sqrt(pi))] / r^2,
+# B_0 = erfc(a r) / r, which tend to (2l-1)!! / r^(2l+1) for a -> 0 (bare dipole sums).
+
+
+def _dipole_field_direct_impl(src, mom, obs, out):
+    """Bare dipole field of every source at every observer, ``src, mom (3, Ns)``, ``obs, out
+    (3, No)`` (structure of arrays so the inner loop vectorises); coincident points skipped."""
+    ns = src.shape[1]
+    no = obs.shape[1]
+    blk = 256
+    nblk = (no + blk - 1) // blk
+    for b in nb.prange(nblk):
+        i0 = b * blk
+        i1 = min(i0 + blk, no)
+        for i in range(i0, i1):
+            out[0, i] = 0.0
+            out[1, i] = 0.0
+            out[2, i] = 0.0
+        for j in range(ns):
+            sx, sy, sz = src[0, j], src[1, j], src[2, j]
+            mx, my, mz = mom[0, j], mom[1, j], mom[2, j]
+            for i in range(i0, i1):
+                dx = obs[0, i] - sx
+                dy = obs[1, i] - sy
+                dz = obs[2, i] - sz
+                r2 = dx * dx + dy * dy + dz * dz
+                ok = r2 > 0.0
+                ir2 = 1.0 / (r2 if ok else 1.0)
+                ir3 = ir2 * math.sqrt(ir2) if ok else 0.0
+                t = 3.0 * (mx * dx + my * dy + mz * dz) * ir2
+                out[0, i] += (t * dx - mx) * ir3
+                out[1, i] += (t * dy - my) * ir3
+                out[2, i] += (t * dz - mz) * ir3
+
+
+dipole_field_direct = nb.njit(cache=True)(_dipole_field_direct_impl)
+dipole_field_direct_par = nb.njit(cache=True, parallel=True)(_dipole_field_direct_impl)
+
+
+@nb.njit(cache=True)
+def ewald_b123(r, alpha):
+    """Screened radial functions (B1, B2, B3) at distance r > 0 (box units)."""
+    a2 = alpha * alpha
+    c = 2.0 * alpha / math.sqrt(math.pi) * math.exp(-a2 * r * r)
+    ir2 = 1.0 / (r * r)
+    b0 = math.erfc(alpha * r) / r
+    b1 = (b0 + c) * ir2
+    b2 = (3.0 * b1 + 2.0 * a2 * c) * ir2
+    b3 = (5.0 * b2 + 4.0 * a2 * a2 * c) * ir2
+    return b1, b2, b3
+
+
+@nb.njit(cache=True)
+def ewald_cell_index(p, ncell):
+    """Cell index along one axis of a coordinate p in [0, 1)."""
+    c = int(p * ncell)
+    return min(max(c, 0), ncell - 1)
+
+
+def _ewald_real_impl(pos, mom, order, cell_start, ncell, noff, alpha, rc, want_force,
+                     out_h, out_f, out_vir):
+    """Real-space Ewald part for every particle i over all j and images within rc.
+
+    ``order``/``cell_start``: particles sorted by cell (cell c holds order[cell_start[c]:
+    cell_start[c+1]]), ``ncell`` cells per edge; ``noff`` >= rc * ncell neighbour cells are
+    visited per direction, wrapping (with the image shift) as often as needed, so any rc works.
+    ``out_h`` (N,3): field sum C (m_j.r) r - B m_j. With ``want_force``: ``out_f`` (N,3) force
+    on i and ``out_vir`` (N,9) half of sum_j r (x) F (row-major), both without mu0/(4 pi).
+    """
+    n = pos.shape[0]
+    rc2 = rc * rc
+    for i in nb.prange(n):
+        xi, yi, zi = pos[i, 0], pos[i, 1], pos[i, 2]
+        mix, miy, miz = mom[i, 0], mom[i, 1], mom[i, 2]
+        cx = ewald_cell_index(xi, ncell)
+        cy = ewald_cell_index(yi, ncell)
+        cz = ewald_cell_index(zi, ncell)
+        hx = hy = hz = 0.0
+        fx = fy = fz = 0.0
+        v = np.zeros(9)
+        for ox in range(-noff, noff + 1):
+            gx = cx + ox
+            sx = (gx // ncell)
+            gx -= sx * ncell
+            for oy in range(-noff, noff + 1):
+                gy = cy + oy
+                sy = (gy // ncell)
+                gy -= sy * ncell
+                for oz in range(-noff, noff + 1):
+                    gz = cz + oz
+                    sz = (gz // ncell)
+                    gz -= sz * ncell
+                    c = (gx * ncell + gy) * ncell + gz
+                    for t in range(cell_start[c], cell_start[c + 1]):
+                        j = order[t]
+                        dx = xi - pos[j, 0] - sx
+                        dy = yi - pos[j, 1] - sy
+                        dz = zi - pos[j, 2] - sz
+                        r2 = dx * dx + dy * dy + dz * dz
+                        if r2 >= rc2 or r2 == 0.0:
+                            continue
+                        b1, b2, b3 = ewald_b123(math.sqrt(r2), alpha)
+                        mjx, mjy, mjz = mom[j, 0], mom[j, 1], mom[j, 2]
+                        mjr = mjx * dx + mjy * dy + mjz * dz
+                        hx += b2 * mjr * dx - b1 * mjx
+                        hy += b2 * mjr * dy - b1 * mjy
+                        hz += b2 * mjr * dz - b1 * mjz
+                        if want_force:
+                            mir = mix * dx + miy * dy + miz * dz
+                            mm = mix * mjx + miy * mjy + miz * mjz
+                            g = b2 * mm - b3 * mir * mjr
+                            px = g * dx + b2 * (mjr * mix + mir * mjx)
+                            py = g * dy + b2 * (mjr * miy + mir * mjy)
+                            pz = g * dz + b2 * (mjr * miz + mir * mjz)
+                            fx += px
+                            fy += py
+                            fz += pz
+                            v[0] += 0.5 * dx * px
+                            v[1] += 0.5 * dx * py
+                            v[2] += 0.5 * dx * pz
+                            v[3] += 0.5 * dy * px
+                            v[4] += 0.5 * dy * py
+                            v[5] += 0.5 * dy * pz
+                            v[6] += 0.5 * dz * px
+                            v[7] += 0.5 * dz * py
+                            v[8] += 0.5 * dz * pz
+        out_h[i, 0] = hx
+        out_h[i, 1] = hy
+        out_h[i, 2] = hz
+        if want_force:
+            out_f[i, 0] = fx
+            out_f[i, 1] = fy
+            out_f[i, 2] = fz
+            for q in range(9):
+                out_vir[i, q] = v[q]
+
+
+ewald_real = nb.njit(cache=True, parallel=True)(_ewald_real_impl)
+
+
+@nb.njit(cache=True, parallel=True)
+def ewald_structure_factor(pos, mom, kvec, out):
+    """Vector structure factor t(k) = sum_j m_j exp(-i k.x_j): ``out`` (K, 6) = (Re t, Im t)."""
+    nk = kvec.shape[0]
+    n = pos.shape[0]
+    for q in nb.prange(nk):
+        kx, ky, kz = kvec[q, 0], kvec[q, 1], kvec[q, 2]
+        a = np.zeros(6)
+        for j in range(n):
+            ph = kx * pos[j, 0] + ky * pos[j, 1] + kz * pos[j, 2]
+            c = math.cos(ph)
+            s = math.sin(ph)
+            for d in range(3):
+                a[d] += mom[j, d] * c
+                a[3 + d] -= mom[j, d] * s
+        for d in range(6):
+            out[q, d] = a[d]
+
+
+@nb.njit(cache=True, parallel=True)
+def ewald_recip_gather(pos, mom, kvec, coef, out_h, out_f):
+    """Per particle i: ``out_h`` = sum_k k Re[c_k e^{i k.x_i}], ``out_f`` = sum_k (m_i.k) k
+    Im[c_k e^{i k.x_i}], with ``coef`` (K, 2) = (Re c_k, Im c_k)."""
+    n = pos.shape[0]
+    nk = kvec.shape[0]
+    for i in nb.prange(n):
+        hx = hy = hz = 0.0
+        fx = fy = fz = 0.0
+        for q in range(nk):
+            kx, ky, kz = kvec[q, 0], kvec[q, 1], kvec[q, 2]
+            ph = kx * pos[i, 0] + ky * pos[i, 1] + kz * pos[i, 2]
+            c = math.cos(ph)
+            s = math.sin(ph)
+            re = coef[q, 0] * c - coef[q, 1] * s
+            im = coef[q, 0] * s + coef[q, 1] * c
+            hx += kx * re
+            hy += ky * re
+            hz += kz * re
+            mk = (mom[i, 0] * kx + mom[i, 1] * ky + mom[i, 2] * kz) * im
+            fx += kx * mk
+            fy += ky * mk
+            fz += kz * mk
+        out_h[i, 0] = hx
+        out_h[i, 1] = hy
+        out_h[i, 2] = hz
+        out_f[i, 0] = fx
+        out_f[i, 1] = fy
+        out_f[i, 2] = fz
+
+
+@nb.njit(cache=True)
+def pme_bspline(frac, p, w):
+    """Cardinal B-spline weights of order p: w[q] = M_p(frac + q), q = 0..p-1, frac in [0,1).
+
+    Grid point floor(u) - q receives weight w[q] for a particle at grid coordinate u.
+    """
+    for q in range(p):
+        w[q] = 0.0
+    w[0] = frac
+    w[1] = 1.0 - frac
+    # raise the order by the recursion M_n(x) = [x M_{n-1}(x) + (n - x) M_{n-1}(x - 1)]/(n-1),
+    # evaluated at x = frac + q from the highest q down so w[q-1] is still of order n-1.
+    for n in range(3, p + 1):
+        for q in range(n - 1, -1, -1):
+            x = frac + q
+            here = w[q] if q < n - 1 else 0.0
+            below = w[q - 1] if q > 0 else 0.0
+            w[q] = (x * here + (n - x) * below) / (n - 1)
+    return w
+
+
+@nb.njit(cache=True)
+def pme_spread(gpos, val, p, out):
+    """Spread per-particle values ``val`` (N, C) onto ``out`` (C, K, K, K) with order-p
+    B-splines; ``gpos`` (N, 3) are grid coordinates in [0, K). Serial: no write races."""
+    n = gpos.shape[0]
+    nc = val.shape[1]
+    kk = out.shape[1]
+    wx = np.empty(p)
+    wy = np.empty(p)
+    wz = np.empty(p)
+    for i in range(n):
+        fx = math.floor(gpos[i, 0])
+        fy = math.floor(gpos[i, 1])
+        fz = math.floor(gpos[i, 2])
+        pme_bspline(gpos[i, 0] - fx, p, wx)
+        pme_bspline(gpos[i, 1] - fy, p, wy)
+        pme_bspline(gpos[i, 2] - fz, p, wz)
+        for a in range(p):
+            ga = (int(fx) - a) % kk
+            for b in range(p):
+                gb = (int(fy) - b) % kk
+                wab = wx[a] * wy[b]
+                for c in range(p):
+                    gc = (int(fz) - c) % kk
+                    w = wab * wz[c]
+                    for d in range(nc):
+                        out[d, ga, gb, gc] += w * val[i, d]
+
+
+@nb.njit(cache=True, parallel=True)
+def pme_gather(gpos, grid, p, out):
+    """Interpolate ``grid`` (C, K, K, K) at grid coordinates ``gpos`` (N, 3) with order-p
+    B-splines into ``out`` (N, C) (the transpose of :func:`pme_spread`)."""
+    n = gpos.shape[0]
+    nc = grid.shape[0]
+    kk = grid.shape[1]
+    for i in nb.prange(n):
+        wx = np.empty(p)
+        wy = np.empty(p)
+        wz = np.empty(p)
+        acc = np.zeros(nc)
+        fx = math.floor(gpos[i, 0])
+        fy = math.floor(gpos[i, 1])
+        fz = math.floor(gpos[i, 2])
+        pme_bspline(gpos[i, 0] - fx, p, wx)
+        pme_bspline(gpos[i, 1] - fy, p, wy)
+        pme_bspline(gpos[i, 2] - fz, p, wz)
+        for a in range(p):
+            ga = (int(fx) - a) % kk
+            for b in range(p):
+                gb = (int(fy) - b) % kk
+                wab = wx[a] * wy[b]
+                for c in range(p):
+                    gc = (int(fz) - c) % kk
+                    w = wab * wz[c]
+                    for d in range(nc):
+                        acc[d] += w * grid[d, ga, gb, gc]
+        for d in range(nc):
+            out[i, d] = acc[d]

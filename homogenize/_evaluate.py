@@ -1,0 +1,267 @@
+"""Evaluators: what one realization of a study computes.
+
+An evaluator is a picklable callable ``evaluator(task) -> dict[str, ndarray]`` with an ``id``
+(name and version: it names the stored results, so results of an older evaluator are never
+mixed with newer ones), ``check(study)`` (raises :class:`InputError` for a study it cannot run)
+and the quantities it returns, all listed in :data:`QUANTITIES` with their unit and shape.
+
+* :class:`RVEEvaluator` (``evaluator = "rve"``): generate a random RVE
+  (:func:`micro.particles.generate_rve`), solve the self-consistent dipoles
+  (:func:`micro.dipoles.solve`) and optionally the FEM cell problem
+  (:func:`homogenize.cell.homogenize_rve`).
+* :class:`SyntheticEvaluator` (``evaluator = "synthetic"``): normal outputs with a known mean
+  and standard deviation (:func:`synthetic_truth`), for testing the batch machinery and the
+  statistics against exact answers.
+"""
+from __future__ import annotations
+
+import inspect
+import math
+import os
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from micro._validate import InputError
+
+__all__ = ["QUANTITIES", "get_evaluator", "RVEEvaluator", "SyntheticEvaluator", "synthetic_truth"]
+
+# name -> (unit, per-realization shape, description)
+QUANTITIES = {
+    "f_eff_N_m3": ("N/m^3", (3,), "effective magnetic body force density <sum F_i> / V"),
+    "phi_eff": ("1", (), "effective magnetic volume fraction (magnetics solver)"),
+    "d_eff": ("1", (), "effective packing factor: body force relative to the seed's N F_g / V "
+                       "with d = 1 (magnetics solver)"),
+    "M_eff_A_per_m": ("A/m", (3,), "effective magnetization <sum m_i> / V"),
+    "virial_stress_Pa": ("Pa", (3, 3), "magnetic stress: virial of the particle forces"),
+    "E_eff_Pa": ("Pa", (), "effective Young's modulus (FEM, isotropic projection)"),
+    "nu_eff": ("1", (), "effective Poisson's ratio (FEM, isotropic projection)"),
+    "stress_mag_Pa": ("Pa", (3, 3), "magnetic stress from the FEM cell problem"),
+    "volume_m3": ("m^3", (), "RVE box volume"),
+    "phi_rve": ("1", (), "particle volume fraction of the generated RVE"),
+}
+
+# Seed-paper values used by the synthetic model, so that its numbers look like the real ones.
+_MS_A_PER_M = 7870.0 * 178.0       # Fe saturation magnetization rho * sigma [A/m]
+_B_SAT_T = 0.3                       # field scale of the synthetic magnetization curve [T]
+_REL_SD_100 = 0.05                   # relative sd of f_eff at 100 particles
+
+
+def get_evaluator(name: str):
+    """The evaluator of a study's ``evaluator`` key."""
+    if name == "rve":
+        return RVEEvaluator()
+    if name == "synthetic":
+        return SyntheticEvaluator()
+    raise InputError(f"unknown evaluator {name!r}; allowed: rve, synthetic")
+
+
+def _check_finite_result(out: dict, task) -> dict:
+    res = {}
+    for k, v in out.items():
+        if k not in QUANTITIES:
+            raise RuntimeError(f"evaluator returned unknown quantity {k!r}")
+        a = np.asarray(v, dtype=np.float64)
+        if a.shape != QUANTITIES[k][1]:
+            raise RuntimeError(f"evaluator returned {k} with shape {a.shape}, "
+                               f"expected {QUANTITIES[k][1]}")
+        if not np.all(np.isfinite(a)):
+            raise RuntimeError(f"non-finite {k} = {a} at grid point {task.grid_index} "
+                               f"realization {task.realization} ({task.point})")
+        res[k] = a
+    return res
+
+
+# --------------------------------------------------------------------------- synthetic
+_SYNTH_AXES = {"phi", "B_T", "gradB_T_per_m", "mean_radius_m", "arrangement", "law"}
+_ARRANGEMENT_FACTOR = {"dispersed": 1.0, "clustered": 1.1, "chained": 1.25}
+
+
+def synthetic_truth(point: dict, settings: dict) -> dict:
+    """Exact mean and standard deviation of each output of :class:`SyntheticEvaluator`.
+
+    Returns ``{quantity: (mean, sd)}`` with arrays of the quantity's shape. The body force
+    mimics a saturating Fe suspension, ``f_z = phi Ms tanh(B / 0.3 T) dB/dz`` (times 1.1 for
+    clustered, 1.25 for chained particles), with a relative standard deviation
+    ``0.05 sqrt(100 / n_particles)``: variance proportional to 1 / RVE volume (Kanit exponent 1).
+    """
+    phi = float(point.get("phi", 0.035))
+    B = float(point.get("B_T", 0.1))
+    g = float(point.get("gradB_T_per_m", 1.78))
+    r = float(point.get("mean_radius_m", 25e-9))
+    k = _ARRANGEMENT_FACTOR[point.get("arrangement", "dispersed")]
+    n = int(settings["n_particles"])
+    rel = _REL_SD_100 * math.sqrt(100.0 / n)
+    M = phi * _MS_A_PER_M * math.tanh(B / _B_SAT_T) * k
+    f = M * g
+    out = {
+        "f_eff_N_m3": (np.array([0.0, 0.0, f]), np.abs(np.array([0.2, 0.2, 1.0]) * rel * f)
+                       + 1e-9),
+        "M_eff_A_per_m": (np.array([0.0, 0.0, M]), np.abs(np.array([0.2, 0.2, 1.0]) * rel * M)
+                          + 1e-9),
+        "phi_eff": (np.array(phi * k), np.array(rel * phi)),
+        "d_eff": (np.array(k), np.array(rel)),
+        "virial_stress_Pa": (np.diag([-0.5, -0.5, 1.0]) * 1e-7 * M * M * k,
+                             np.full((3, 3), rel * 1e-7 * M * M + 1e-9)),
+        "volume_m3": (np.array(n * 4.0 / 3.0 * math.pi * r ** 3 / phi), np.array(0.0)),
+        "phi_rve": (np.array(phi), np.array(0.0)),
+    }
+    if settings.get("fem"):
+        out["E_eff_Pa"] = (np.array(2e6 * (1 + 2.5 * phi)), np.array(2e6 * rel * phi))
+        out["nu_eff"] = (np.array(0.45), np.array(0.01 * rel))
+        out["stress_mag_Pa"] = out["virial_stress_Pa"]
+    return out
+
+
+@dataclass(frozen=True)
+class SyntheticEvaluator:
+    """Normal outputs with a known distribution (:func:`synthetic_truth`).
+
+    For tests of the batch machinery: ``counter_dir`` records every call as one file
+    ``g<grid>_r<realization>_<uuid>``; ``die_once_dir`` makes the first call of each realization
+    kill its worker process (``os._exit``), so the scheduler must retry it; ``fail_on`` lists
+    tags ``g<grid>_r<realization>`` that raise; ``work_seconds`` burns CPU per call
+    (for benchmarks).
+    """
+
+    counter_dir: str | None = None
+    die_once_dir: str | None = None
+    fail_on: tuple = ()
+    work_seconds: float = 0.0
+
+    id = "synthetic-1"
+
+    def check(self, study) -> None:
+        for axis, values in study.axes:
+            if axis not in _SYNTH_AXES:
+                raise InputError(f"{study.path}: [grid] unknown key '{axis}' for the synthetic "
+                                 f"evaluator; allowed: {', '.join(sorted(_SYNTH_AXES))}")
+            if axis == "arrangement":
+                for v in values:
+                    if v not in _ARRANGEMENT_FACTOR:
+                        raise InputError(f"{study.path}: [grid] arrangement must be one of "
+                                         f"{', '.join(_ARRANGEMENT_FACTOR)}; got {v!r}")
+        for t in ("rve", "law", "magnetics", "cell"):
+            if getattr(study, t):
+                k = next(iter(getattr(study, t)))
+                raise InputError(f"{study.path}: [{t}] unknown key '{k}' (the synthetic "
+                                 f"evaluator takes no [{t}] parameters)")
+
+    def __call__(self, task) -> dict:
+        tag = f"g{task.grid_index}_r{task.realization}"
+        if self.counter_dir is not None:
+            Path(self.counter_dir, f"{tag}_{uuid.uuid4().hex}").touch()
+        if self.die_once_dir is not None:
+            marker = Path(self.die_once_dir, tag)
+            if not marker.exists():
+                marker.touch()
+                os._exit(1)      # a dying worker, as after a segfault or the OOM killer
+        if tag in self.fail_on:
+            raise RuntimeError(f"synthetic failure of {tag}")
+        if self.work_seconds > 0:
+            t_end = time.process_time() + self.work_seconds
+            x = 0.0
+            while time.process_time() < t_end:
+                x += math.sin(x + 1.0)
+        truth = synthetic_truth(task.point, task.settings)
+        rng = task.rng()
+        out = {}
+        for name in sorted(truth):     # fixed draw order: the result depends on the seed only
+            mean, sd = truth[name]
+            out[name] = mean + sd * rng.standard_normal(np.shape(mean))
+        return _check_finite_result(out, task)
+
+
+# --------------------------------------------------------------------------- real chain
+_FIELD_AXES = ("phi", "B_T", "gradB_T_per_m", "law")
+DEFAULT_LAW = "frohlich-kennelly"
+
+
+def _signature_keys(func) -> set:
+    return set(inspect.signature(func).parameters)
+
+
+@dataclass(frozen=True)
+class RVEEvaluator:
+    """particles -> dipoles -> (FEM): one random RVE at one grid point.
+
+    Grid axes ``phi``, ``B_T``, ``gradB_T_per_m`` are required, ``law`` is optional
+    (default Froehlich-Kennelly); any other axis and the ``[rve]`` table are keywords of
+    :func:`micro.particles.generate_rve`; ``[law]`` goes to :func:`micro.magnetization.get_law`,
+    ``[magnetics]`` to :func:`micro.dipoles.solve`, ``[cell]`` to
+    :func:`homogenize.cell.homogenize_rve`.
+    """
+
+    id = "rve-1"
+
+    def check(self, study) -> None:
+        names = dict(study.axes)
+        for req in ("phi", "B_T", "gradB_T_per_m"):
+            if req not in names:
+                raise InputError(f"{study.path}: [grid] missing key '{req}' (required by the "
+                                 f"rve evaluator; one value is enough)")
+        try:
+            from micro.dipoles import solve
+            from micro.magnetization import get_law
+            from micro.particles import generate_rve
+        except ModuleNotFoundError as exc:
+            raise InputError(f"{study.path}: evaluator 'rve' needs {exc.name}, which is not "
+                             f"available in this installation") from None
+        gen_keys = _signature_keys(generate_rve) - {"phi", "n", "seed"}
+        for axis in names:
+            if axis not in _FIELD_AXES and axis not in gen_keys:
+                raise InputError(f"{study.path}: [grid] unknown key '{axis}'; allowed: "
+                                 f"{', '.join(sorted(set(_FIELD_AXES) | gen_keys))}")
+        for k in study.rve:
+            if k not in gen_keys:
+                raise InputError(f"{study.path}: [rve] unknown key '{k}'; allowed: "
+                                 f"{', '.join(sorted(gen_keys))}")
+        solve_keys = _signature_keys(solve) - {"rve", "B_T", "gradB_T_per_m", "law"}
+        for k in study.magnetics:
+            if k not in solve_keys:
+                raise InputError(f"{study.path}: [magnetics] unknown key '{k}'; allowed: "
+                                 f"{', '.join(sorted(solve_keys))}")
+        for law in names.get("law", (DEFAULT_LAW,)):
+            try:
+                get_law(law, **study.law)
+            except (InputError, TypeError, ValueError) as exc:
+                raise InputError(f"{study.path}: [grid] law / [law]: {exc}") from None
+        if study.fem:
+            try:
+                from homogenize.cell import homogenize_rve
+            except ModuleNotFoundError as exc:
+                raise InputError(f"{study.path}: [study] fem = true needs {exc.name}, which is "
+                                 f"not available in this installation") from None
+            cell_keys = _signature_keys(homogenize_rve) - {"rve", "voxels", "forces_N"}
+            for k in study.cell:
+                if k not in cell_keys:
+                    raise InputError(f"{study.path}: [cell] unknown key '{k}'; allowed: "
+                                     f"{', '.join(sorted(cell_keys))}")
+        elif study.cell:
+            raise InputError(f"{study.path}: [cell] is given but [study] fem = false")
+
+    def __call__(self, task) -> dict:
+        from micro.dipoles import solve
+        from micro.magnetization import get_law
+        from micro.particles import generate_rve
+        point = dict(task.point)
+        s = task.settings
+        phi = point.pop("phi")
+        B = point.pop("B_T")
+        grad = point.pop("gradB_T_per_m")
+        law = get_law(point.pop("law", DEFAULT_LAW), **s["law"])
+        rve = generate_rve(phi, s["n_particles"], task.seed_int(), **s["rve"], **point)
+        state = solve(rve, B, grad, law, **s["magnetics"])
+        out = {"f_eff_N_m3": state.f_eff_N_m3, "phi_eff": state.phi_eff, "d_eff": state.d_eff,
+               "M_eff_A_per_m": state.M_eff_A_per_m, "virial_stress_Pa": state.virial_stress_Pa,
+               "volume_m3": rve.volume_m3, "phi_rve": rve.phi}
+        if s["fem"]:
+            from homogenize.cell import homogenize_rve
+            forces = np.asarray(state.force_ext_N) + np.asarray(state.force_dd_N)
+            cell = homogenize_rve(rve, s["voxels"], forces_N=forces, **s["cell"])
+            out.update(E_eff_Pa=cell.E_eff_Pa, nu_eff=cell.nu_eff,
+                       stress_mag_Pa=cell.stress_mag_Pa)
+        return _check_finite_result(out, task)

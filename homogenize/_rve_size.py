@@ -1,0 +1,132 @@
+"""Representative volume: variance of an output against RVE volume (Kanit et al., 2003).
+
+For each RVE size of the study's ``[rve_size]`` table, a batch of realizations is run at every
+grid point; the sample variance of the chosen output is fitted by the power law
+``D^2(V) = D^2_ref (V_ref / V)^alpha`` and, for each size, the number of realizations needed for
+the target relative precision of the mean (Student-t half-width / |mean|) is reported, measured
+(from that size's own sd) and from the fit.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+from pathlib import Path
+
+import numpy as np
+
+from micro._io import atomic_path, manifest, write_json
+from micro._validate import InputError
+
+from ._stats import fit_power_law, realizations_needed
+from ._study import Study, load_study
+from .tables import _dask_client, read_table, run_batch
+
+__all__ = ["rve_size_study"]
+
+
+def rve_size_study(study, out_dir, *, evaluator=None, workers=None, scheduler=None,
+                   processes=True, client=None, progress=True, quantity=None, component=None,
+                   target=None) -> dict:
+    """Run the ``[rve_size]`` batches of ``study`` into ``out_dir`` and analyse them.
+
+    Returns a dict (also written as ``out_dir/rve_size.json``, with ``rve_size.md`` and the plot
+    ``rve_size.png``): per grid point and size the mean volume, mean, sd, the realizations
+    needed, and the fitted exponent alpha with its standard error.
+    """
+    if not isinstance(study, Study):
+        study = load_study(study)
+    spec = study.rve_size
+    if spec is None:
+        raise InputError(f"{study.path}: missing table [rve_size] (n_particles = [...], "
+                         f"realizations, quantity, component, target_rel_precision)")
+    quantity = quantity or spec.quantity
+    component = spec.component if component is None else component
+    target = spec.target_rel_precision if target is None else target
+    out_dir = Path(out_dir)
+    tables = {}
+    with contextlib.ExitStack() as stack:
+        cl = client if client is not None else stack.enter_context(
+            _dask_client(scheduler, workers, processes))    # one cluster for all sizes
+        for n in spec.n_particles:
+            sub = study.replace(n_particles=n, realizations=spec.realizations)
+            path = out_dir / f"rve_size_n{n}.h5"
+            run_batch(sub, path, evaluator=evaluator, client=cl, progress=progress)
+            tables[n] = read_table(path)
+    first = tables[spec.n_particles[0]]
+    q = first.resolve_quantity(quantity)
+    rows = []
+    for p, point in enumerate(first.points):
+        sizes = []
+        for n, t in tables.items():
+            x = t.component_values(q, component)[p]
+            V = float(t.values["volume_m3"][p].mean())
+            mean, sd = float(x.mean()), float(x.std(ddof=1))
+            if mean == 0:
+                raise InputError(f"{q} ({component}) has zero mean at grid point {p}: its "
+                                 f"relative precision is undefined; choose another component")
+            sizes.append({"n_particles": n, "volume_m3": V, "mean": mean, "sd": sd,
+                          "rel_sd": sd / abs(mean),
+                          "realizations_needed": realizations_needed(sd, mean, target,
+                                                                     study.confidence)})
+        V = [s["volume_m3"] for s in sizes]
+        var = [s["sd"] ** 2 for s in sizes]
+        fit = fit_power_law(V, var)
+        for s in sizes:
+            sd_fit = math.sqrt(float(fit.variance(s["volume_m3"])))
+            s["realizations_needed_fit"] = realizations_needed(sd_fit, s["mean"], target,
+                                                               study.confidence)
+        rows.append({"point": point, "sizes": sizes, "alpha": fit.alpha,
+                     "alpha_se": fit.alpha_se, "V_ref_m3": fit.V_ref_m3,
+                     "variance_ref": fit.variance_ref})
+    result = {"quantity": q, "component": component, "unit": first.units[q],
+              "target_rel_precision": target, "confidence": study.confidence,
+              "realizations_per_size": spec.realizations, "points": rows,
+              "manifest": manifest(study.config(), study.seed)}
+    write_json(out_dir / "rve_size.json", result)
+    _write_markdown(out_dir / "rve_size.md", result)
+    _plot(out_dir / "rve_size.png", result)
+    return result
+
+
+def _write_markdown(path: Path, res: dict) -> None:
+    lines = [f"# RVE size: {res['quantity']} ({res['component']}) [{res['unit']}]", "",
+             f"Realizations needed for a {100 * res['confidence']:g} % interval of half-width "
+             f"{100 * res['target_rel_precision']:g} % of the mean (Student t), measured at "
+             f"each size and from the power-law fit var ~ V^-alpha (Kanit et al. 2003).", ""]
+    for row in res["points"]:
+        pt = ", ".join(f"{k} = {v}" for k, v in row["point"].items())
+        lines += [f"## {pt}", "",
+                  f"alpha = {row['alpha']:.3f} +/- {row['alpha_se']:.3f} "
+                  f"(1 = independent sub-volumes)", "",
+                  "| particles | volume [m^3] | mean | sd | rel. sd | needed | needed (fit) |",
+                  "|---:|---:|---:|---:|---:|---:|---:|"]
+        for s in row["sizes"]:
+            lines.append(f"| {s['n_particles']} | {s['volume_m3']:.3e} | {s['mean']:.5g} | "
+                         f"{s['sd']:.3g} | {s['rel_sd']:.3g} | {s['realizations_needed']} | "
+                         f"{s['realizations_needed_fit']} |")
+        lines.append("")
+    text = "\n".join(lines) + "\n"
+    from micro._io import atomic_write_text
+    atomic_write_text(path, text)
+
+
+def _plot(path: Path, res: dict) -> None:
+    import matplotlib
+    from matplotlib.figure import Figure
+    del matplotlib
+    fig = Figure(figsize=(6.0, 4.2), layout="constrained")
+    ax = fig.add_subplot()
+    for row in res["points"]:
+        V = np.array([s["volume_m3"] for s in row["sizes"]])
+        var = np.array([s["sd"] ** 2 for s in row["sizes"]])
+        label = ", ".join(f"{k}={v}" for k, v in row["point"].items() if k != "gradB_T_per_m")
+        line, = ax.loglog(V, var, "o", label=f"{label}: alpha={row['alpha']:.2f}")
+        Vf = np.geomspace(V.min(), V.max(), 50)
+        ax.loglog(Vf, row["variance_ref"] * (row["V_ref_m3"] / Vf) ** row["alpha"], "-",
+                  color=line.get_color())
+    ax.set_xlabel("RVE volume V [m$^3$]")
+    ax.set_ylabel(f"variance of {res['quantity']} ({res['component']}) [({res['unit']})$^2$]")
+    ax.set_title("Variance across realizations vs RVE volume (Kanit et al. 2003)", fontsize=9)
+    ax.legend(fontsize=7)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=120)

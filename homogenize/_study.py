@@ -1,0 +1,354 @@
+"""Study files (TOML): parsing, validation, grid expansion and per-realization seeds.
+
+A study declares a grid of conditions and how many random RVEs to evaluate at each grid point::
+
+    [study]
+    name = "seed conditions"       # free text
+    seed = 20130402                # study seed (integer >= 0)
+    realizations = 8               # random RVEs per grid point (>= 2, for a standard deviation)
+    n_particles = 200              # particles per RVE (the RVE size)
+    evaluator = "rve"              # "rve" (particles -> dipoles -> FEM) or "synthetic"
+    fem = false                    # run the FEM homogenization (E_eff, nu_eff, stress_mag)
+    voxels = 16                    # FEM voxels per RVE edge (when fem = true)
+    confidence = 0.95              # level of the confidence intervals in the table
+
+    [grid]                         # every key is a grid axis: one value or a list of values
+    phi = [0.0175, 0.035]          # particle volume fraction [1]
+    B_T = [0.005, 0.05, 0.5]       # applied flux density mu0 H along z [T]
+    gradB_T_per_m = 1.78           # d|B|/dz [T/m]
+    law = "frohlich-kennelly"      # magnetization law of one particle
+    arrangement = ["dispersed", "clustered"]   # any keyword of micro.particles.generate_rve
+
+    [rve]        # fixed keywords of micro.particles.generate_rve
+    [law]        # fixed parameters of micro.magnetization.get_law
+    [magnetics]  # fixed keywords of micro.dipoles.solve (tol, accuracy, method, ...)
+    [cell]       # fixed keywords of homogenize.cell.homogenize_rve (matrix_E_Pa, ...)
+
+    [rve_size]   # for `mapsim rve-size`
+    n_particles = [25, 50, 100, 200]
+    realizations = 16
+    quantity = "f_eff_N_m3"
+    component = "z"
+    target_rel_precision = 0.02
+
+The grid is the Cartesian product of the axes, taken in the canonical order of
+:data:`AXIS_ORDER` (then alphabetical for other axes), C order (last axis fastest). Grid point
+``g`` realization ``r`` gets the seed ``SeedSequence(study seed, spawn_key=(g, r))``: independent
+streams, reproducible one by one, whatever the number of workers or the order of execution.
+"""
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from micro._validate import InputError
+
+__all__ = ["Study", "Task", "load_study", "parse_study", "AXIS_ORDER"]
+
+# Canonical order of the common axes; the grid index (and hence the seeds) does not depend on
+# the order in which the axes are written in the file.
+AXIS_ORDER = ("phi", "distribution", "mean_radius_m", "radius_sd", "shell_thickness_m",
+              "arrangement", "law", "B_T", "gradB_T_per_m")
+
+# Units of the common axes (others: taken from their name, "1" if none can be told).
+AXIS_UNITS = {"phi": "1", "mean_radius_m": "m", "shell_thickness_m": "m", "B_T": "T",
+              "gradB_T_per_m": "T/m", "radius_sd": "1"}
+
+_STUDY_KEYS = {
+    "name": str, "seed": int, "realizations": int, "n_particles": int, "evaluator": str,
+    "fem": bool, "voxels": int, "confidence": float, "description": str,
+}
+_TABLES = ("study", "grid", "rve", "law", "magnetics", "cell", "rve_size")
+_RVE_SIZE_KEYS = {"n_particles": list, "realizations": int, "quantity": str, "component": str,
+                  "target_rel_precision": float}
+EVALUATORS = ("rve", "synthetic")
+
+
+def _unit_of(axis: str) -> str:
+    if axis in AXIS_UNITS:
+        return AXIS_UNITS[axis]
+    for suffix, unit in (("_m", "m"), ("_T", "T"), ("_Pa", "Pa"), ("_T_per_m", "T/m"),
+                         ("_A_per_m", "A/m"), ("_kg_m3", "kg/m^3")):
+        if axis.endswith(suffix):
+            return unit
+    return "1"
+
+
+@dataclass(frozen=True)
+class RveSizeSpec:
+    """The ``[rve_size]`` table: RVE sizes to compare and the target precision."""
+
+    n_particles: tuple
+    realizations: int
+    quantity: str = "f_eff_N_m3"
+    component: str = "z"
+    target_rel_precision: float = 0.02
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated study: fixed settings plus grid axes (immutable).
+
+    ``axes`` is a tuple of ``(name, values)`` in canonical order; ``points()`` expands it.
+    """
+
+    path: str
+    text: str
+    name: str
+    seed: int
+    realizations: int
+    n_particles: int
+    evaluator: str
+    fem: bool
+    voxels: int
+    confidence: float
+    axes: tuple
+    rve: dict = field(default_factory=dict)
+    law: dict = field(default_factory=dict)
+    magnetics: dict = field(default_factory=dict)
+    cell: dict = field(default_factory=dict)
+    rve_size: RveSizeSpec | None = None
+
+    @property
+    def axis_names(self) -> tuple:
+        return tuple(a for a, _ in self.axes)
+
+    @property
+    def grid_shape(self) -> tuple:
+        return tuple(len(v) for _, v in self.axes)
+
+    @property
+    def n_points(self) -> int:
+        return math.prod(self.grid_shape)
+
+    def points(self) -> list[dict]:
+        """Grid points in grid-index order (C order over ``axes``)."""
+        names = self.axis_names
+        return [dict(zip(names, combo)) for combo in itertools.product(*(v for _, v in self.axes))]
+
+    def settings(self) -> dict:
+        """Everything besides the grid point that determines one realization's result."""
+        return {"n_particles": self.n_particles, "fem": self.fem, "voxels": self.voxels,
+                "rve": self.rve, "law": self.law, "magnetics": self.magnetics, "cell": self.cell}
+
+    def tasks(self) -> list["Task"]:
+        """All realizations in grid order (point-major), each with its own seed."""
+        settings = self.settings()
+        return [Task(grid_index=g, realization=r, point=p, settings=settings,
+                     study_seed=self.seed)
+                for g, p in enumerate(self.points()) for r in range(self.realizations)]
+
+    def replace(self, **changes) -> "Study":
+        import dataclasses
+        return dataclasses.replace(self, **changes)
+
+    def config(self) -> dict:
+        """JSON-serialisable description (for manifests)."""
+        return {"path": self.path, "name": self.name, "seed": self.seed,
+                "realizations": self.realizations, "n_particles": self.n_particles,
+                "evaluator": self.evaluator, "fem": self.fem, "voxels": self.voxels,
+                "confidence": self.confidence, "axes": {a: list(v) for a, v in self.axes},
+                "rve": self.rve, "law": self.law, "magnetics": self.magnetics,
+                "cell": self.cell, "study_file_text": self.text}
+
+
+@dataclass(frozen=True)
+class Task:
+    """One realization: grid point, realization index, settings and seed."""
+
+    grid_index: int
+    realization: int
+    point: dict
+    settings: dict
+    study_seed: int
+
+    def seed_sequence(self) -> np.random.SeedSequence:
+        """``SeedSequence(study seed, spawn_key=(grid index, realization index))``."""
+        return np.random.SeedSequence(self.study_seed, spawn_key=(self.grid_index, self.realization))
+
+    def seed_int(self) -> int:
+        """A 63-bit integer seed drawn from :meth:`seed_sequence` (for APIs that take an int)."""
+        w = self.seed_sequence().generate_state(2, np.uint32)
+        return int((int(w[0]) << 31) ^ int(w[1]))
+
+    def rng(self) -> np.random.Generator:
+        return np.random.default_rng(self.seed_sequence())
+
+    def key(self, evaluator_id: str) -> str:
+        """Hash of everything that determines the result: names the stored part."""
+        doc = {"evaluator": evaluator_id, "point": self.point, "settings": self.settings,
+               "seed": self.study_seed, "spawn_key": [self.grid_index, self.realization]}
+        text = json.dumps(doc, sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+# --------------------------------------------------------------------------- parsing
+def load_study(path) -> Study:
+    """Read and validate a study file; raise :class:`InputError` naming file, table and key."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"study file {path} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"study file {path} cannot be read: {exc}") from None
+    return parse_study(text, str(path))
+
+
+def _type_name(t) -> str:
+    return {str: "a string", int: "an integer", float: "a number", bool: "true or false",
+            list: "a list"}[t]
+
+
+def _coerce(where: str, value, t):
+    if t is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if t is int and isinstance(value, bool):
+        raise InputError(f"{where} must be {_type_name(t)}, got {value!r}")
+    if not isinstance(value, t):
+        raise InputError(f"{where} must be {_type_name(t)}, got {value!r}")
+    return value
+
+
+def _check_scalar_value(where: str, axis: str, v):
+    """Range checks for the values of the common axes."""
+    if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+        raise InputError(f"{where} values must be numbers or strings, got {v!r}")
+    if isinstance(v, str):
+        if axis in ("phi", "B_T", "gradB_T_per_m", "mean_radius_m", "shell_thickness_m"):
+            raise InputError(f"{where} values must be numbers [{_unit_of(axis)}], got {v!r}")
+        return v
+    v = float(v)
+    if not math.isfinite(v):
+        raise InputError(f"{where} values must be finite, got {v!r}")
+    if axis == "phi" and not 0 < v <= 0.6:
+        raise InputError(f"{where} values must be in (0, 0.6] (particle volume fraction), got {v:g}")
+    if axis == "B_T" and v < 0:
+        raise InputError(f"{where} values must be >= 0 T, got {v:g}")
+    if axis in ("mean_radius_m",) and not 0 < v < 1e-5:
+        raise InputError(f"{where} values must be in (0, 1e-05) m, got {v:g}")
+    if axis in ("shell_thickness_m", "radius_sd") and v < 0:
+        raise InputError(f"{where} values must be >= 0 {_unit_of(axis)}, got {v:g}")
+    if axis == "law":
+        raise InputError(f"{where} values must be names of magnetization laws, got {v!r}")
+    return v
+
+
+def parse_study(text: str, path: str = "<study>") -> Study:
+    """Parse and validate the text of a study file (see the module docstring)."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: not valid TOML: {exc}") from None
+    for key, val in doc.items():
+        if key not in _TABLES:
+            raise InputError(f"{path}: unknown table or key '{key}'; allowed tables: "
+                             f"{', '.join('[' + t + ']' for t in _TABLES)}")
+        if not isinstance(val, dict):
+            raise InputError(f"{path}: '{key}' must be a table [{key}]")
+    st = doc.get("study")
+    if st is None:
+        raise InputError(f"{path}: missing table [study] (with at least seed and realizations)")
+    for key in st:
+        if key not in _STUDY_KEYS:
+            raise InputError(f"{path}: [study] unknown key '{key}'; allowed: "
+                             f"{', '.join(_STUDY_KEYS)}")
+    s = {k: _coerce(f"{path}: [study] {k}", v, _STUDY_KEYS[k]) for k, v in st.items()}
+    for req in ("seed", "realizations"):
+        if req not in s:
+            raise InputError(f"{path}: [study] missing key '{req}'")
+    if s["seed"] < 0:
+        raise InputError(f"{path}: [study] seed must be an integer >= 0, got {s['seed']}")
+    if s["realizations"] < 2:
+        raise InputError(f"{path}: [study] realizations must be >= 2 (a standard deviation "
+                         f"needs two), got {s['realizations']}")
+    n_particles = s.get("n_particles", 100)
+    if n_particles < 1:
+        raise InputError(f"{path}: [study] n_particles must be >= 1, got {n_particles}")
+    voxels = s.get("voxels", 16)
+    if voxels < 4:
+        raise InputError(f"{path}: [study] voxels must be >= 4, got {voxels}")
+    confidence = s.get("confidence", 0.95)
+    if not 0 < confidence < 1:
+        raise InputError(f"{path}: [study] confidence must be in (0, 1), got {confidence:g}")
+    evaluator = s.get("evaluator", "rve")
+    if evaluator not in EVALUATORS:
+        raise InputError(f"{path}: [study] evaluator must be one of {', '.join(EVALUATORS)}; "
+                         f"got {evaluator!r}")
+
+    grid = doc.get("grid")
+    if not grid:
+        raise InputError(f"{path}: [grid] is empty or missing: the study needs at least one "
+                         f"axis (e.g. B_T = [0.01, 0.1])")
+    axes = []
+    for axis, raw in grid.items():
+        where = f"{path}: [grid] {axis}"
+        values = raw if isinstance(raw, list) else [raw]
+        if not values:
+            raise InputError(f"{where} is an empty list: every grid axis needs at least one value")
+        values = [_check_scalar_value(where, axis, v) for v in values]
+        kinds = {isinstance(v, str) for v in values}
+        if len(kinds) > 1:
+            raise InputError(f"{where} mixes numbers and strings")
+        if len(set(values)) != len(values):
+            raise InputError(f"{where} has repeated values {values}")
+        axes.append((axis, tuple(values)))
+    rank = {a: i for i, a in enumerate(AXIS_ORDER)}
+    axes.sort(key=lambda av: (rank.get(av[0], len(AXIS_ORDER)), av[0]))
+
+    tables = {}
+    for t in ("rve", "law", "magnetics", "cell"):
+        tab = doc.get(t, {})
+        for k, v in tab.items():
+            if k in dict(axes):
+                raise InputError(f"{path}: [{t}] {k} is also a grid axis; give it in one place")
+        tables[t] = dict(tab)
+
+    rve_size = None
+    if "rve_size" in doc:
+        rs = doc["rve_size"]
+        for key in rs:
+            if key not in _RVE_SIZE_KEYS:
+                raise InputError(f"{path}: [rve_size] unknown key '{key}'; allowed: "
+                                 f"{', '.join(_RVE_SIZE_KEYS)}")
+        r = {k: _coerce(f"{path}: [rve_size] {k}", v, _RVE_SIZE_KEYS[k]) for k, v in rs.items()}
+        sizes = r.get("n_particles")
+        if not sizes:
+            raise InputError(f"{path}: [rve_size] n_particles must be a non-empty list of "
+                             f"particle counts")
+        if len(sizes) < 2:
+            raise InputError(f"{path}: [rve_size] n_particles needs at least two sizes for a "
+                             f"power-law fit, got {sizes}")
+        for n in sizes:
+            if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+                raise InputError(f"{path}: [rve_size] n_particles must be integers >= 1, got {n!r}")
+        if len(set(sizes)) != len(sizes):
+            raise InputError(f"{path}: [rve_size] n_particles has repeated values {sizes}")
+        reals = r.get("realizations", s["realizations"])
+        if reals < 3:
+            raise InputError(f"{path}: [rve_size] realizations must be >= 3, got {reals}")
+        prec = r.get("target_rel_precision", 0.02)
+        if not 0 < prec < 1:
+            raise InputError(f"{path}: [rve_size] target_rel_precision must be in (0, 1), "
+                             f"got {prec:g}")
+        comp = r.get("component", "z")
+        if comp not in ("x", "y", "z", "norm", ""):
+            raise InputError(f"{path}: [rve_size] component must be x, y, z or norm; got {comp!r}")
+        rve_size = RveSizeSpec(n_particles=tuple(sorted(sizes)), realizations=reals,
+                               quantity=r.get("quantity", "f_eff_N_m3"), component=comp,
+                               target_rel_precision=prec)
+
+    study = Study(path=str(path), text=text, name=s.get("name", Path(path).stem), seed=s["seed"],
+                  realizations=s["realizations"], n_particles=n_particles, evaluator=evaluator,
+                  fem=s.get("fem", False), voxels=voxels, confidence=confidence,
+                  axes=tuple(axes), rve_size=rve_size, **tables)
+    from . import _evaluate
+    _evaluate.get_evaluator(evaluator).check(study)
+    return study

@@ -1,0 +1,319 @@
+"""The physics the extensions are built from: narrow adapters onto the project's modules, plus
+the few small material laws this package owns.
+
+Owned here (each tested in tests/homogenize/experiments/test_experiment_physics.py):
+
+* :func:`cylinder_demag_factor` -- magnetometric demagnetizing factor of a cylinder magnetized
+  along its axis, from the exact end-face-charge integral
+  ``N = (2R/L) int_0^inf J1(u)^2 / u^2 (1 - exp(-u L / R)) du``.
+* :func:`uniaxial_stress_Pa` -- engineering (nominal) stress of incompressible hyperelastic
+  laws in uniaxial tension: neo-Hookean, Mooney-Rivlin, Gent.
+
+Adapters (the physics lives elsewhere in the project; nothing is re-implemented):
+
+* beams -- ``homogenize.macro.closed_form`` (Euler-Bernoulli compliance, elastica table),
+* magnetization laws -- ``micro.magnetization.get_law``,
+* filler stiffening -- the closed forms of ``homogenize.cell``,
+* core-shell moments -- ``micro.particles``.
+
+An adapter whose module has not landed raises :class:`Unavailable`; the diagnosis then leaves
+that cause out and says so, rather than faking it.
+"""
+from __future__ import annotations
+
+import csv
+import functools
+import importlib
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy import integrate, special
+from scipy.constants import mu_0
+
+__all__ = ["Unavailable", "cylinder_demag_factor", "uniaxial_stress_Pa", "HYPERELASTIC_FORMS",
+           "eb_compliance_m4_N", "elastica_ratio", "LAWS", "particle_magnetization_A_per_m",
+           "stiffening_ratio", "core_shell_moment_ratio", "composite_density_kg_m3", "mu_0",
+           "elastica_table_path"]
+
+DATA_DIR = Path(__file__).resolve().parent / "data"
+
+
+class Unavailable(RuntimeError):
+    """The project module an extension needs is not (yet) available."""
+
+
+def _module(name: str):
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        if exc.name == name:
+            raise Unavailable(f"{name} is not available") from None
+        raise
+
+
+# ------------------------------------------------------------------------------------------
+# demagnetizing factor of a cylinder (owned here)
+
+@functools.lru_cache(maxsize=4096)
+def _demag_scalar(aspect: float) -> float:
+    # u = k R; end faces are disks of radius R a distance L = 2 R aspect apart
+    ratio = 2.0 * aspect                       # L / R
+    f = lambda u: (special.j1(u) / u) ** 2 * -math.expm1(-u * ratio) if u > 0 else 0.0
+    # pieces of length pi up to U = 200 pi so quad sees smooth arches; beyond U the integrand
+    # averages to 1 / (pi u^3) (J1^2 ~ 2 cos^2(u - 3 pi/4) / (pi u)), whose tail 1 / (2 pi U^2)
+    # = 4e-7 is added in closed form.
+    edges = np.arange(0, 201) * math.pi
+    total = 0.0
+    for a, b in zip(edges[:-1], edges[1:]):
+        val, _ = integrate.quad(f, a, b, limit=100, epsabs=1e-14, epsrel=1e-12)
+        total += val
+    total += 1.0 / (2.0 * math.pi * edges[-1] ** 2)
+    return total / aspect                      # (2R/L) = 1/aspect
+
+
+def cylinder_demag_factor(aspect_ratio):
+    """Magnetometric (volume-averaged) demagnetizing factor of a cylinder along its axis.
+
+    Parameters
+    ----------
+    aspect_ratio : float or ndarray -- length / diameter [-], > 0
+
+    Returns
+    -------
+    float or ndarray -- N in (0, 1); N -> 1 for a thin disk, N -> 4 / (3 pi aspect) for a
+    long rod (energy of the two charged end faces, sigma = +-M).
+    """
+    a = np.asarray(aspect_ratio, dtype=float)
+    if np.any(~np.isfinite(a)) or np.any(a <= 0):
+        from micro._validate import InputError
+        raise InputError(f"aspect_ratio must be finite and > 0, got {aspect_ratio!r}")
+    out = np.array([_demag_scalar(float(x)) for x in a.ravel()]).reshape(a.shape)
+    return float(out) if out.ndim == 0 else out
+
+
+# ------------------------------------------------------------------------------------------
+# hyperelastic matrix in uniaxial tension (owned here)
+
+HYPERELASTIC_FORMS = ("neo-hookean", "mooney-rivlin", "gent")
+
+
+def uniaxial_stress_Pa(form: str, strain, E_Pa: float, extra: float | None = None):
+    """Engineering stress of an incompressible hyperelastic solid in uniaxial tension.
+
+    Parameters
+    ----------
+    form : {"neo-hookean", "mooney-rivlin", "gent"}
+    strain : ndarray -- engineering strain, stretch ``lam = 1 + strain`` [-]
+    E_Pa : float -- small-strain Young's modulus, ``E = 3 G`` [Pa]
+    extra : float -- Mooney-Rivlin: ``beta = C2 / (C1 + C2)`` [-]; Gent: ``J_m`` [-]
+
+    Returns
+    -------
+    ndarray -- nominal stress [Pa]. Every form has slope E at zero strain.
+
+    Notes
+    -----
+    neo-Hookean ``P = G (lam - lam^-2)``; Mooney-Rivlin ``P = 2 (C1 + C2 / lam)(lam - lam^-2)``
+    with ``G = 2 (C1 + C2)``; Gent ``P = G J_m (lam - lam^-2) / (J_m - I1 + 3)``,
+    ``I1 = lam^2 + 2 / lam`` (the stress diverges as I1 - 3 -> J_m: chain locking).
+    """
+    lam = 1.0 + np.asarray(strain, dtype=float)
+    G = E_Pa / 3.0
+    base = lam - lam ** -2
+    if form == "neo-hookean":
+        return G * base
+    if form == "mooney-rivlin":
+        beta = 0.0 if extra is None else float(extra)
+        return G * ((1.0 - beta) + beta / lam) * base
+    if form == "gent":
+        Jm = float(extra)
+        I1 = lam ** 2 + 2.0 / lam
+        denom = np.maximum(Jm - I1 + 3.0, 1e-9 * Jm)    # past locking: very stiff, not NaN
+        return G * Jm * base / denom
+    raise ValueError(f"unknown hyperelastic form {form!r}")
+
+
+# ------------------------------------------------------------------------------------------
+# beams: adapters onto homogenize.macro.closed_form
+
+def eb_compliance_m4_N(length_m, width_m, thickness_m, E_Pa):
+    """Euler-Bernoulli tip deflection per unit body force, row by row [m / (N/m^3)].
+
+    Calls ``homogenize.macro.closed_form.eb_tip_deflection_m`` with f = 1 N/m^3 per distinct
+    geometry (the deflection is linear in f).
+    """
+    cf = _module("homogenize.macro.closed_form")
+    L, w, t = (np.atleast_1d(np.asarray(x, dtype=float)) for x in (length_m, width_m, thickness_m))
+    E = np.broadcast_to(np.asarray(E_Pa, dtype=float), L.shape)
+    out = np.empty(L.shape)
+    cache = {}
+    for i in range(L.size):
+        key = (L[i], w[i], t[i], E[i])
+        if key not in cache:
+            cache[key] = cf.eb_tip_deflection_m(1.0, L[i], w[i], t[i], E[i])
+        out[i] = cache[key]
+    return out
+
+
+_ELASTICA_ALPHA_MAX = 400.0
+
+
+def elastica_table_path() -> Path:
+    return DATA_DIR / "elastica_table.csv"
+
+
+@functools.lru_cache(maxsize=1)
+def _elastica_table():
+    """(log alpha, ratio) with ratio = (delta/L) / (alpha/8): elastica over Euler-Bernoulli.
+
+    Built once from ``homogenize.macro.closed_form.elastica_tip_deflection`` (unit beam with
+    EI = 1 so that alpha = f) and stored in data/elastica_table.csv with how it was made.
+    """
+    path = elastica_table_path()
+    if path.exists():
+        rows = [r for r in csv.reader(path.read_text().splitlines()) if r and not r[0].startswith("#")]
+        arr = np.array([[float(x) for x in r] for r in rows[1:]])
+        return np.log(arr[:, 0]), arr[:, 1] / (arr[:, 0] / 8.0)
+    cf = _module("homogenize.macro.closed_form")
+    alpha = np.geomspace(1e-3, _ELASTICA_ALPHA_MAX, 161)
+    # unit beam: L = w = 1, t = 1, E = 12  ->  EI = E w t^3 / 12 = 1, alpha = f w t L^3 / EI = f
+    v, _ = cf.elastica_tip_deflection(alpha, 1.0, 1.0, 1.0, 12.0)
+    from micro._io import atomic_write_text
+    lines = ["# elastica tip deflection of a clamped-free beam under a uniform dead load",
+             "# made by homogenize.experiments._physics._elastica_table() from",
+             "# homogenize.macro.closed_form.elastica_tip_deflection (solve_bvp, tol 1e-9) on a",
+             "# unit beam (L = 1, EI = 1); alpha = q L^3 / (E I), delta_over_L = tip deflection / L",
+             "alpha,delta_over_L"]
+    lines += [f"{float(a)!r},{float(d)!r}" for a, d in zip(alpha, v)]
+    try:
+        atomic_write_text(path, "\n".join(lines) + "\n")
+    except OSError:
+        pass                                   # read-only install: keep the table in memory
+    return np.log(alpha), np.asarray(v) / (alpha / 8.0)
+
+
+def elastica_ratio(alpha):
+    """Elastica tip deflection over the Euler-Bernoulli one at load ``alpha = q L^3 / EI``.
+
+    Interpolated (cubic in log alpha) in the stored table; 1 below the table, the table's last
+    value times ``alpha_max / alpha`` above it (the tip deflection saturates at ~L there).
+    """
+    la, ratio = _elastica_table()
+    a = np.abs(np.asarray(alpha, dtype=float))
+    out = np.ones_like(a)
+    pos = a > np.exp(la[0])
+    if np.any(pos):
+        x = np.log(np.minimum(a[pos], np.exp(la[-1])))
+        out[pos] = _interp_cubic(la, ratio, x)
+        big = a[pos] > np.exp(la[-1])
+        if np.any(big):
+            out[pos] = np.where(big, ratio[-1] * np.exp(la[-1]) / np.maximum(a[pos], 1e-300),
+                                out[pos])
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def _spline():
+    from scipy.interpolate import CubicSpline
+    la, ratio = _elastica_table()
+    return CubicSpline(la, ratio)
+
+
+def _interp_cubic(la, ratio, x):
+    return _spline()(x)
+
+
+# ------------------------------------------------------------------------------------------
+# magnetization laws: adapter onto micro.magnetization
+
+LAWS = ("langevin", "frohlich-kennelly", "linear")
+
+
+def particle_magnetization_A_per_m(law: str, H_A_per_m, Ms_A_per_m, chi0: float):
+    """Magnetization of one particle [A/m] along H for a law with initial susceptibility chi0.
+
+    Every law is parametrised by its saturation magnetization ``Ms`` and its initial
+    susceptibility ``chi0 = dM/dH`` at H = 0, so that the laws differ only in shape. The law
+    itself is ``micro.magnetization.get_law`` (see :func:`_project_law`). Odd in H.
+    """
+    H = np.asarray(H_A_per_m, dtype=float)
+    Ms = np.broadcast_to(np.asarray(Ms_A_per_m, dtype=float), H.shape)
+    return np.sign(H) * _project_law(law, np.abs(H), Ms, float(chi0))
+
+
+_LANGEVIN_T_K = 300.0
+
+
+def langevin_moment_Am2(chi0: float, Ms_A_per_m: float) -> float:
+    """Particle moment whose Langevin law at 300 K has initial susceptibility chi0 [A m^2].
+
+    ``chi0 = mu0 m Ms / (3 k_B T)`` (the slope of ``Ms L(mu0 m H / k_B T)`` at H = 0).
+    """
+    from scipy.constants import k as kB
+    return 3.0 * kB * _LANGEVIN_T_K * chi0 / (mu_0 * Ms_A_per_m)
+
+
+def _project_law(law, H_abs, Ms, chi0):
+    """Map (law, chi0) onto micro.magnetization's own parameters and evaluate |M| [A/m].
+
+    * linear: ``LinearLaw(chi)`` has apparent susceptibility ``3 chi / (3 + chi)``, so
+      ``chi = 3 chi0 / (3 - chi0)`` (a sphere's apparent susceptibility is below 3);
+    * frohlich-kennelly: ``chi0`` is the law's own parameter;
+    * langevin: at T = 300 K, the moment ``m = 3 k_B T chi0 / (mu0 Ms)`` and volume ``m / Ms``.
+    """
+    mag = _module("micro.magnetization")
+    if law == "linear":
+        c = min(chi0, 3.0 * (1.0 - 1e-12))
+        obj = mag.get_law("linear", chi=3.0 * c / (3.0 - c))
+        V = 1.0
+        return np.asarray(obj.magnitude(H_abs, Ms * V, V), dtype=float) / V
+    if law == "frohlich-kennelly":
+        obj = mag.get_law("frohlich-kennelly", chi0=chi0)
+        V = 1.0
+        return np.asarray(obj.magnitude(H_abs, Ms * V, V), dtype=float) / V
+    if law == "langevin":
+        obj = mag.get_law("langevin", T_K=_LANGEVIN_T_K)
+        # one moment per distinct Ms (rows may differ through the oxide shell)
+        m = 3.0 * 1.380649e-23 * _LANGEVIN_T_K * chi0 / (mu_0 * Ms)
+        V = m / Ms
+        return np.asarray(obj.magnitude(H_abs, m, V), dtype=float) / V
+    raise ValueError(f"unknown law {law!r}")
+
+
+# ------------------------------------------------------------------------------------------
+# filler stiffening: adapter onto homogenize.cell closed forms
+
+def stiffening_ratio(phi, nu_matrix: float):
+    """E_eff / E_matrix of rigid spheres at volume fraction phi (homogenize.cell)."""
+    raise Unavailable("homogenize.cell is not available")
+
+
+# ------------------------------------------------------------------------------------------
+# core-shell particles: adapter onto micro.particles
+
+def core_shell_moment_ratio(radius_m, shell_m, nominal_radius_m, core_density_kg_m3,
+                            powder_sigma_Am2_kg):
+    """Saturation magnetization of a core-shell particle of radius r over that at the powder's
+    nominal radius [-], from ``micro.particles.CoreShell``.
+
+    The powder's specific moment ``powder_sigma`` was measured on particles of the nominal
+    radius; ``CoreShell(calibrate_sigma_Am2_kg=powder_sigma)`` picks the Fe core moment that
+    reproduces it there, and ``CoreShell.apply`` gives every radius its moment. Smaller particles
+    have a larger Fe3O4 fraction, hence less moment per volume. Ratio 1 at the nominal radius.
+    """
+    P = _module("micro.particles")
+    r = np.atleast_1d(np.asarray(radius_m, dtype=float))
+    cs = P.CoreShell(shell_m=float(shell_m), core_density_kg_m3=float(core_density_kg_m3),
+                     calibrate_sigma_Am2_kg=float(powder_sigma_Am2_kg))
+    nominal = P.Monodisperse(float(nominal_radius_m))
+    core_sigma = cs.core_sigma(nominal)
+    _, _, m_r = cs.apply(r, core_sigma)
+    _, _, m_0 = cs.apply(np.array([float(nominal_radius_m)]), core_sigma)
+    return (m_r / r ** 3) / (m_0[0] / float(nominal_radius_m) ** 3)
+
+
+def composite_density_kg_m3(phi, rho_matrix, rho_particle):
+    """Rule of mixtures (exact for a mass balance): (1 - phi) rho_m + phi rho_p [kg/m^3]."""
+    phi = np.asarray(phi, dtype=float)
+    return (1.0 - phi) * rho_matrix + phi * rho_particle

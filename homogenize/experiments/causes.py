@@ -1,0 +1,302 @@
+"""Causes and their model extensions: the seed model composed with any set of extensions.
+
+A :class:`ModelSpec` is the seed model of one kind plus a set of causes (spec section 4) and,
+where a cause has several physical forms, the form used (the magnetization law's shape, the
+hyperelastic law). :func:`parameters` lists its fitted parameters; :func:`predict` evaluates it
+on an :class:`~homogenize.experiments.io.Experiment`.
+
+How each cause extends the seed model (the physics comes from the project's modules, through
+the adapters of ``_physics``):
+
+=============================== =================================================================
+cause                           extension (fitted parameters)
+=============================== =================================================================
+field_dependent_magnetization   particle magnetization ``M_p(H_loc)`` from
+                                ``micro.magnetization`` -- linear-capped, Froehlich-Kennelly or
+                                Langevin, chosen by cross-validation (``chi0``: initial
+                                susceptibility of a particle)
+dipolar_interaction             mean-field local field of randomly placed dipoles,
+                                ``H_loc = H_int + M/3`` (the Lorentz cavity field, the isotropic
+                                limit of ``micro.dipoles``), and the magnetic stress
+                                ``sigma = kappa mu0 M^2`` that strains the specimen
+                                (magnetostriction: ``kappa``)
+oxide_shell                     Fe core + Fe3O4 shell per particle (``micro.particles.CoreShell``
+                                calibrated to the powder's sigma_s at its nominal radius):
+                                smaller particles carry less moment (``shell_m``)
+filler_stiffening               effective modulus of rigid spheres in the matrix,
+                                ``homogenize.cell`` closed form (none)
+geometric_nonlinearity          elastica instead of Euler-Bernoulli, from
+                                ``homogenize.macro.closed_form`` (none)
+hyperelasticity                 incompressible neo-Hookean (none), Mooney-Rivlin (``beta``) or
+                                Gent (``J_m``) matrix, chosen by cross-validation
+gravity                         self-weight ``rho_c g`` of the composite as a body force along
+                                (or against) the magnetic one; subtracted again when the
+                                deflection is measured from the field-off state (none)
+hysteresis                      magnetic kinds: the law lags the field by a coercive field,
+                                ``M_up(H) = M(H - H_c)``, ``M_down(H) = M(H + H_c)`` (``H_c``);
+                                tensile: unloading stress softened by a factor (``softening``)
+demagnetization                 internal field ``H_int = H_a - N M`` with N the magnetometric
+                                factor of the cylinder's aspect ratio (none)
+=============================== =================================================================
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _physics as P
+from .io import Experiment
+
+__all__ = ["CAUSES", "DESCRIPTIONS", "VARIANTS", "ModelSpec", "Param", "parameters",
+           "predict", "applicable", "LORENTZ_FACTOR"]
+
+CAUSES = ("field_dependent_magnetization", "dipolar_interaction", "oxide_shell",
+          "filler_stiffening", "geometric_nonlinearity", "hyperelasticity", "gravity",
+          "hysteresis", "demagnetization")
+
+DESCRIPTIONS = {
+    "field_dependent_magnetization": "the particles are not saturated: their magnetization "
+                                     "follows a law M(H) that levels off",
+    "dipolar_interaction": "the particles' own fields matter: interacting dipoles raise the "
+                           "local field and stress the matrix",
+    "oxide_shell": "an oxide shell: smaller particles carry less moment per volume",
+    "filler_stiffening": "the particles stiffen the matrix",
+    "geometric_nonlinearity": "large deflection: the beam is stiffer than linear theory",
+    "hyperelasticity": "the matrix is hyperelastic: stress is not proportional to strain",
+    "gravity": "self-weight adds a load",
+    "hysteresis": "rising and falling branches differ",
+    "demagnetization": "the specimen's shape reduces the internal field (demagnetizing factor)",
+}
+
+#: Physical forms among which cross-validation chooses (None: a single form).
+VARIANTS = {"field_dependent_magnetization": P.LAWS, "hyperelasticity": P.HYPERELASTIC_FORMS}
+
+#: Local-field factor of dipoles placed at random without order: the Lorentz cavity, 1/3.
+LORENTZ_FACTOR = 1.0 / 3.0
+
+_KINDS_OF = {
+    "field_dependent_magnetization": ("deflection", "magnetization", "magnetostriction"),
+    "dipolar_interaction": ("deflection", "magnetization", "magnetostriction"),
+    "oxide_shell": ("deflection", "magnetization", "magnetostriction"),
+    "filler_stiffening": ("deflection", "magnetostriction", "tensile"),
+    "geometric_nonlinearity": ("deflection",),
+    "hyperelasticity": ("tensile",),
+    "gravity": ("deflection",),
+    "hysteresis": ("deflection", "magnetization", "magnetostriction", "tensile"),
+    "demagnetization": ("magnetization", "magnetostriction"),
+}
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """Seed model of ``kind`` plus ``causes`` (ordered as accepted) and chosen forms."""
+    kind: str
+    causes: tuple = ()
+    law: str | None = None           # with field_dependent_magnetization
+    hyper: str | None = None         # with hyperelasticity
+
+    def plus(self, cause: str, variant: str | None = None) -> "ModelSpec":
+        law, hyper = self.law, self.hyper
+        if cause == "field_dependent_magnetization":
+            law = variant
+        if cause == "hyperelasticity":
+            hyper = variant
+        return ModelSpec(self.kind, self.causes + (cause,), law, hyper)
+
+    def has(self, cause: str) -> bool:
+        return cause in self.causes
+
+    def label(self) -> str:
+        parts = []
+        for c in self.causes:
+            if c == "field_dependent_magnetization":
+                parts.append(f"{c}[{self.law}]")
+            elif c == "hyperelasticity":
+                parts.append(f"{c}[{self.hyper}]")
+            else:
+                parts.append(c)
+        return "seed" + "".join(" + " + p for p in parts)
+
+
+@dataclass(frozen=True)
+class Param:
+    """A fitted parameter: fitted as log(value) when ``log``; ``starts`` are trial values."""
+    name: str
+    log: bool
+    lo: float
+    hi: float
+    starts: tuple
+    amplitude: bool = False          # prediction ~ proportional to it (closed-form start)
+
+
+def applicable(cause: str, exp: Experiment) -> tuple[bool, str]:
+    """Whether ``cause`` can be tested on ``exp`` and, if not, why (the design cannot show it)."""
+    if exp.kind not in _KINDS_OF[cause]:
+        return False, f"not a cause for kind '{exp.kind}'"
+    c = exp.columns
+    if cause == "hysteresis" and not (exp.down.any() and (~exp.down).any()):
+        return False, "needs rows on both the rising ('up') and the falling ('down') branch"
+    if cause == "oxide_shell" and ("radius_mean_m" not in c or np.unique(c["radius_mean_m"]).size < 2):
+        return False, "needs specimens of at least two mean particle radii (radius_mean_m)"
+    if cause == "filler_stiffening" and np.unique(c["phi"]).size < 2:
+        return False, "needs at least two volume fractions (phi): one phi only rescales E"
+    if cause == "demagnetization" and "aspect_ratio" not in c:
+        return False, "needs the specimen's aspect_ratio"
+    try:
+        _probe(cause, exp)
+    except P.Unavailable as exc:
+        return False, f"unavailable: {exc}"
+    return True, ""
+
+
+def _probe(cause, exp):
+    """Raise Unavailable if the project module behind ``cause`` has not landed."""
+    if cause in ("field_dependent_magnetization", "hysteresis", "dipolar_interaction",
+                 "demagnetization") and exp.kind != "tensile":
+        P.particle_magnetization_A_per_m("frohlich-kennelly", np.array([1.0]), 1.0, 1.0)
+    if cause == "oxide_shell":
+        P.core_shell_moment_ratio(np.array([20e-9]), 1e-9, 25e-9, 7870.0, 178.0)
+    if cause == "filler_stiffening":
+        P.stiffening_ratio(np.array([0.1]), 0.45)
+    if cause in ("geometric_nonlinearity",):
+        P.elastica_ratio(np.array([1.0]))
+    if cause == "gravity" or exp.kind == "deflection":
+        P.eb_compliance_m4_N(np.array([1.0]), np.array([1.0]), np.array([1.0]), 1.0)
+
+
+def parameters(spec: ModelSpec, exp: Experiment) -> list[Param]:
+    """The fitted parameters of ``spec`` on ``exp`` (the first is the seed's own)."""
+    ps = []
+    kind = spec.kind
+    if kind == "tensile":
+        ps.append(Param("E_Pa", True, 1e2, 1e12, (exp.matrix.E_Pa,), amplitude=True))
+    elif kind == "magnetostriction":
+        if spec.has("dipolar_interaction"):
+            ps.append(Param("kappa", False, -1e3, 1e3, (1.0,), amplitude=True))
+    else:
+        ps.append(Param("scale", True, 1e-6, 1e3, (1.0,), amplitude=True))
+    if spec.has("field_dependent_magnetization"):
+        hi = 3.0 if spec.law == "linear" else 1e6
+        starts = (0.3, 2.0) if spec.law == "linear" else (0.3, 3.0, 30.0, 300.0)
+        ps.append(Param("chi0", True, 1e-4, hi, starts))
+    if spec.has("oxide_shell"):
+        rmin = float(np.min(exp.columns["radius_mean_m"]))
+        ps.append(Param("shell_m", True, 1e-3 * rmin, 0.95 * min(rmin, exp.particles.radius_mean_m),
+                        (0.05 * rmin, 0.2 * rmin, 0.5 * rmin)))
+    if spec.has("hysteresis"):
+        if kind == "tensile":
+            ps.append(Param("softening", False, 0.0, 0.95, (0.05, 0.2, 0.5)))
+        else:
+            Hs = np.abs(_applied_field(exp))
+            Hmax = float(Hs.max()) if Hs.size and Hs.max() > 0 else 1e5
+            ps.append(Param("H_c_A_per_m", True, 1e-4 * Hmax, 2.0 * Hmax,
+                            (0.01 * Hmax, 0.05 * Hmax, 0.2 * Hmax)))
+    if spec.has("hyperelasticity") and spec.hyper == "mooney-rivlin":
+        ps.append(Param("beta", False, -0.5, 1.0, (0.0, 0.5)))
+    if spec.has("hyperelasticity") and spec.hyper == "gent":
+        ps.append(Param("J_m", True, 0.3, 1e4, (3.0, 30.0, 300.0)))
+    return ps
+
+
+def _applied_field(exp: Experiment) -> np.ndarray:
+    c = exp.columns
+    if exp.kind == "magnetization":
+        return c["H_A_per_m"]
+    return c["B_T"] / P.mu_0
+
+
+def _stiffening(spec, exp):
+    if spec.has("filler_stiffening"):
+        return P.stiffening_ratio(exp.columns["phi"], exp.matrix.nu)
+    return 1.0
+
+
+def composite_magnetization_A_per_m(spec: ModelSpec, exp: Experiment, p: dict) -> np.ndarray:
+    """Composite magnetization along the applied field [A/m] of every row."""
+    c = exp.columns
+    H_a = _applied_field(exp)
+    scale = p.get("scale", 1.0)
+    Ms = np.full(exp.n_rows, exp.particles.Ms_A_per_m)
+    if spec.has("oxide_shell"):
+        Ms = Ms * P.core_shell_moment_ratio(c["radius_mean_m"], p["shell_m"],
+                                            exp.particles.radius_mean_m,
+                                            exp.particles.density_kg_m3,
+                                            exp.particles.sigma_s_Am2_kg)
+    Mmax = scale * c["phi"] * Ms
+    if not spec.has("field_dependent_magnetization"):
+        # saturated particles: neither the local nor the internal field changes |M|
+        return Mmax * np.sign(H_a)
+    N = P.cylinder_demag_factor(c["aspect_ratio"]) if spec.has("demagnetization") else 0.0
+    cL = LORENTZ_FACTOR if spec.has("dipolar_interaction") else 0.0
+    shift = 0.0
+    if spec.has("hysteresis"):
+        shift = np.where(exp.down, 1.0, -1.0) * p["H_c_A_per_m"]
+    feedback = cL - N
+    chi0 = p["chi0"]
+
+    def g(M):
+        return scale * c["phi"] * P.particle_magnetization_A_per_m(
+            spec.law, H_a + feedback * M + shift, Ms, chi0)
+
+    if np.all(feedback == 0.0):
+        return g(0.0)
+    # M - g(H_a + feedback M) is increasing where the mean field is stable and changes sign
+    # on [-Mmax, Mmax] (|g| <= Mmax): vectorised bisection to 2^-48 of the bracket.
+    lo, hi = -Mmax.copy(), Mmax.copy()
+    for _ in range(48):
+        mid = 0.5 * (lo + hi)
+        pos = mid - g(mid) > 0
+        hi = np.where(pos, mid, hi)
+        lo = np.where(pos, lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def predict(spec: ModelSpec, exp: Experiment, p: dict) -> np.ndarray:
+    """Prediction of the measured column of ``exp`` [its SI unit] with parameters ``p``."""
+    c = exp.columns
+    if spec.kind == "tensile":
+        E = p["E_Pa"] * _stiffening(spec, exp)
+        if spec.has("hyperelasticity"):
+            extra = p.get("beta") if spec.hyper == "mooney-rivlin" else p.get("J_m")
+            s = P.uniaxial_stress_Pa(spec.hyper, c["strain"], E, extra)
+        else:
+            s = E * c["strain"]
+        if spec.has("hysteresis"):
+            s = np.where(exp.down, (1.0 - p["softening"]) * s, s)
+        return s
+    M = composite_magnetization_A_per_m(spec, exp, p)
+    if spec.kind == "magnetization":
+        return M
+    E = exp.matrix.E_Pa * _stiffening(spec, exp)
+    if spec.kind == "magnetostriction":
+        if not spec.has("dipolar_interaction"):
+            return np.zeros(exp.n_rows)
+        # axial magnetic stress kappa mu0 M^2 on a linear matrix of modulus E (small strain)
+        return p["kappa"] * P.mu_0 * M ** 2 / E
+    # deflection
+    f = M * c["gradB_T_per_m"]
+    comp = P.eb_compliance_m4_N(c["length_m"], c["width_m"], c["thickness_m"], 1.0) / E
+
+    def beam(force):
+        d = comp * force
+        if spec.has("geometric_nonlinearity"):
+            alpha = 8.0 * d / c["length_m"]          # Euler-Bernoulli: delta / L = alpha / 8
+            d = d * P.elastica_ratio(alpha)
+        return d
+
+    if not spec.has("gravity"):
+        return beam(f)
+    rho = P.composite_density_kg_m3(c["phi"], exp.matrix.density_kg_m3,
+                                    exp.particles.density_kg_m3)
+    fg = rho * exp.setup.gravity_m_s2 * (1.0 if exp.setup.gravity_along_force else -1.0)
+    d = beam(f + fg)
+    if exp.setup.deflection_reference == "field_off":
+        d = d - beam(fg)
+    return d
+
+
+def default_params(spec: ModelSpec, exp: Experiment) -> dict:
+    """A priori parameter values: the seed's scale 1 / the matrix E; first start otherwise."""
+    return {q.name: q.starts[0] for q in parameters(spec, exp)}
+

@@ -1,0 +1,412 @@
+"""``diagnose``: what the seed model gets wrong, which cause, which extension, and the gain.
+
+Procedure (spec section 5)
+--------------------------
+1. **Cross-validation.** Rows are split into folds by specimen when there are at least three
+   specimens (leave-one-specimen-out, or specimens dealt round-robin into at most
+   ``max_folds`` folds); otherwise into 5 seeded random folds of rows. Every model is fitted
+   (non-linear least squares, ``scipy.optimize.least_squares``) on the training folds and
+   predicts the held-out fold; ``cv_rmse`` is the RMS of all held-out errors, in the unit of
+   the measured column.
+2. **Seed model** (baseline): one fitted scale (``scale``; tensile: ``E_Pa``).
+3. **Forward selection.** Every applicable cause not yet accepted is added to the current model
+   (causes with several physical forms -- magnetization law, hyperelastic law -- try each form
+   and keep the one with the lowest ``cv_rmse``). The best candidate is accepted only if
+
+   * its ``cv_rmse`` is at least ``min_gain`` (10 %) below the current one, AND
+   * a one-sided Wilcoxon signed-rank test on the paired held-out squared errors (current minus
+     candidate, one pair per row) gives ``p < alpha`` (0.01);
+
+   then the search repeats on top of it, until no candidate passes.
+4. **Parameters** of the accepted model are fitted on all rows; their standard errors come from
+   the Jacobian at the optimum, ``cov = s^2 (J^T J)^-1`` with ``s^2`` the residual variance.
+
+With fewer than 3 rows nothing can be held out: the "held-out" prediction is then the a priori
+model (scale 1, the TOML's E, no fitted parameter), only parameter-free extensions are tried,
+and none is accepted (a significance test needs data).
+"""
+from __future__ import annotations
+
+import math
+import sys
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, stats
+
+from .causes import CAUSES, VARIANTS, ModelSpec, Param, applicable, parameters, predict
+from .io import Experiment
+
+__all__ = ["Diagnosis", "FitResult", "diagnose", "make_folds", "fit", "cross_validate",
+           "covariates", "MIN_GAIN", "ALPHA"]
+
+MIN_GAIN = 0.10
+ALPHA = 0.01
+
+
+@dataclass
+class FitResult:
+    spec: ModelSpec
+    params: dict
+    sd: dict
+    x: np.ndarray
+    prediction: np.ndarray
+
+
+@dataclass
+class Candidate:
+    spec: ModelSpec
+    cause: str
+    cv_rmse: float
+    cv_pred: np.ndarray
+    fit: FitResult
+    variants: dict = field(default_factory=dict)   # variant -> cv_rmse
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose`; :meth:`as_dict` is the spec's JSON."""
+    exp: Experiment
+    baseline: Candidate
+    final: Candidate
+    steps: list
+    rounds: list                       # per round: list of Candidate tried
+    skipped: dict                      # cause -> why it was not tried
+    folds: list | None
+
+    @property
+    def gain(self) -> float:
+        if self.final.cv_rmse == 0.0:
+            return 1.0 if self.baseline.cv_rmse == 0.0 else math.inf
+        return self.baseline.cv_rmse / self.final.cv_rmse
+
+    def as_dict(self) -> dict:
+        first = self.rounds[0] if self.rounds else []
+        return {
+            "kind": self.exp.kind,
+            "n_rows": self.exp.n_rows,
+            "baseline": {"cv_rmse": self.baseline.cv_rmse, "params": _params_out(self.baseline)},
+            "causes": [s["cause"] for s in self.steps],
+            "steps": [{"cause": s["cause"], "cv_rmse": s["cv_rmse"], "params": s["params"],
+                       "evidence": s["evidence"]} for s in self.steps],
+            "candidates": [{"cause": c.cause, "cv_rmse": c.cv_rmse}
+                           for c in sorted(first, key=lambda c: c.cv_rmse)],
+            "final": {"cv_rmse": self.final.cv_rmse, "params": _params_out(self.final)},
+            "gain": self.gain if self.steps else 1.0,
+        }
+
+
+def _params_out(c: Candidate) -> dict:
+    out = {}
+    for k, v in c.fit.params.items():
+        out[k] = float(v)
+        if k in c.fit.sd and np.isfinite(c.fit.sd[k]):
+            out[k + "_sd"] = float(c.fit.sd[k])
+    if c.spec.law:
+        out["law"] = c.spec.law
+    if c.spec.hyper:
+        out["hyperelastic_law"] = c.spec.hyper
+    if c.spec.kind == "magnetostriction" and "scale" not in out:
+        out["scale"] = 1.0            # not identifiable in magnetostriction (absorbed in kappa)
+    return out
+
+
+# ------------------------------------------------------------------------------------------
+# folds
+
+def make_folds(exp: Experiment, max_folds: int = 8, k_rows: int = 5, seed: int = 0):
+    """Held-out index sets: by specimen when there are >= 3 specimens, else K random folds.
+
+    Returns None when there are fewer than 3 rows (nothing can be held out).
+    """
+    n = exp.n_rows
+    if n < 3:
+        return None
+    g = exp.groups
+    n_spec = int(g.max()) + 1
+    if n_spec >= 3:
+        nf = min(n_spec, max_folds)
+        fold_of = np.arange(n_spec) % nf
+        return [np.flatnonzero(fold_of[g] == k) for k in range(nf)]
+    k = min(k_rows, n)
+    perm = np.random.default_rng(seed).permutation(n)
+    return [np.sort(part) for part in np.array_split(perm, k)]
+
+
+# ------------------------------------------------------------------------------------------
+# fitting
+
+def _to_params(ps: list[Param], x) -> dict:
+    return {q.name: (math.exp(v) if q.log else float(v)) for q, v in zip(ps, x)}
+
+
+def _bounds(ps):
+    lo = np.array([math.log(q.lo) if q.log else q.lo for q in ps])
+    hi = np.array([math.log(q.hi) if q.log else q.hi for q in ps])
+    return lo, hi
+
+
+def _x_of(q: Param, v):
+    return math.log(v) if q.log else float(v)
+
+
+def _residual_fn(spec, exp, ps, y, w):
+    def fun(x):
+        pred = predict(spec, exp, _to_params(ps, x))
+        r = (pred - y) / w
+        return np.where(np.isfinite(r), r, 1e6)
+    return fun
+
+
+def _weights(exp):
+    y = exp.y
+    sd = exp.sd
+    if sd is not None:
+        return sd
+    s = float(np.sqrt(np.mean(y ** 2)))
+    return np.full(y.shape, s if s > 0 else 1.0)
+
+
+def _amplitude_solve(spec, exp, ps, x, y, w):
+    """Closed-form least-squares amplitude (prediction ~ amplitude) given the other params."""
+    k = next((i for i, q in enumerate(ps) if q.amplitude), None)
+    if k is None:
+        return x
+    x = x.copy()
+    q = ps[k]
+    x[k] = _x_of(q, 1.0)
+    p1 = predict(spec, exp, _to_params(ps, x)) / w
+    yy = y / w
+    den = float(p1 @ p1)
+    if not np.isfinite(den) or den <= 0:
+        x[k] = _x_of(q, q.starts[0])
+        return x
+    a = float(p1 @ yy) / den
+    if q.log:
+        a = a if a > 0 else q.starts[0]
+    a = min(max(a, q.lo), q.hi)
+    x[k] = _x_of(q, a)
+    return x
+
+
+def _sse(fun, x):
+    r = fun(x)
+    return float(r @ r)
+
+
+def fit(spec: ModelSpec, exp: Experiment, x0=None) -> FitResult:
+    """Least-squares fit of ``spec`` to all rows of ``exp`` (starts: grid, or ``x0``)."""
+    ps = parameters(spec, exp)
+    y = exp.y
+    if not ps:
+        pred = predict(spec, exp, {})
+        return FitResult(spec, {}, {}, np.zeros(0), pred)
+    w = _weights(exp)
+    fun = _residual_fn(spec, exp, ps, y, w)
+    lo, hi = _bounds(ps)
+    if x0 is None:
+        x = np.array([_x_of(q, q.starts[0]) for q in ps])
+        x = _amplitude_solve(spec, exp, ps, x, y, w)
+        # coordinate-wise choice of the start of every shape parameter
+        for i, q in enumerate(ps):
+            if q.amplitude or len(q.starts) < 2:
+                continue
+            best = (math.inf, x)
+            for s in q.starts:
+                xt = x.copy()
+                xt[i] = _x_of(q, s)
+                xt = _amplitude_solve(spec, exp, ps, xt, y, w)
+                e = _sse(fun, xt)
+                if e < best[0]:
+                    best = (e, xt)
+            x = best[1]
+    else:
+        x = np.asarray(x0, dtype=float).copy()
+    x = np.clip(x, lo + 1e-12 * np.abs(lo), hi - 1e-12 * np.abs(hi))
+    x = np.minimum(np.maximum(x, lo), hi)
+    res = optimize.least_squares(fun, x, bounds=(lo, hi), method="trf", x_scale=1.0,
+                                 max_nfev=60 * (len(ps) + 1), xtol=1e-10, ftol=1e-10)
+    x = res.x
+    params = _to_params(ps, x)
+    sd = _uncertainty(res, ps, params, y.size)
+    return FitResult(spec, params, sd, x, predict(spec, exp, params))
+
+
+def _uncertainty(res, ps, params, n):
+    p = len(ps)
+    dof = n - p
+    if dof <= 0:
+        return {q.name: math.nan for q in ps}
+    J = res.jac
+    s2 = float(res.fun @ res.fun) / dof
+    try:
+        cov = s2 * np.linalg.pinv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return {q.name: math.nan for q in ps}
+    out = {}
+    for i, q in enumerate(ps):
+        sx = math.sqrt(max(cov[i, i], 0.0))
+        out[q.name] = params[q.name] * sx if q.log else sx
+    return out
+
+
+def cross_validate(spec: ModelSpec, exp: Experiment, folds, full: FitResult | None = None):
+    """Held-out predictions of every row, and the full-data fit."""
+    full = full or fit(spec, exp)
+    if folds is None:
+        from .causes import default_params
+        return predict(spec, exp, default_params(spec, exp)), full
+    pred = np.empty(exp.n_rows)
+    all_idx = np.arange(exp.n_rows)
+    for test in folds:
+        train = np.setdiff1d(all_idx, test)
+        if full.x.size == 0:
+            pred[test] = predict(spec, exp.subset(test), {})
+            continue
+        ft = fit(spec, exp.subset(train), x0=full.x)
+        pred[test] = predict(spec, exp.subset(test), ft.params)
+    return pred, full
+
+
+def _rmse(a, b):
+    return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2)))
+
+
+def _candidate(spec, cause, exp, folds):
+    full = fit(spec, exp)
+    cvp, full = cross_validate(spec, exp, folds, full)
+    return Candidate(spec, cause, _rmse(cvp, exp.y), cvp, full)
+
+
+# ------------------------------------------------------------------------------------------
+# covariates of the residuals
+
+def covariates(exp: Experiment, prediction: np.ndarray | None = None) -> dict:
+    """Covariates to inspect residuals against (name -> values), per kind."""
+    c = exp.columns
+    out = {}
+    names = {"deflection": ("B_T", "gradB_T_per_m", "phi", "length_m", "width_m",
+                            "thickness_m", "radius_mean_m"),
+             "magnetization": ("H_A_per_m", "phi", "radius_mean_m", "aspect_ratio"),
+             "magnetostriction": ("B_T", "phi", "aspect_ratio", "radius_mean_m"),
+             "tensile": ("strain", "phi")}[exp.kind]
+    for n in names:
+        if n in c:
+            out[n] = np.asarray(c[n])
+    if exp.kind == "deflection":
+        out["deflection/length"] = c["deflection_m"] / c["length_m"]
+        out["L^4/t^2 [m^2]"] = c["length_m"] ** 4 / c["thickness_m"] ** 2
+    if exp.down.any():
+        out["branch (down=1)"] = exp.down.astype(float)
+    if prediction is not None:
+        out["prediction"] = np.asarray(prediction)
+    return out
+
+
+def residual_correlations(exp, residual) -> dict:
+    """Spearman rank correlation of the residual with every covariate that varies."""
+    out = {}
+    for name, v in covariates(exp).items():
+        if np.unique(v).size < 2 or np.unique(residual).size < 2:
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rho = stats.spearmanr(v, residual).statistic
+        if np.isfinite(rho):
+            out[name] = float(rho)
+    return out
+
+
+def _paired_p(e_cur, e_new):
+    d = e_cur ** 2 - e_new ** 2
+    if np.all(d == 0):
+        return 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            return float(stats.wilcoxon(d, alternative="greater").pvalue)
+        except ValueError:
+            return 1.0
+
+
+# ------------------------------------------------------------------------------------------
+# the diagnosis
+
+def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPHA,
+             max_folds: int = 8, progress: bool = False) -> Diagnosis:
+    """Cross-validated forward selection of causes on top of the seed model (module doc)."""
+    folds = make_folds(exp, max_folds=max_folds)
+    seed = ModelSpec(exp.kind)
+    current = _candidate(seed, "seed", exp, folds)
+    baseline = current
+    skipped = {}
+    for cause in CAUSES:
+        ok, why = applicable(cause, exp)
+        if not ok and "not a cause for kind" not in why:
+            skipped[cause] = why
+    steps, rounds = [], []
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(desc=f"diagnose {exp.kind}", unit="model", file=sys.stderr, leave=False)
+    remaining = [c for c in CAUSES if applicable(c, exp)[0]]
+    if folds is None:
+        n_seed = len(parameters(seed, exp))
+        remaining = [c for c in remaining
+                     if len(parameters(seed.plus(c, (VARIANTS.get(c) or (None,))[0]), exp)) == n_seed]
+    while remaining:
+        tried = []
+        for cause in remaining:
+            best = None
+            variants = {}
+            for v in VARIANTS.get(cause, (None,)):
+                cand = _candidate(current.spec.plus(cause, v), cause, exp, folds)
+                if bar is not None:
+                    bar.update(1)
+                if v is not None:
+                    variants[v] = cand.cv_rmse
+                if best is None or cand.cv_rmse < best.cv_rmse:
+                    best = cand
+            best.variants = variants
+            tried.append(best)
+        rounds.append(tried)
+        top = min(tried, key=lambda c: c.cv_rmse)
+        e_cur = current.cv_pred - exp.y
+        e_new = top.cv_pred - exp.y
+        p = _paired_p(e_cur, e_new) if folds is not None else 1.0
+        if not (folds is not None and top.cv_rmse <= (1.0 - min_gain) * current.cv_rmse
+                and p < alpha):
+            break
+        corr = residual_correlations(exp, e_cur)
+        steps.append({"cause": top.cause, "cv_rmse": top.cv_rmse,
+                      "params": _step_params(top), "evidence": _evidence(exp, current, top, p, corr),
+                      "p_value": p, "correlations": corr})
+        current = top
+        remaining = [c for c in remaining if c != top.cause]
+    if bar is not None:
+        bar.close()
+    return Diagnosis(exp, baseline, current, steps, rounds, skipped, folds)
+
+
+def _step_params(c: Candidate) -> dict:
+    """Parameters the accepted extension added (with their standard errors)."""
+    out = _params_out(c)
+    return out
+
+
+def _evidence(exp, cur: Candidate, new: Candidate, p, corr) -> str:
+    unit = {"deflection": "m", "magnetization": "A/m", "magnetostriction": "",
+            "tensile": "Pa"}[exp.kind]
+    u = f" {unit}" if unit else ""
+    pct = 100.0 * (1.0 - new.cv_rmse / cur.cv_rmse) if cur.cv_rmse > 0 else 0.0
+    text = (f"held-out RMSE {cur.cv_rmse:.3g}{u} -> {new.cv_rmse:.3g}{u} ({pct:.0f} % lower); "
+            f"one-sided Wilcoxon signed-rank test on {exp.n_rows} paired held-out squared "
+            f"errors p = {p:.2g}")
+    if corr:
+        name, rho = max(corr.items(), key=lambda kv: abs(kv[1]))
+        text += f"; before it the residuals followed {name} (Spearman rho = {rho:+.2f})"
+    if new.variants:
+        alts = ", ".join(f"{k} {v:.3g}" for k, v in sorted(new.variants.items(), key=lambda kv: kv[1]))
+        text += f"; form chosen by cross-validation among: {alts}"
+    return text

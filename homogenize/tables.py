@@ -1,0 +1,590 @@
+"""Batch runs of random RVEs on Dask, and the effective-parameter tables they produce.
+
+A study (:mod:`homogenize._study`) is a grid of conditions times a number of random
+realizations. :func:`run_batch` evaluates every realization on a Dask cluster (a local one,
+or an existing one via its scheduler address) and stores each result the moment it arrives, as
+one small file ``<table>.parts/g<grid>_r<realization>_<hash>.npz`` written atomically by the
+client process only. The hash covers everything that determines the result (evaluator
+version, grid point, settings, seed), so running the same command again resumes: stored
+realizations are loaded, not recomputed, and a changed study never reuses stale results.
+The table is then aggregated from the stored parts in grid order, so it is identical whatever
+the number of workers, the order of completion, or how often the batch was interrupted.
+
+Table layout (HDF5, readable by ``xarray.open_dataset(path, engine="h5netcdf")``)
+-------------------------------------------------------------------------------
+dimensions ``point`` (grid points, C order over the grid axes), ``realization``, ``i`` and
+``j`` (Cartesian components x, y, z of vectors and tensors).
+
+* one coordinate variable per grid axis, shape (point,): e.g. ``phi``, ``B_T`` [T],
+  ``gradB_T_per_m`` [T/m], ``arrangement`` (strings);
+* for each quantity Q (``f_eff_N_m3``, ``phi_eff``, ``d_eff``, ``M_eff_A_per_m``,
+  ``virial_stress_Pa``, ``E_eff_Pa``, ``nu_eff``, ``stress_mag_Pa``, ``volume_m3``,
+  ``phi_rve``): ``Q_mean``, ``Q_sd`` (sample sd, ddof 1), ``Q_ci_low``, ``Q_ci_high``
+  (Student-t interval of the mean at the study's confidence), shape (point, [i, [j]]), and the
+  per-realization values ``Q`` (point, realization, [i, [j]]); each with a ``units`` attribute;
+* ``n`` (point,): realizations per point; ``seed`` (point, realization): the integer seed of
+  each realization (``generate_rve(..., seed=...)`` reproduces it alone);
+* root attributes: ``format = "mapsim-table"``, ``confidence``, ``grid_axes`` (JSON: axis ->
+  values), ``study_toml`` (the study file text), ``evaluator``, ``manifest`` (JSON: versions,
+  git revision, start and end times); the same manifest is written to ``<table>.manifest.json``.
+"""
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import json
+import math
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from micro._io import atomic_path, manifest as _manifest, write_json
+from micro._validate import InputError
+
+from ._evaluate import QUANTITIES, get_evaluator
+from ._stats import summarize
+from ._study import Study, Task, _unit_of, load_study
+
+__all__ = ["run_batch", "aggregate", "read_table", "Table", "Estimate", "BatchError",
+           "parts_dir_for", "interpolate", "body_force_from_table", "modulus_from_table",
+           "load_study"]
+
+FORMAT = "mapsim-table"
+FORMAT_VERSION = 1
+_COMPONENTS = ("x", "y", "z")
+
+
+class BatchError(RuntimeError):
+    """Some realizations failed for good (after retries); the others are stored."""
+
+
+def parts_dir_for(out) -> Path:
+    """Where the per-realization results of the table ``out`` are kept."""
+    out = Path(out)
+    return out.with_name(out.stem + ".parts")
+
+
+def _utcnow() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+# --------------------------------------------------------------------------- parts
+def _part_path(parts: Path, task: Task, key: str) -> Path:
+    return parts / f"g{task.grid_index:05d}_r{task.realization:04d}_{key}.npz"
+
+
+def _write_part(path: Path, task: Task, key: str, result: dict) -> None:
+    arrays = {f"q_{k}": np.asarray(v, dtype=np.float64) for k, v in result.items()}
+    arrays["seed"] = np.int64(task.seed_int())
+    arrays["key"] = np.array(key)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **arrays)
+
+
+def _read_part(path: Path, key: str) -> dict | None:
+    """The stored result, or None if the file is unusable (then it is recomputed)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["key"]) != key:
+                return None
+            out = {k[2:]: z[k].copy() for k in z.files if k.startswith("q_")}
+            out["__seed__"] = int(z["seed"])
+            return out
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def _run_task(task: Task, evaluator) -> dict:
+    """What a worker runs (module level, so it pickles by reference)."""
+    return evaluator(task)
+
+
+@contextlib.contextmanager
+def _dask_client(scheduler: str | None, workers: int | None, processes: bool):
+    from dask.distributed import Client, LocalCluster
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
+                             f"({exc})") from None
+        with client:
+            yield client
+        return
+    n = workers or min(2, os.cpu_count() or 1)
+    kwargs = dict(n_workers=n, threads_per_worker=1, processes=processes,
+                  dashboard_address="127.0.0.1:0")
+    if processes:
+        # loopback only; one numba/BLAS thread per worker process (no oversubscription)
+        kwargs.update(host="127.0.0.1", env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
+    with LocalCluster(**kwargs) as cluster, Client(cluster) as client:
+        yield client
+
+
+def run_batch(study, out, *, evaluator=None, workers: int | None = None,
+              scheduler: str | None = None, processes: bool = True, client=None,
+              retries: int = 2, progress: bool = True, clean: bool = False,
+              _stop_after: int | None = None) -> Path:
+    """Evaluate every realization of ``study`` on Dask and write the table ``out``.
+
+    Parameters
+    ----------
+    study : Study or path
+        The study (or its TOML file).
+    out : path
+        Table file (HDF5). Results of single realizations go to :func:`parts_dir_for` ``(out)``
+        as they arrive; a second call resumes from them.
+    evaluator : callable, optional
+        Overrides the study's evaluator (tests: a :class:`SyntheticEvaluator` with counters).
+    workers : int, optional
+        Local cluster size (default: 2, or the number of cores if fewer).
+    scheduler : str, optional
+        Address ``tcp://HOST:PORT`` of an existing Dask scheduler (then ``workers`` is unused).
+    processes : bool
+        Local cluster of processes (default) or of threads in this process.
+    client : dask.distributed.Client, optional
+        Use this client (and its cluster) instead of creating one.
+    retries : int
+        How often a realization whose task raised is resubmitted (a worker that dies is
+        replaced by its nanny and its tasks rescheduled by the scheduler).
+    clean : bool
+        Remove the parts directory once the table is written.
+
+    Returns
+    -------
+    Path of the table. Raises :class:`BatchError` if realizations failed for good (the table is
+    then not written; the finished realizations are kept for the next run).
+    """
+    if not isinstance(study, Study):
+        study = load_study(study)
+    out = Path(out)
+    evaluator = evaluator or get_evaluator(study.evaluator)
+    started = _utcnow()
+    parts = parts_dir_for(out)
+    parts.mkdir(parents=True, exist_ok=True)
+    tasks = study.tasks()
+    keys = [t.key(evaluator.id) for t in tasks]
+    todo = [(t, k) for t, k in zip(tasks, keys)
+            if _read_part(_part_path(parts, t, k), k) is None]
+    n_done = len(tasks) - len(todo)
+    failures = []
+    if todo:
+        from tqdm import tqdm
+        bar = tqdm(total=len(tasks), initial=n_done, desc=f"batch {study.name}", unit="RVE",
+                   file=sys.stderr, disable=not progress, dynamic_ncols=True)
+        ctx = contextlib.nullcontext(client) if client is not None else \
+            _dask_client(scheduler, workers, processes)
+        with bar, ctx as cl:
+            from dask.distributed import as_completed
+            by_key = {}
+            futures = []
+            for t, k in todo:
+                fut = cl.submit(_run_task, t, evaluator, key=f"mapsim-{k}", retries=retries,
+                                pure=False)
+                by_key[fut.key] = (t, k)
+                futures.append(fut)
+            stored = 0
+            for fut in as_completed(futures):
+                t, k = by_key[fut.key]
+                if fut.status == "error":
+                    exc = fut.exception()
+                    failures.append((t, f"{type(exc).__name__}: {exc}"))
+                else:
+                    _write_part(_part_path(parts, t, k), t, k, fut.result())
+                    stored += 1
+                    bar.update(1)
+                fut.release()
+                if _stop_after is not None and stored >= _stop_after:
+                    raise KeyboardInterrupt        # tests: an interruption after some results
+    if failures:
+        lines = [f"  grid point {t.grid_index} ({_fmt_point(t.point)}) realization "
+                 f"{t.realization}: {msg}" for t, msg in failures[:10]]
+        more = f"\n  ... and {len(failures) - 10} more" if len(failures) > 10 else ""
+        raise BatchError(f"{len(failures)} of {len(tasks)} realizations failed; the other "
+                         f"results are kept in {parts} and a rerun computes only the "
+                         f"missing ones:\n" + "\n".join(lines) + more)
+    data = aggregate(study, parts, evaluator.id)
+    man = _manifest(study.config(), study.seed, started_utc=started, finished_utc=_utcnow(),
+                    evaluator=evaluator.id, table=str(out))
+    write_table(out, study, data, man, evaluator.id)
+    write_json(out.with_name(out.stem + ".manifest.json"), man)
+    if clean:
+        import shutil
+        shutil.rmtree(parts, ignore_errors=True)
+    return out
+
+
+def _fmt_point(point: dict) -> str:
+    return ", ".join(f"{k}={v}" for k, v in point.items())
+
+
+# --------------------------------------------------------------------------- aggregation
+def aggregate(study: Study, parts: Path, evaluator_id: str) -> dict:
+    """Per-realization arrays and statistics, read from the stored parts in grid order."""
+    tasks = study.tasks()
+    R = study.realizations
+    P = study.n_points
+    values: dict[str, np.ndarray] = {}
+    seeds = np.zeros((P, R), dtype=np.int64)
+    names = None
+    for t in tasks:
+        k = t.key(evaluator_id)
+        res = _read_part(_part_path(parts, t, k), k)
+        if res is None:
+            raise BatchError(f"realization {t.realization} of grid point {t.grid_index} is "
+                             f"missing from {parts}")
+        seeds[t.grid_index, t.realization] = res.pop("__seed__")
+        if names is None:
+            names = [q for q in QUANTITIES if q in res]
+            for q in names:
+                values[q] = np.empty((P, R) + QUANTITIES[q][1])
+        if set(res) != set(names):
+            raise BatchError(f"inconsistent quantities in {parts}: {sorted(res)} vs {names}")
+        for q in names:
+            values[q][t.grid_index, t.realization] = res[q]
+    summaries = {q: summarize(np.moveaxis(values[q], 1, 0), study.confidence) for q in names}
+    return {"values": values, "summaries": summaries, "seeds": seeds,
+            "n": np.full(P, R, dtype=np.int64)}
+
+
+def _str_array(values):
+    import h5py
+    return np.array(values, dtype=h5py.string_dtype())
+
+
+def write_table(out, study: Study, data: dict, man: dict, evaluator_id: str) -> None:
+    """Write the aggregated table atomically (layout: module docstring)."""
+    import h5py
+    P, R = study.n_points, study.realizations
+    points = study.points()
+    axis_names = study.axis_names
+    coords_attr = " ".join(axis_names)
+    with atomic_path(out) as tmp, h5py.File(tmp, "w") as h:
+        h.attrs["format"] = FORMAT
+        h.attrs["format_version"] = FORMAT_VERSION
+        h.attrs["confidence"] = study.confidence
+        h.attrs["grid_axes"] = json.dumps({a: list(v) for a, v in study.axes})
+        h.attrs["grid_shape"] = np.array(study.grid_shape, dtype=np.int64)
+        h.attrs["study_name"] = study.name
+        h.attrs["study_toml"] = study.text
+        h.attrs["evaluator"] = evaluator_id
+        h.attrs["manifest"] = json.dumps(man, default=str)
+        dims = {}
+        for name, size in (("point", P), ("realization", R), ("i", 3), ("j", 3)):
+            d = h.create_dataset(name, data=np.arange(size, dtype=np.int64))
+            d.make_scale(name)
+            dims[name] = d
+        dims["i"].attrs["long_name"] = "Cartesian component (0 = x, 1 = y, 2 = z)"
+        dims["j"].attrs["long_name"] = "Cartesian component (0 = x, 1 = y, 2 = z)"
+        dims["point"].attrs["long_name"] = "grid point (C order over the grid axes)"
+
+        def put(name, arr, dimnames, units=None, desc=None, coords=True):
+            ds = h.create_dataset(name, data=arr)
+            for ax, dn in enumerate(dimnames):
+                ds.dims[ax].attach_scale(dims[dn])
+            if units is not None:
+                ds.attrs["units"] = units
+            if desc:
+                ds.attrs["long_name"] = desc
+            if coords and coords_attr:
+                ds.attrs["coordinates"] = coords_attr
+            return ds
+
+        for a in axis_names:
+            col = [p[a] for p in points]
+            if isinstance(col[0], str):
+                put(a, _str_array(col), ("point",), desc=f"grid axis {a}", coords=False)
+            else:
+                put(a, np.array(col, dtype=np.float64), ("point",), units=_unit_of(a),
+                    desc=f"grid axis {a}", coords=False)
+        put("n", data["n"], ("point",), units="1", desc="realizations per grid point")
+        put("seed", data["seeds"], ("point", "realization"), units="1",
+            desc="integer seed of each realization")
+        for q, vals in data["values"].items():
+            unit, shape, desc = QUANTITIES[q]
+            comp = ("i", "j")[:len(shape)]
+            put(q, vals, ("point", "realization") + comp, unit, desc + " (per realization)")
+            s = data["summaries"][q]
+            put(f"{q}_mean", s["mean"], ("point",) + comp, unit, desc + " (mean)")
+            put(f"{q}_sd", s["sd"], ("point",) + comp, unit, desc + " (sample sd)")
+            lvl = f"{100 * study.confidence:g} %"
+            put(f"{q}_ci_low", s["ci_low"], ("point",) + comp, unit,
+                desc + f" (lower end of the {lvl} Student-t interval of the mean)")
+            put(f"{q}_ci_high", s["ci_high"], ("point",) + comp, unit,
+                desc + f" (upper end of the {lvl} Student-t interval of the mean)")
+
+
+# --------------------------------------------------------------------------- reading
+@dataclass(frozen=True)
+class Table:
+    """An effective-parameter table in memory (see :func:`read_table`)."""
+
+    path: str
+    axes: dict            # axis -> tuple of grid values (canonical order)
+    points: tuple         # tuple of dicts, grid order
+    confidence: float
+    n: np.ndarray         # (P,)
+    values: dict          # quantity -> (P, R, ...) per-realization values
+    units: dict           # quantity -> unit
+    attrs: dict
+
+    @property
+    def quantities(self) -> tuple:
+        return tuple(self.values)
+
+    def resolve_quantity(self, name: str) -> str:
+        """Full quantity name from a prefix such as ``f_eff`` or ``E_eff``."""
+        if name in self.values:
+            return name
+        hits = [q for q in self.values if q.startswith(name + "_") or q == name]
+        if len(hits) == 1:
+            return hits[0]
+        raise InputError(f"{self.path}: no quantity {name!r} in the table; available: "
+                         f"{', '.join(self.values)}")
+
+    def component_values(self, quantity: str, component: str | None = None) -> np.ndarray:
+        """(P, R) per-realization values of one scalar component of ``quantity``.
+
+        ``component``: ``x``/``y``/``z`` (vectors, default z), ``xx``..``zz`` (tensors,
+        default zz), ``norm`` (Euclidean norm of a vector); ignored for scalars.
+        """
+        q = self.resolve_quantity(quantity)
+        v = self.values[q]
+        shape = v.shape[2:]
+        if not shape:
+            return v
+        if component in (None, ""):
+            component = "z" * len(shape)
+        if component == "norm" and len(shape) == 1:
+            return np.linalg.norm(v, axis=-1)
+        if len(component) != len(shape) or any(c not in _COMPONENTS for c in component):
+            allowed = "x, y, z, norm" if len(shape) == 1 else "xx, xy, ..., zz"
+            raise InputError(f"component {component!r} of {q}: allowed {allowed}")
+        idx = tuple(_COMPONENTS.index(c) for c in component)
+        return v[(slice(None), slice(None)) + idx]
+
+    def select(self, spec) -> int:
+        """Index of the grid point given as an integer or ``axis=value,axis=value``."""
+        if isinstance(spec, (int, np.integer)):
+            i = int(spec)
+        elif isinstance(spec, str) and spec.strip().lstrip("-").isdigit():
+            i = int(spec)
+        else:
+            want = {}
+            for item in str(spec).split(","):
+                if "=" not in item:
+                    raise InputError(f"point {spec!r}: expected an index or axis=value pairs "
+                                     f"separated by commas (axes: {', '.join(self.axes)})")
+                a, v = (s.strip() for s in item.split("=", 1))
+                if a not in self.axes:
+                    raise InputError(f"point {spec!r}: unknown axis {a!r}; axes: "
+                                     f"{', '.join(self.axes)}")
+                want[a] = v
+            hits = [i for i, p in enumerate(self.points)
+                    if all(_same(p[a], v) for a, v in want.items())]
+            if len(hits) != 1:
+                what = "no" if not hits else f"{len(hits)}"
+                raise InputError(f"point {spec!r} matches {what} grid points; give a value for "
+                                 f"each axis with several values: "
+                                 + "; ".join(f"{a} in {list(v)}" for a, v in self.axes.items()
+                                             if len(v) > 1))
+            return hits[0]
+        if not 0 <= i < len(self.points):
+            raise InputError(f"point index {i} out of range [0, {len(self.points) - 1}]")
+        return i
+
+
+def _same(grid_value, text: str) -> bool:
+    if isinstance(grid_value, str):
+        return grid_value == text
+    try:
+        v = float(text)
+    except ValueError:
+        return False
+    return math.isclose(v, grid_value, rel_tol=1e-9, abs_tol=0.0)
+
+
+def read_table(path) -> Table:
+    """Load a table written by :func:`run_batch`."""
+    import h5py
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"table {path} does not exist")
+    try:
+        h = h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(f"table {path} is not an HDF5 file: {exc}") from None
+    with h:
+        if h.attrs.get("format") != FORMAT:
+            raise InputError(f"{path} is not a mapsim table (format attribute "
+                             f"{h.attrs.get('format')!r})")
+        axes = {a: tuple(v) for a, v in json.loads(h.attrs["grid_axes"]).items()}
+        P = h["point"].shape[0]
+        cols = {}
+        for a in axes:
+            raw = h[a][()]
+            cols[a] = [x.decode() if isinstance(x, bytes) else
+                       (str(x) if isinstance(x, str) else float(x)) for x in raw]
+        points = tuple({a: cols[a][i] for a in axes} for i in range(P))
+        values, units = {}, {}
+        for q in QUANTITIES:
+            if q in h:
+                values[q] = h[q][()]
+                units[q] = h[q].attrs["units"]
+                if isinstance(units[q], bytes):
+                    units[q] = units[q].decode()
+        attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
+        return Table(path=str(path), axes=axes, points=points,
+                     confidence=float(h.attrs["confidence"]), n=h["n"][()], values=values,
+                     units=units, attrs=attrs)
+
+
+# --------------------------------------------------------------------------- interpolation
+@dataclass(frozen=True)
+class Estimate:
+    """An interpolated table value with its confidence interval."""
+
+    mean: float
+    ci_low: float
+    ci_high: float
+    se: float             # standard error of the mean
+    dof: float            # Welch-Satterthwaite degrees of freedom
+    confidence: float
+    unit: str
+
+    def scaled(self, factor: float) -> "Estimate":
+        lo, hi = sorted((self.ci_low * factor, self.ci_high * factor))
+        return Estimate(self.mean * factor, lo, hi, self.se * abs(factor), self.dof,
+                        self.confidence, self.unit)
+
+
+def _axis_weights(table: Table, axis: str, value) -> list[tuple[int, float]]:
+    """(index into the axis values, weight) pairs of 1-D linear interpolation."""
+    grid = table.axes[axis]
+    if isinstance(grid[0], str):
+        if value not in grid:
+            raise InputError(f"{axis} = {value!r} is not in the table; available: {list(grid)}")
+        return [(grid.index(value), 1.0)]
+    v = float(value)
+    order = np.argsort(grid)
+    g = np.asarray(grid, dtype=float)[order]
+    if len(g) == 1:
+        if not math.isclose(v, g[0], rel_tol=1e-9):
+            raise InputError(f"{axis} = {v:g} {_unit_of(axis)}: the table has only "
+                             f"{axis} = {g[0]:g}")
+        return [(int(order[0]), 1.0)]
+    if v < g[0] * (1 - 1e-12) or v > g[-1] * (1 + 1e-12):
+        raise InputError(f"{axis} = {v:g} {_unit_of(axis)} lies outside the table's range "
+                         f"[{g[0]:g}, {g[-1]:g}] (no extrapolation)")
+    k = int(np.clip(np.searchsorted(g, v, side="right") - 1, 0, len(g) - 2))
+    w = (v - g[k]) / (g[k + 1] - g[k])
+    w = min(max(w, 0.0), 1.0)
+    return [(int(order[k]), 1.0 - w), (int(order[k + 1]), w)]
+
+
+def interpolate(table, quantity: str, *, component: str | None = None,
+                confidence: float | None = None, **coords) -> Estimate:
+    """Multilinear interpolation of a table quantity, with the propagated interval.
+
+    The grid points are independent samples, so the interpolated mean
+    ``sum_k w_k mean_k`` has the variance ``sum_k w_k^2 sd_k^2 / n_k``; the interval uses
+    Student's t with Welch-Satterthwaite degrees of freedom (at a grid point it is the table's
+    own interval). Interpolation error between grid points is not included: make the grid
+    dense where the quantity curves. Axes with a single value may be omitted.
+    """
+    if not isinstance(table, Table):
+        table = read_table(table)
+    conf = table.confidence if confidence is None else confidence
+    for a in coords:
+        if a not in table.axes:
+            raise InputError(f"{a} is not a grid axis of {table.path}; axes: "
+                             f"{', '.join(table.axes)}")
+    per_axis = []
+    for a, grid in table.axes.items():
+        if a not in coords:
+            if len(grid) > 1:
+                raise InputError(f"give {a} (the table {table.path} has {a} in {list(grid)})")
+            per_axis.append([(0, 1.0)])
+        else:
+            per_axis.append(_axis_weights(table, a, coords[a]))
+    shape = tuple(len(v) for v in table.axes.values())
+    vals = table.component_values(quantity, component)
+    q = table.resolve_quantity(quantity)
+    import itertools
+    mean = 0.0
+    var_terms = []
+    for combo in itertools.product(*per_axis):
+        w = math.prod(c[1] for c in combo)
+        if w == 0.0:
+            continue
+        p = int(np.ravel_multi_index(tuple(c[0] for c in combo), shape))
+        x = vals[p]
+        n = x.size
+        mean += w * float(x.mean())
+        var_terms.append((w * w * float(x.var(ddof=1)) / n, n))
+    se2 = sum(v for v, _ in var_terms)
+    if se2 > 0:
+        dof = se2 ** 2 / sum(v * v / (n - 1) for v, n in var_terms)
+    else:
+        dof = float(min(n for _, n in var_terms) - 1)
+    from scipy import stats
+    half = float(stats.t.ppf(0.5 + conf / 2, dof) * math.sqrt(se2))
+    return Estimate(mean, mean - half, mean + half, math.sqrt(se2), float(dof), conf,
+                    table.units[q])
+
+
+def body_force_from_table(table, phi: float, B_T: float, gradB_T_per_m: float, *,
+                          component: str = "z", confidence: float | None = None,
+                          **other_axes) -> Estimate:
+    """Effective body force [N/m^3] at (phi, B, dB/dz), interpolated with its interval.
+
+    If the table holds one gradient only, the force is scaled linearly to the asked gradient:
+    ``F_i = (m_i . grad) B`` is linear in the gradient at fixed moments, and the moments are set
+    by the local field, which a gradient of a few T/m changes by ~1e-6 T across an RVE.
+    """
+    if not isinstance(table, Table):
+        table = read_table(table)
+    coords = {"phi": phi, "B_T": B_T, **other_axes}
+    grads = table.axes.get("gradB_T_per_m")
+    if grads is not None and len(grads) == 1:
+        g0 = float(grads[0])
+        if g0 == 0:
+            raise InputError(f"{table.path} was computed at gradB_T_per_m = 0: no body force "
+                             f"to scale")
+        est = interpolate(table, "f_eff_N_m3", component=component, confidence=confidence,
+                          **coords)
+        return est.scaled(float(gradB_T_per_m) / g0)
+    coords["gradB_T_per_m"] = gradB_T_per_m
+    return interpolate(table, "f_eff_N_m3", component=component, confidence=confidence,
+                       **coords)
+
+
+def modulus_from_table(table, phi: float, *, confidence: float | None = None,
+                       **other_axes) -> Estimate | None:
+    """Effective Young's modulus [Pa] at phi (None if the table has no FEM results).
+
+    The modulus does not depend on the field in this model, so field axes not given are
+    averaged over (equal weights, which keeps the interval honest: all realizations count).
+    """
+    if not isinstance(table, Table):
+        table = read_table(table)
+    if "E_eff_Pa" not in table.values:
+        return None
+    coords = {"phi": phi, **other_axes}
+    ests = []
+    field_axes = [a for a in ("B_T", "gradB_T_per_m") if a in table.axes and a not in coords]
+    import itertools
+    for combo in itertools.product(*(table.axes[a] for a in field_axes)):
+        ests.append(interpolate(table, "E_eff_Pa", confidence=confidence, **coords,
+                                **dict(zip(field_axes, combo))))
+    m = len(ests)
+    mean = sum(e.mean for e in ests) / m
+    se2 = sum(e.se ** 2 for e in ests) / m ** 2
+    dof = se2 ** 2 / sum((e.se ** 2 / m ** 2) ** 2 / e.dof for e in ests) if se2 > 0 else ests[0].dof
+    conf = ests[0].confidence
+    from scipy import stats
+    half = float(stats.t.ppf(0.5 + conf / 2, dof) * math.sqrt(se2))
+    return Estimate(mean, mean - half, mean + half, math.sqrt(se2), float(dof), conf, "Pa")

@@ -1,0 +1,548 @@
+"""Self-consistent point-dipole moments of the particles of a periodic RVE; forces and effective
+quantities.
+
+Model
+-----
+Each particle i is a point dipole ``m_i`` [A m^2] at its centre, magnetised by its local field
+(law from :mod:`micro.magnetization`)::
+
+    H_loc,i = H_ext(x_i) + sum_{j, images} H_dip(x_i - x_j - n L; m_j) - N M_eff
+
+``H_ext = (B + G (x - x_c)) / mu0`` is the applied field: uniform flux density ``B`` [T] plus a
+uniform gradient ``G_ab = dB_a/dx_b`` [T/m] about the box centre ``x_c``. The periodic sum is an
+Ewald sum (plain, or smooth particle-mesh Ewald for large N) with metallic ("tin-foil")
+boundary: the mean field in the sample equals the applied field. A demagnetizing factor ``N``
+(0: long rod along the field, 1/3: sphere, 1: thin plate normal to the field) turns the applied
+field into the internal one, ``H_applied - N M_eff``, solved self-consistently.
+
+Forces: ``F_i = mu0 (m_i . grad) H`` at the centre, split into the external-gradient part
+``G m_i`` and the dipole-dipole part. For an induced moment this is ``-grad`` of the particle's
+energy ``-mu0 int_0^|H| m(h) dh`` (e.g. ``(mu0 alpha / 2) grad |H|^2`` for a linear particle),
+not ``grad(m . B)`` at fixed m, which would double it.
+
+Effective quantities: ``M_eff = sum m / V`` [A/m], ``f_eff = sum F_ext / V`` [N/m^3], the
+magnetic virial stress ``sigma = -(1/V) sum_pairs r_ij (x) F_ij`` [Pa] of the dipole-dipole
+interaction (tin-foil lattice sum; the specimen's demagnetizing term is a macroscopic Maxwell
+stress and not included), ``phi_eff = f_eff.g / (rho sigma_s |g|^2)`` with ``g = grad|B|`` (the
+volume fraction of saturated material giving the same force) and ``d_eff = phi_eff / c`` (what
+the seed paper's packing density 0.5 should have been, for its powder concentration ``c``).
+
+Units: SI throughout (m, A m^2, A/m, T, T/m, N, N/m^3, Pa).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.constants import mu_0 as MU0
+
+from . import _kernels as K
+from ._ewald import PeriodicSum
+from ._validate import InputError, check_choice, check_finite, check_positive, check_range
+from .magnetization import LAW_NAMES, MagnetizationLaw, get_law
+
+__all__ = ["MagneticState", "ConvergenceError", "solve", "applied_gradient", "DipoleSum",
+           "dipole_field_direct", "dipole_pair_interactions", "add_cli_arguments", "cli_summary",
+           "RHO_FE_KG_M3", "SIGMA_S_FE_AM2_KG", "C_POWDER_SEED"]
+
+RHO_FE_KG_M3 = 7870.0          # seed paper, particle density
+SIGMA_S_FE_AM2_KG = 178.0      # seed paper, specific saturation moment
+C_POWDER_SEED = 0.035          # seed paper, powder concentration (vol fraction of powder)
+_METHODS = ("anderson", "fixed-point", "newton-krylov")
+_SUMMATIONS = ("auto", "ewald", "pme")
+_PME_ABOVE_N = 3000            # "auto": plain Ewald below, PME above (both O(N^1.5)/O(N log N))
+
+
+class ConvergenceError(InputError):
+    """The self-consistent moments did not converge; ``residual_history`` tells how far."""
+
+    def __init__(self, message, residual_history):
+        super().__init__(message)
+        self.residual_history = list(residual_history)
+
+
+# ------------------------------------------------------------------------------------------
+# Non-periodic sums (open boundary): direct kernel
+# ------------------------------------------------------------------------------------------
+def dipole_field_direct(sources_m, moments_Am2, observers_m, parallel=True):
+    """Field [A/m] of point dipoles at observer points, open boundary, O(Ns No).
+
+    Parameters
+    ----------
+    sources_m : ndarray, shape (Ns, 3) -- dipole positions [m]
+    moments_Am2 : ndarray, shape (Ns, 3) -- dipole moments [A m^2]
+    observers_m : ndarray, shape (No, 3) -- observer positions [m]; an observer on a source
+        gets no contribution from that source (self-field excluded)
+
+    Returns
+    -------
+    H_A_m : ndarray, shape (No, 3)
+    """
+    src = np.asarray(sources_m, dtype=float)
+    mom = np.asarray(moments_Am2, dtype=float)
+    obs = np.asarray(observers_m, dtype=float)
+    for name, a in (("sources_m", src), ("moments_Am2", mom), ("observers_m", obs)):
+        if a.ndim != 2 or a.shape[1] != 3:
+            raise InputError(f"{name} must have shape (N, 3), got {a.shape}")
+        check_finite(name, a)
+    if src.shape != mom.shape:
+        raise InputError(f"moments_Am2 shape {mom.shape} must match sources_m {src.shape}")
+    # relative coordinates about a common origin keep the differences exact-ish
+    o = src.mean(axis=0) if src.shape[0] else np.zeros(3)
+    out = np.empty((3, obs.shape[0]))
+    fn = K.dipole_field_direct_par if parallel else K.dipole_field_direct
+    fn(np.ascontiguousarray((src - o).T), np.ascontiguousarray(mom.T),
+       np.ascontiguousarray((obs - o).T), out)
+    return out.T / (4 * math.pi)
+
+
+def dipole_pair_interactions(centers_m, moments_Am2):
+    """Field, force and torque on each of a few dipoles from all the others, open boundary.
+
+    Returns ``(H_A_m (N,3), F_N (N,3), torque_Nm (N,3))`` with ``F_i = mu0 (m_i . grad) H`` and
+    ``torque_i = mu0 m_i x H``. Uses the bare (alpha = 0) real-space kernel on a box large enough
+    to contain no images; meant for small N and tests.
+    """
+    c = np.asarray(centers_m, dtype=float)
+    m = np.asarray(moments_Am2, dtype=float)
+    if c.ndim != 2 or c.shape[1] != 3 or m.shape != c.shape:
+        raise InputError("centers_m and moments_Am2 must both have shape (N, 3)")
+    ext = float(np.ptp(c, axis=0).max()) or 1.0
+    box = 4.0 * ext
+    pos = np.ascontiguousarray((c - c.min(axis=0)) / box + 0.25)
+    n = c.shape[0]
+    h = np.empty((n, 3))
+    f = np.empty((n, 3))
+    v = np.empty((n, 9))
+    order = np.arange(n, dtype=np.int64)
+    start = np.array([0, n], dtype=np.int64)
+    # one cell, no neighbour offsets: only the n = 0 image; all pairs closer than rc = 0.5 box
+    K.ewald_real(pos, np.ascontiguousarray(m), order, start, 1, 0, 0.0, 0.5, True, h, f, v)
+    H = h / (4 * math.pi * box ** 3)
+    F = MU0 * f / (4 * math.pi * box ** 4)
+    return H, F, MU0 * np.cross(m, H)
+
+
+# ------------------------------------------------------------------------------------------
+# Periodic sums in SI units
+# ------------------------------------------------------------------------------------------
+class DipoleSum:
+    """Periodic dipolar field of point dipoles at fixed centres in a cubic box (SI wrapper).
+
+    Parameters
+    ----------
+    box_m : float -- cube edge L [m]
+    centers_m : ndarray, shape (N, 3) -- centres [m] (wrapped into the box)
+    accuracy : float -- relative accuracy of the field, in (1e-12, 1e-1]
+    summation : {"ewald", "pme"} -- plain Ewald (reference) or smooth particle-mesh Ewald
+    demag_factor : float or None -- None: metallic boundary; else the specimen demagnetizing
+        factor N in [0, 1], adding ``-N sum(m)/V`` to every field
+    alpha_per_m : float, optional -- Ewald splitting parameter [1/m]; automatic if None
+    """
+
+    def __init__(self, box_m, centers_m, *, accuracy=1e-6, summation="pme", demag_factor=None,
+                 alpha_per_m=None, pme_order=6, pme_grid=None):
+        self.box_m = check_positive("box_m", box_m, "m")
+        check_range("accuracy", accuracy, 1e-12, 0.1, "(relative)")
+        check_choice("summation", summation, ("ewald", "pme"))
+        c = np.asarray(centers_m, dtype=float)
+        if c.ndim != 2 or c.shape[1] != 3:
+            raise InputError(f"centers_m must have shape (N, 3), got {c.shape}")
+        check_finite("centers_m", c, "m")
+        if demag_factor is not None:
+            check_range("demag_factor", demag_factor, 0.0, 1.0)
+        self.demag_factor = demag_factor
+        u = np.mod(c / self.box_m, 1.0)
+        u[u >= 1.0] = 0.0
+        alpha = None if alpha_per_m is None else float(alpha_per_m) * self.box_m
+        self._sum = PeriodicSum(u, accuracy, summation, alpha, pme_order, grid=pme_grid)
+        self.n = c.shape[0]
+        self.volume_m3 = self.box_m ** 3
+
+    @property
+    def evaluations(self) -> int:
+        """Number of field evaluations so far."""
+        return self._sum.evaluations
+
+    @property
+    def parameters(self) -> dict:
+        """Splitting parameter [1/m], real-space cutoff [m], k cutoff or PME grid."""
+        s = self._sum
+        out = {"summation": s.method, "alpha_per_m": s.alpha / self.box_m,
+               "rc_m": s.rc * self.box_m, "accuracy": s.accuracy}
+        if s.method == "pme":
+            out.update(pme_grid=s.grid, pme_order=s.order)
+        else:
+            out.update(n_kvectors=int(s.kvec.shape[0]))
+        return out
+
+    def _surface(self, mom):
+        if self.demag_factor is None:
+            return 0.0
+        return -self.demag_factor * mom.sum(axis=0) / self.volume_m3
+
+    def field_A_m(self, moments_Am2):
+        """Field [A/m] at each centre from all other dipoles and all images, shape (N, 3)."""
+        mom = np.ascontiguousarray(moments_Am2, dtype=float)
+        return self._sum.field(mom) / self.box_m ** 3 + self._surface(mom)
+
+    def interactions(self, moments_Am2):
+        """Dipole-dipole field [A/m], forces [N], energy [J] and virial stress [Pa].
+
+        The stress is ``-(1/V) sum_pairs r_ij (x) F_ij`` over the periodic lattice sum
+        (tin-foil; the demagnetizing surface term is not part of it).
+        """
+        mom = np.ascontiguousarray(moments_Am2, dtype=float)
+        h, f, u, p = self._sum.interactions(mom)
+        L = self.box_m
+        H = h / L ** 3 + self._surface(mom)
+        F = MU0 * f / L ** 4
+        energy = MU0 * u / L ** 3
+        sigma = MU0 * p.T / L ** 6
+        return H, F, energy, sigma
+
+
+# ------------------------------------------------------------------------------------------
+# Applied field
+# ------------------------------------------------------------------------------------------
+def applied_gradient(B_T, gradB_T_per_m):
+    """The applied flux density vector [T] and its gradient tensor ``G_ab = dB_a/dx_b`` [T/m].
+
+    ``B_T`` is a scalar (along z) or a 3-vector. ``gradB_T_per_m`` is either a scalar
+    ``d|B|/dz`` -- then G is the symmetric, traceless (curl- and divergence-free) tensor with
+    ``grad|B| = G^T b = gradB z`` (for B along z: ``diag(-1/2, -1/2, 1) gradB``) -- or a 3x3
+    tensor, which must be symmetric and traceless (Maxwell in free space).
+    """
+    check_finite("B_T", B_T, "T")
+    check_finite("gradB_T_per_m", gradB_T_per_m, "T/m")
+    B = np.asarray(B_T, dtype=float)
+    if B.ndim == 0:
+        B = np.array([0.0, 0.0, float(B)])
+    if B.shape != (3,):
+        raise InputError(f"B_T must be a scalar or a 3-vector [T], got shape {B.shape}")
+    Bn = float(np.linalg.norm(B))
+    b = B / Bn if Bn > 0 else np.array([0.0, 0.0, 1.0])
+    g = np.asarray(gradB_T_per_m, dtype=float)
+    if g.ndim == 0:
+        z = np.array([0.0, 0.0, 1.0])
+        c = float(b @ z)
+        G = float(g) * (np.outer(b, z) + np.outer(z, b) - c * np.outer(b, b)
+                        - 0.5 * c * (np.eye(3) - np.outer(b, b)))
+    elif g.shape == (3, 3):
+        G = g.copy()
+        scale = max(float(np.abs(G).max()), 1e-300)
+        if np.abs(G - G.T).max() > 1e-9 * scale or abs(np.trace(G)) > 1e-9 * scale:
+            raise InputError("gradB_T_per_m as a 3x3 tensor dB_a/dx_b must be symmetric and "
+                             "traceless (curl B = 0 and div B = 0 in the matrix) [T/m]")
+    else:
+        raise InputError(f"gradB_T_per_m must be a scalar or 3x3 [T/m], got shape {g.shape}")
+    return B, G
+
+
+# ------------------------------------------------------------------------------------------
+# Self-consistent solve
+# ------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class MagneticState:
+    """Converged magnetic state of an RVE (SI units).
+
+    Attributes
+    ----------
+    moments_Am2 : (N, 3) particle moments [A m^2]
+    H_local_A_m : (N, 3) local field at each centre (applied + others + demag) [A/m]
+    force_ext_N : (N, 3) external-gradient force ``G m_i`` [N]
+    force_dd_N : (N, 3) dipole-dipole force ``mu0 (m_i . grad) H_dd`` [N]
+    M_eff_A_per_m : (3,) ``sum m / V`` [A/m]
+    f_eff_N_m3 : (3,) ``sum F_ext / V`` [N/m^3]
+    virial_stress_Pa : (3, 3) ``-(1/V) sum_pairs r_ij (x) F_ij`` [Pa]
+    phi_eff, d_eff : effective saturated volume fraction and packing density (None if no
+        gradient)
+    iterations : number of solver iterations
+    residual_history : relative residual ``|m_new - m| / |m_new|`` per iteration
+    """
+
+    moments_Am2: np.ndarray
+    H_local_A_m: np.ndarray
+    force_ext_N: np.ndarray
+    force_dd_N: np.ndarray
+    M_eff_A_per_m: np.ndarray
+    f_eff_N_m3: np.ndarray
+    virial_stress_Pa: np.ndarray
+    phi_eff: float | None
+    d_eff: float | None
+    iterations: int
+    residual_history: tuple
+    field_evaluations: int = 0
+    energy_dd_J: float = 0.0
+    B_applied_T: np.ndarray = field(default=None)
+    gradient_T_per_m: np.ndarray = field(default=None)
+    summation: dict = field(default_factory=dict)
+    law: str = ""
+
+    @property
+    def residual(self) -> float:
+        """Final relative residual."""
+        return float(self.residual_history[-1]) if self.residual_history else 0.0
+
+    @property
+    def dd_force_sum_rel(self) -> float:
+        """|sum of dipole-dipole forces| / sum |F_dd|: zero by Newton's third law."""
+        tot = float(np.abs(self.force_dd_N).sum())
+        return float(np.linalg.norm(self.force_dd_N.sum(axis=0))) / tot if tot > 0 else 0.0
+
+
+def _anderson(g, x0, tol, max_iter, depth=8):
+    """Anderson acceleration (type II, Walker & Ni 2011) of the fixed point x = g(x).
+
+    Returns ``(x, g(x) history length, residual history, converged)``; the residual is
+    ``|g(x) - x| / |g(x)|``.
+    """
+    x = x0
+    hist = []
+    dG, dF = [], []
+    g_prev = f_prev = None
+    for it in range(max_iter):
+        gx = g(x)
+        f = gx - x
+        res = float(np.linalg.norm(f) / max(np.linalg.norm(gx), 1e-300))
+        hist.append(res)
+        if res <= tol:
+            return gx, it + 1, hist, True
+        if f_prev is not None:
+            dG.append(gx - g_prev)
+            dF.append(f - f_prev)
+            if len(dF) > depth:
+                dG.pop(0)
+                dF.pop(0)
+        g_prev, f_prev = gx, f
+        if dF:
+            Fm = np.stack(dF, axis=1)
+            gamma = np.linalg.lstsq(Fm, f, rcond=None)[0]
+            x = gx - np.stack(dG, axis=1) @ gamma
+        else:
+            x = gx
+    return x, max_iter, hist, False
+
+
+def _fixed_point(g, x0, tol, max_iter, damping=1.0):
+    x = x0
+    hist = []
+    for it in range(max_iter):
+        gx = g(x)
+        res = float(np.linalg.norm(gx - x) / max(np.linalg.norm(gx), 1e-300))
+        hist.append(res)
+        if res <= tol:
+            return gx, it + 1, hist, True
+        x = (1 - damping) * x + damping * gx
+    return x, max_iter, hist, False
+
+
+def _newton_krylov(g, x0, tol, max_iter):
+    from scipy.optimize import NoConvergence, newton_krylov
+    hist = []
+
+    def resid(x):
+        gx = g(x)
+        return gx - x
+
+    def cb(x, f):
+        hist.append(float(np.linalg.norm(f) / max(np.linalg.norm(x + f), 1e-300)))
+
+    scale = max(float(np.abs(x0).max()), 1e-300)
+    try:
+        x = newton_krylov(resid, x0, f_tol=tol * scale * 1e-1, maxiter=max_iter, callback=cb,
+                          method="lgmres", line_search=None)
+        ok = True
+    except NoConvergence as exc:
+        x = exc.args[0]
+        ok = False
+    gx = g(x)
+    res = float(np.linalg.norm(gx - x) / max(np.linalg.norm(gx), 1e-300))
+    hist.append(res)
+    return gx, len(hist), hist, ok and res <= tol
+
+
+def _rve_arrays(rve):
+    try:
+        c = np.asarray(rve.centers_m, dtype=float)
+        box = float(rve.box_m)
+        ms = np.asarray(rve.m_sat_Am2, dtype=float)
+        vol = 4.0 / 3.0 * np.pi * np.asarray(rve.radii_m, dtype=float) ** 3
+    except AttributeError as exc:
+        raise InputError(f"rve must be a micro.rve.RVE (missing {exc.name})") from None
+    return box, c, ms, vol
+
+
+def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None, tol=1e-8,
+          accuracy=1e-6, method="anderson", summation="auto", max_iter=500,
+          rho_kg_m3=RHO_FE_KG_M3, sigma_s_Am2_kg=SIGMA_S_FE_AM2_KG, c_powder=C_POWDER_SEED,
+          initial_moments_Am2=None, **law_params) -> MagneticState:
+    """Self-consistent moments, forces and effective quantities of an RVE in an applied field.
+
+    Parameters
+    ----------
+    rve : micro.rve.RVE -- particles (centres, outer radii [m], saturation moments [A m^2])
+    B_T : float or (3,) -- applied flux density mu0 H [T]; a scalar points along z
+    gradB_T_per_m : float or (3, 3) -- d|B|/dz [T/m], or the gradient tensor dB_a/dx_b
+    law : str or MagnetizationLaw -- "saturated", "linear", "frohlich-kennelly", "langevin";
+        the particle volume in the laws is the outer (core + shell) sphere
+    demag_factor : float in [0, 1] or None -- specimen demagnetizing factor; None = metallic
+    tol : float -- relative residual of the moments at convergence (default 1e-8)
+    accuracy : float -- relative accuracy of the periodic field sums (default 1e-6)
+    method : {"anderson", "fixed-point", "newton-krylov"}
+    summation : {"auto", "ewald", "pme"} -- periodic sum; auto: PME above 3000 particles
+    rho_kg_m3, sigma_s_Am2_kg : density [kg/m^3] and specific saturation moment [A m^2/kg] of
+        the reference saturated material in phi_eff (defaults: the seed paper's Fe)
+    c_powder : float -- the seed's powder concentration c in d_eff (default 0.035)
+    **law_params : chi, chi0, T_K (see :func:`micro.magnetization.get_law`)
+
+    Raises
+    ------
+    ConvergenceError -- if the residual does not reach ``tol`` in ``max_iter`` iterations.
+    """
+    box, c, m_sat, vol = _rve_arrays(rve)
+    n = c.shape[0]
+    if n == 0:
+        raise InputError("rve has no particles")
+    law_obj = law if isinstance(law, MagnetizationLaw) else get_law(law, **law_params)
+    check_range("tol", tol, 1e-15, 1e-1, "(relative)")
+    check_choice("method", method, _METHODS)
+    check_choice("summation", summation, _SUMMATIONS)
+    check_positive("rho_kg_m3", rho_kg_m3, "kg/m^3")
+    check_positive("sigma_s_Am2_kg", sigma_s_Am2_kg, "A m^2/kg")
+    check_range("c_powder", c_powder, 0.0, 1.0, lo_open=True)
+    if int(max_iter) < 1:
+        raise InputError(f"max_iter must be >= 1, got {max_iter}")
+    B, G = applied_gradient(B_T, gradB_T_per_m)
+    if summation == "auto":
+        summation = "pme" if n > _PME_ABOVE_N else "ewald"
+    dsum = DipoleSum(box, c, accuracy=accuracy, summation=summation, demag_factor=demag_factor)
+    xc = np.full(3, 0.5 * box)
+    H_app = (B[None, :] + (c - xc) @ G.T) / MU0           # (N, 3)
+    m_scale = float(np.mean(m_sat)) if np.mean(m_sat) > 0 else 1.0
+
+    def g(x):
+        mom = x.reshape(n, 3) * m_scale
+        H = H_app + dsum.field_A_m(mom)
+        return law_obj.moment(H, m_sat, vol).ravel() / m_scale
+
+    if initial_moments_Am2 is not None:
+        x0 = np.asarray(initial_moments_Am2, dtype=float).reshape(-1) / m_scale
+    else:
+        x0 = law_obj.moment(H_app, m_sat, vol).ravel() / m_scale
+    t0 = time.perf_counter()
+    if method == "anderson":
+        x, its, hist, ok = _anderson(g, x0, tol, int(max_iter))
+    elif method == "fixed-point":
+        x, its, hist, ok = _fixed_point(g, x0, tol, int(max_iter))
+    else:
+        x, its, hist, ok = _newton_krylov(g, x0, tol, int(max_iter))
+    if not ok:
+        tail = ", ".join(f"{r:.2e}" for r in hist[-5:])
+        raise ConvergenceError(
+            f"magnetic moments did not converge with method {method!r}: relative residual "
+            f"{hist[-1]:.3e} > tol {tol:g} after {its} iterations ({time.perf_counter() - t0:.1f}"
+            f" s; last residuals {tail}); try method='anderson', a larger max_iter or tol",
+            hist)
+    mom = x.reshape(n, 3) * m_scale
+    H_dd, F_dd, energy, sigma = dsum.interactions(mom)
+    H_loc = H_app + H_dd
+    F_ext = mom @ G.T                                       # F_a = m_b dB_a/dx_b
+    V = box ** 3
+    M_eff = mom.sum(axis=0) / V
+    f_eff = F_ext.sum(axis=0) / V
+    gradabs = G.T @ (B / np.linalg.norm(B)) if np.linalg.norm(B) > 0 else G.T @ np.array([0, 0, 1.])
+    gg = float(gradabs @ gradabs)
+    if gg > 0:
+        phi_eff = float(f_eff @ gradabs) / (rho_kg_m3 * sigma_s_Am2_kg * gg)
+        d_eff = phi_eff / c_powder
+    else:
+        phi_eff = d_eff = None
+    return MagneticState(
+        moments_Am2=mom, H_local_A_m=H_loc, force_ext_N=F_ext, force_dd_N=F_dd,
+        M_eff_A_per_m=M_eff, f_eff_N_m3=f_eff, virial_stress_Pa=sigma, phi_eff=phi_eff,
+        d_eff=d_eff, iterations=int(its), residual_history=tuple(hist),
+        field_evaluations=dsum.evaluations, energy_dd_J=energy, B_applied_T=B,
+        gradient_T_per_m=G, summation=dsum.parameters, law=law_obj.name)
+
+
+# ------------------------------------------------------------------------------------------
+# CLI hooks (called by `mapsim rve`, homogenize/_cli_rve.py)
+# ------------------------------------------------------------------------------------------
+def add_cli_arguments(parser) -> None:
+    """Add the magnetics options of ``mapsim rve`` to an argparse parser."""
+    g = parser.add_argument_group("magnetics (self-consistent dipoles; active when --B is given)")
+    g.add_argument("--B", dest="B_T", type=float, default=None,
+                   help="applied flux density mu0 H [T]; enables the magnetic solve "
+                        "(default: none, no magnetics)")
+    g.add_argument("--B-direction", dest="B_direction", type=float, nargs=3, default=None,
+                   metavar=("BX", "BY", "BZ"),
+                   help="direction of the applied field (any length) [-] (default: 0 0 1)")
+    g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=1.78,
+                   help="gradient of |B| along z [T/m] (default: 1.78, the seed paper)")
+    g.add_argument("--law", default="frohlich-kennelly", choices=LAW_NAMES,
+                   help="magnetization law of one particle (default: frohlich-kennelly)")
+    g.add_argument("--chi", type=float, default=None,
+                   help="linear law: intrinsic susceptibility [-] (default: inf, i.e. m = 3 V H)")
+    g.add_argument("--chi0", type=float, default=None,
+                   help="frohlich-kennelly: initial apparent susceptibility [-] (default: 3)")
+    g.add_argument("--T", dest="T_K", type=float, default=None,
+                   help="langevin: temperature [K] (default: 300)")
+    g.add_argument("--demag-factor", dest="demag_factor", type=float, default=None,
+                   help="specimen demagnetizing factor N in [0, 1] [-] (default: none = "
+                        "metallic boundary, internal field = applied field)")
+    g.add_argument("--tol", type=float, default=1e-8,
+                   help="relative residual of the self-consistent moments [-] (default: 1e-8)")
+    g.add_argument("--accuracy", type=float, default=1e-6,
+                   help="relative accuracy of the periodic dipole sums [-] (default: 1e-6)")
+    g.add_argument("--solver", dest="mag_method", default="anderson", choices=_METHODS,
+                   help="nonlinear solver for the moments (default: anderson)")
+    g.add_argument("--summation", default="auto", choices=_SUMMATIONS,
+                   help="periodic sum: plain Ewald, particle-mesh Ewald, or auto (PME above "
+                        f"{_PME_ABOVE_N} particles) (default: auto)")
+    g.add_argument("--c-powder", dest="c_powder", type=float, default=C_POWDER_SEED,
+                   help="the seed's powder concentration c for d_eff = phi_eff / c [-] "
+                        "(default: 0.035)")
+    g.add_argument("--rho-particle", dest="rho_kg_m3", type=float, default=RHO_FE_KG_M3,
+                   help="density of the saturated reference material in phi_eff [kg/m^3] "
+                        "(default: 7870)")
+    g.add_argument("--sigma-s", dest="sigma_s_Am2_kg", type=float, default=SIGMA_S_FE_AM2_KG,
+                   help="specific saturation moment of the reference material [A m^2/kg] "
+                        "(default: 178)")
+
+
+def cli_summary(args, rve) -> dict:
+    """Solve the magnetics for the CLI options ``args`` and return the JSON summary entries.
+
+    Returns an empty dict when ``--B`` was not given.
+    """
+    if getattr(args, "B_T", None) is None:
+        return {}
+    B = float(args.B_T)
+    if getattr(args, "B_direction", None) is not None:
+        d = np.asarray(args.B_direction, dtype=float)
+        check_finite("--B-direction", d)
+        if np.linalg.norm(d) == 0:
+            raise InputError("--B-direction must not be the zero vector")
+        B = B * d / np.linalg.norm(d)
+    st = solve(rve, B, args.gradB_T_per_m, args.law, demag_factor=args.demag_factor,
+               tol=args.tol, accuracy=args.accuracy, method=args.mag_method,
+               summation=args.summation, c_powder=args.c_powder, rho_kg_m3=args.rho_kg_m3,
+               sigma_s_Am2_kg=args.sigma_s_Am2_kg, chi=args.chi, chi0=args.chi0, T_K=args.T_K)
+    return {
+        "B_applied_T": st.B_applied_T.tolist(),
+        "gradB_T_per_m": float(args.gradB_T_per_m),
+        "law": st.law,
+        "M_eff_A_per_m": st.M_eff_A_per_m.tolist(),
+        "f_eff_N_m3": st.f_eff_N_m3.tolist(),
+        "phi_eff": st.phi_eff,
+        "d_eff": st.d_eff,
+        "virial_stress_Pa": st.virial_stress_Pa.tolist(),
+        "iterations": st.iterations,
+        "residual": st.residual,
+        "field_evaluations": st.field_evaluations,
+        "dd_force_sum_rel": st.dd_force_sum_rel,
+        "summation": st.summation,
+    }

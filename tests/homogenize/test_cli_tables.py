@@ -1,0 +1,141 @@
+"""The commands batch, compare and rve-size, run in-process against a loopback scheduler."""
+import json
+
+import numpy as np
+import pytest
+
+from homogenize.cli import main
+from homogenize.tables import parts_dir_for, read_table
+
+STUDY = """
+[study]
+name = "cli-test"
+seed = 99
+realizations = 10
+n_particles = 100
+evaluator = "synthetic"
+
+[grid]
+phi = 0.035
+arrangement = ["dispersed", "chained"]
+B_T = [0.05, 0.3]
+gradB_T_per_m = 1.78
+
+[rve_size]
+n_particles = [25, 100, 400]
+realizations = 8
+quantity = "f_eff"
+component = "z"
+target_rel_precision = 0.02
+"""
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    """A Dask cluster on loopback TCP (threads in this process), reached via --scheduler."""
+    from dask.distributed import LocalCluster
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                      host="127.0.0.1", dashboard_address="127.0.0.1:0") as c:
+        yield c.scheduler_address
+
+
+@pytest.fixture(scope="module")
+def table(scheduler, tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    (d / "study.toml").write_text(STUDY)
+    out = d / "table.h5"
+    rc = main(["batch", str(d / "study.toml"), "--out", str(out), "--scheduler", scheduler,
+               "--no-progress"])
+    assert rc == 0
+    return out
+
+
+@pytest.mark.parametrize("edit, words", [
+    (("n_particles = 100", "n_particels = 100"), ["[study]", "unknown key", "n_particels"]),
+    (("B_T = [0.05, 0.3]", "B_T = []"), ["[grid] B_T", "empty"]),
+    (("realizations = 10", "realizations = -2"), ["realizations", "-2"]),
+    (("n_particles = 100", "n_particles = -1"), ["n_particles", "-1"]),
+])
+def test_bad_study_file_exit_2_one_message_no_output(tmp_path, capsys, edit, words):
+    p = tmp_path / "bad.toml"
+    p.write_text(STUDY.replace(*edit))
+    out = tmp_path / "t.h5"
+    rc = main(["batch", str(p), "--out", str(out), "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and str(p) in lines[0], err
+    for w in words:
+        assert w in err
+    assert list(tmp_path.iterdir()) == [p]        # neither table nor parts directory
+
+
+def test_bad_options_exit_2(tmp_path, capsys):
+    p = tmp_path / "s.toml"
+    p.write_text(STUDY)
+    assert main(["batch", str(p), "--out", str(tmp_path / "t.h5"), "--workers", "0"]) == 2
+    assert "--workers" in capsys.readouterr().err
+    assert main(["batch", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "t.h5")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "t.h5").exists()
+
+
+def test_batch_via_scheduler_writes_table(table):
+    t = read_table(table)
+    assert len(t.points) == 4 and t.values["f_eff_N_m3"].shape == (4, 10, 3)
+    assert parts_dir_for(table).is_dir()
+
+
+def test_compare_chained_vs_dispersed(table, tmp_path, capsys):
+    js = tmp_path / "cmp.json"
+    rc = main(["compare", str(table), "arrangement=dispersed,B_T=0.3",
+               "arrangement=chained,B_T=0.3", "--quantity", "f_eff", "--json", str(js),
+               "--permutations", "999"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "Welch" in out and "permutation" in out and "Hedges" in out
+    res = json.loads(js.read_text())
+    t = read_table(table)
+    a = t.select("arrangement=dispersed,B_T=0.3")
+    b = t.select("arrangement=chained,B_T=0.3")
+    vals = t.component_values("f_eff", "z")
+    assert np.isclose(res["difference"], vals[b].mean() - vals[a].mean())
+    # the synthetic chained force is 25 % higher, sd 5 %: effect size 5, with 10 + 10
+    # realizations the expected t is 11 (power ~ 1 at p < 0.01)
+    assert res["p_welch"] < 0.01 and res["p_permutation"] < 0.05 and res["hedges_g"] > 1
+    # by index, the same result
+    rc = main(["compare", str(table), str(a), str(b), "--json", str(js), "--permutations", "999"])
+    assert rc == 0 and np.isclose(json.loads(js.read_text())["difference"], res["difference"])
+
+
+@pytest.mark.parametrize("args, word", [
+    (["0", "0"], "same grid point"),
+    (["arrangement=dispersed", "1"], "matches 2 grid points"),
+    (["7", "1"], "out of range"),
+    (["phi=0.035,colour=red", "1"], "unknown axis"),
+    (["0", "1", "--quantity", "g_eff"], "no quantity"),
+    (["0", "1", "--component", "w"], "component"),
+])
+def test_compare_bad_points(table, capsys, args, word):
+    rc = main(["compare", str(table), *args])
+    assert rc == 2 and word in capsys.readouterr().err
+
+
+def test_rve_size_recovers_kanit_exponent(scheduler, tmp_path, capsys):
+    """The synthetic variance is exactly proportional to 1/V: alpha ~ 1; realizations needed
+    grow as 1/V. Tolerance: sd of log s^2 with 8 realizations is sqrt(2/7) = 0.53 per size;
+    over a factor 16 in V the slope's se is ~0.3, so |alpha - 1| < 1 is a 3-sigma band."""
+    p = tmp_path / "s.toml"
+    p.write_text(STUDY.replace('arrangement = ["dispersed", "chained"]', "")
+                 .replace("B_T = [0.05, 0.3]", "B_T = 0.3"))
+    rc = main(["rve-size", str(p), "--out", str(tmp_path / "rs"), "--scheduler", scheduler,
+               "--no-progress"])
+    assert rc == 0
+    res = json.loads((tmp_path / "rs" / "rve_size.json").read_text())
+    row = res["points"][0]
+    assert abs(row["alpha"] - 1.0) < 1.0
+    need = [s["realizations_needed_fit"] for s in row["sizes"]]
+    assert need[0] > need[1] > need[2]
+    # rel sd 0.05 sqrt(100/n): at n = 25 it is 0.1 -> (1.96 * 0.1 / 0.02)^2 ~ 96 realizations
+    assert 40 < row["sizes"][0]["realizations_needed"] < 400
+    assert (tmp_path / "rs" / "rve_size.png").stat().st_size > 1000
+    assert "alpha" in capsys.readouterr().out
