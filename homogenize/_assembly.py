@@ -101,13 +101,15 @@ def _pattern(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     cols = np.empty((n ** 3, 27), dtype=np.int64)
     for s, (dx, dy, dz) in enumerate(OFFSETS):
         cols[:, s] = (i + dx) % n + n * (((j + dy) % n) + n * ((k + dz) % n))
-    order = np.argsort(cols, axis=1, kind="stable")
-    cols = np.take_along_axis(cols, order, axis=1)
+    # interior rows are already sorted (offsets run z-major); only rows on the faces wrap
+    rows = np.flatnonzero(np.any(np.diff(cols, axis=1) < 0, axis=1))
+    order = np.argsort(cols[rows], axis=1, kind="stable")
+    cols[rows] = np.take_along_axis(cols[rows], order, axis=1)
     idx_dtype = np.int32 if 27 * n ** 3 < 2 ** 31 else np.int64
     indptr = np.arange(0, 27 * n ** 3 + 1, 27, dtype=idx_dtype)
-    for arr in (cols, order):
+    for arr in (cols, order, rows):
         arr.setflags(write=False)
-    return indptr, cols.ravel().astype(idx_dtype), order
+    return indptr, cols.ravel().astype(idx_dtype), (rows, order)
 
 
 def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float) -> sp.bsr_matrix:
@@ -131,9 +133,9 @@ def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float) -> sp.bsr_matrix:
     X = np.concatenate([node_coefficients(lam), node_coefficients(mu)], axis=1)
     data = (X @ G.reshape(16, 243)).reshape(n ** 3, 27, 3, 3)
     del X
-    indptr, indices, order = _pattern(n)
-    # reorder the 27 slots of each row to sorted column order; the interior rows share one order
-    data = np.take_along_axis(data, order[:, :, None, None], axis=1)
+    indptr, indices, (rows, order) = _pattern(n)
+    # reorder the 27 slots of the wrapping rows to sorted column order
+    data[rows] = np.take_along_axis(data[rows], order[:, :, None, None], axis=1)
     A = sp.bsr_matrix((data.reshape(-1, 3, 3), indices, indptr), shape=(3 * n ** 3, 3 * n ** 3))
     A.has_sorted_indices = True
     return A

@@ -40,6 +40,7 @@ QUANTITIES = {
     "E_eff_Pa": ("Pa", (), "effective Young's modulus (FEM, isotropic projection)"),
     "nu_eff": ("1", (), "effective Poisson's ratio (FEM, isotropic projection)"),
     "stress_mag_Pa": ("Pa", (3, 3), "magnetic stress from the FEM cell problem"),
+    "strain_mag": ("1", (3, 3), "strain of a stress-free sample, -C_eff^-1 stress_mag (FEM)"),
     "volume_m3": ("m^3", (), "RVE box volume"),
     "phi_rve": ("1", (), "particle volume fraction of the generated RVE"),
 }
@@ -77,7 +78,7 @@ def _check_finite_result(out: dict, task) -> dict:
 
 # --------------------------------------------------------------------------- synthetic
 _SYNTH_AXES = {"phi", "B_T", "gradB_T_per_m", "mean_radius_m", "arrangement", "law"}
-_ARRANGEMENT_FACTOR = {"dispersed": 1.0, "clustered": 1.1, "chained": 1.25}
+_ARRANGEMENT_FACTOR = {"dispersed": 1.0, "clusters": 1.1, "chains": 1.25}
 
 
 def synthetic_truth(point: dict, settings: dict) -> dict:
@@ -85,7 +86,7 @@ def synthetic_truth(point: dict, settings: dict) -> dict:
 
     Returns ``{quantity: (mean, sd)}`` with arrays of the quantity's shape. The body force
     mimics a saturating Fe suspension, ``f_z = phi Ms tanh(B / 0.3 T) dB/dz`` (times 1.1 for
-    clustered, 1.25 for chained particles), with a relative standard deviation
+    ``clusters``, 1.25 for ``chains``), with a relative standard deviation
     ``0.05 sqrt(100 / n_particles)``: variance proportional to 1 / RVE volume (Kanit exponent 1).
     """
     phi = float(point.get("phi", 0.035))
@@ -113,6 +114,7 @@ def synthetic_truth(point: dict, settings: dict) -> dict:
         out["E_eff_Pa"] = (np.array(2e6 * (1 + 2.5 * phi)), np.array(2e6 * rel * phi))
         out["nu_eff"] = (np.array(0.45), np.array(0.01 * rel))
         out["stress_mag_Pa"] = out["virial_stress_Pa"]
+        out["strain_mag"] = (out["virial_stress_Pa"][0] / 2e6, out["virial_stress_Pa"][1] / 2e6)
     return out
 
 
@@ -178,10 +180,38 @@ class SyntheticEvaluator:
 # --------------------------------------------------------------------------- real chain
 _FIELD_AXES = ("phi", "B_T", "gradB_T_per_m", "law")
 DEFAULT_LAW = "frohlich-kennelly"
+# Study keys that build the size distribution and the composition passed to generate_rve
+# (they may be grid axes or [rve] keys). Defaults: the seed paper's powder.
+_DIST_KEYS = {"distribution": "lognormal", "mean_radius_m": 25e-9, "gsd": 1.4,
+              "r_min_m": 10e-9, "r_max_m": 50e-9}
+_COMP_KEYS = {"shell_thickness_m": "shell_m", "core_density_kg_m3": "core_density_kg_m3",
+              "core_sigma_Am2_kg": "core_sigma_Am2_kg",
+              "shell_density_kg_m3": "shell_density_kg_m3",
+              "shell_sigma_Am2_kg": "shell_sigma_Am2_kg",
+              "calibrate_sigma_Am2_kg": "calibrate_sigma_Am2_kg"}
+_DISTRIBUTIONS = ("lognormal", "monodisperse")
 
 
 def _signature_keys(func) -> set:
-    return set(inspect.signature(func).parameters)
+    return {k for k, p in inspect.signature(func).parameters.items()
+            if p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)}
+
+
+def _rve_kwargs(params: dict) -> dict:
+    """Keywords of generate_rve from the study's RVE keys (distribution, composition, rest)."""
+    from micro.particles import CoreShell, LogNormal, Monodisperse
+    p = dict(params)
+    d = {k: p.pop(k, v) for k, v in _DIST_KEYS.items()}
+    if d["distribution"] == "lognormal":
+        dist = LogNormal.from_mean(float(d["mean_radius_m"]), float(d["gsd"]),
+                                   float(d["r_min_m"]), float(d["r_max_m"]))
+    elif d["distribution"] == "monodisperse":
+        dist = Monodisperse(float(d["mean_radius_m"]))
+    else:
+        raise InputError(f"distribution must be one of {', '.join(_DISTRIBUTIONS)}; "
+                         f"got {d['distribution']!r}")
+    comp = CoreShell(**{_COMP_KEYS[k]: p.pop(k) for k in list(p) if k in _COMP_KEYS})
+    return {"distribution": dist, "composition": comp, **p}
 
 
 @dataclass(frozen=True)
@@ -189,10 +219,14 @@ class RVEEvaluator:
     """particles -> dipoles -> (FEM): one random RVE at one grid point.
 
     Grid axes ``phi``, ``B_T``, ``gradB_T_per_m`` are required, ``law`` is optional
-    (default Froehlich-Kennelly); any other axis and the ``[rve]`` table are keywords of
-    :func:`micro.particles.generate_rve`; ``[law]`` goes to :func:`micro.magnetization.get_law`,
-    ``[magnetics]`` to :func:`micro.dipoles.solve`, ``[cell]`` to
-    :func:`homogenize.cell.homogenize_rve`.
+    (default Froehlich-Kennelly). The size distribution (``distribution`` = lognormal or
+    monodisperse, ``mean_radius_m``, ``gsd``, ``r_min_m``, ``r_max_m``; default the seed's
+    powder: mean 25 nm in [10, 50] nm, gsd 1.4), the composition (``shell_thickness_m``,
+    ``core_sigma_Am2_kg``, ``calibrate_sigma_Am2_kg``, ...; see :class:`micro.particles.CoreShell`)
+    and the other keywords of :func:`micro.particles.generate_rve` (``arrangement``, ``gap_m``,
+    ``cluster_size``, ...) may be grid axes or ``[rve]`` keys; ``[law]`` goes to
+    :func:`micro.magnetization.get_law`, ``[magnetics]`` to :func:`micro.dipoles.solve`,
+    ``[cell]`` to :func:`homogenize.cell.homogenize_rve`.
     """
 
     id = "rve-1"
@@ -203,6 +237,9 @@ class RVEEvaluator:
             if req not in names:
                 raise InputError(f"{study.path}: [grid] missing key '{req}' (required by the "
                                  f"rve evaluator; one value is enough)")
+        if any(float(g) == 0 for g in names["gradB_T_per_m"]):
+            raise InputError(f"{study.path}: [grid] gradB_T_per_m must be != 0 T/m (no gradient, "
+                             f"no body force; phi_eff and d_eff are defined by the force)")
         try:
             from micro.dipoles import solve
             from micro.magnetization import get_law
@@ -210,7 +247,9 @@ class RVEEvaluator:
         except ModuleNotFoundError as exc:
             raise InputError(f"{study.path}: evaluator 'rve' needs {exc.name}, which is not "
                              f"available in this installation") from None
-        gen_keys = _signature_keys(generate_rve) - {"phi", "n", "seed"}
+        gen_keys = ((_signature_keys(generate_rve) - {"phi", "n", "seed", "distribution",
+                                                      "composition", "progress"})
+                    | set(_DIST_KEYS) | set(_COMP_KEYS))
         for axis in names:
             if axis not in _FIELD_AXES and axis not in gen_keys:
                 raise InputError(f"{study.path}: [grid] unknown key '{axis}'; allowed: "
@@ -219,7 +258,8 @@ class RVEEvaluator:
             if k not in gen_keys:
                 raise InputError(f"{study.path}: [rve] unknown key '{k}'; allowed: "
                                  f"{', '.join(sorted(gen_keys))}")
-        solve_keys = _signature_keys(solve) - {"rve", "B_T", "gradB_T_per_m", "law"}
+        solve_keys = _signature_keys(solve) - {"rve", "B_T", "gradB_T_per_m", "law",
+                                               "initial_moments_Am2"}
         for k in study.magnetics:
             if k not in solve_keys:
                 raise InputError(f"{study.path}: [magnetics] unknown key '{k}'; allowed: "
@@ -229,13 +269,28 @@ class RVEEvaluator:
                 get_law(law, **study.law)
             except (InputError, TypeError, ValueError) as exc:
                 raise InputError(f"{study.path}: [grid] law / [law]: {exc}") from None
+        # every distinct particle population of the grid must be constructible
+        rve_axes = [(a, v) for a, v in study.axes if a in gen_keys]
+        seen = set()
+        import itertools
+        for combo in itertools.product(*(v for _, v in rve_axes)):
+            key = tuple(combo)
+            if key in seen:
+                continue
+            seen.add(key)
+            try:
+                _rve_kwargs({**study.rve, **dict(zip((a for a, _ in rve_axes), combo))})
+            except (InputError, TypeError, ValueError) as exc:
+                raise InputError(f"{study.path}: [grid]/[rve] particle parameters: {exc}") from None
         if study.fem:
             try:
                 from homogenize.cell import homogenize_rve
             except ModuleNotFoundError as exc:
                 raise InputError(f"{study.path}: [study] fem = true needs {exc.name}, which is "
                                  f"not available in this installation") from None
-            cell_keys = _signature_keys(homogenize_rve) - {"rve", "voxels", "forces_N"}
+            cell_keys = _signature_keys(homogenize_rve) - {"rve", "voxels", "forces_N",
+                                                           "virial_stress_Pa", "keep_fields",
+                                                           "progress"}
             for k in study.cell:
                 if k not in cell_keys:
                     raise InputError(f"{study.path}: [cell] unknown key '{k}'; allowed: "
@@ -253,7 +308,8 @@ class RVEEvaluator:
         B = point.pop("B_T")
         grad = point.pop("gradB_T_per_m")
         law = get_law(point.pop("law", DEFAULT_LAW), **s["law"])
-        rve = generate_rve(phi, s["n_particles"], task.seed_int(), **s["rve"], **point)
+        kwargs = _rve_kwargs({**s["rve"], **point})
+        rve = generate_rve(phi, s["n_particles"], task.seed_int(), **kwargs)
         state = solve(rve, B, grad, law, **s["magnetics"])
         out = {"f_eff_N_m3": state.f_eff_N_m3, "phi_eff": state.phi_eff, "d_eff": state.d_eff,
                "M_eff_A_per_m": state.M_eff_A_per_m, "virial_stress_Pa": state.virial_stress_Pa,
@@ -261,7 +317,8 @@ class RVEEvaluator:
         if s["fem"]:
             from homogenize.cell import homogenize_rve
             forces = np.asarray(state.force_ext_N) + np.asarray(state.force_dd_N)
-            cell = homogenize_rve(rve, s["voxels"], forces_N=forces, **s["cell"])
+            cell = homogenize_rve(rve, s["voxels"], forces_N=forces,
+                                  virial_stress_Pa=state.virial_stress_Pa, **s["cell"])
             out.update(E_eff_Pa=cell.E_eff_Pa, nu_eff=cell.nu_eff,
-                       stress_mag_Pa=cell.stress_mag_Pa)
+                       stress_mag_Pa=cell.stress_mag_Pa, strain_mag=cell.strain_mag)
         return _check_finite_result(out, task)

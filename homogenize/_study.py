@@ -17,7 +17,7 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
     B_T = [0.005, 0.05, 0.5]       # applied flux density mu0 H along z [T]
     gradB_T_per_m = 1.78           # d|B|/dz [T/m]
     law = "frohlich-kennelly"      # magnetization law of one particle
-    arrangement = ["dispersed", "clustered"]   # any keyword of micro.particles.generate_rve
+    arrangement = ["dispersed", "clusters"]    # any keyword of micro.particles.generate_rve
 
     [rve]        # fixed keywords of micro.particles.generate_rve
     [law]        # fixed parameters of micro.magnetization.get_law
@@ -54,12 +54,12 @@ __all__ = ["Study", "Task", "load_study", "parse_study", "AXIS_ORDER"]
 
 # Canonical order of the common axes; the grid index (and hence the seeds) does not depend on
 # the order in which the axes are written in the file.
-AXIS_ORDER = ("phi", "distribution", "mean_radius_m", "radius_sd", "shell_thickness_m",
+AXIS_ORDER = ("phi", "distribution", "mean_radius_m", "gsd", "shell_thickness_m",
               "arrangement", "law", "B_T", "gradB_T_per_m")
 
 # Units of the common axes (others: taken from their name, "1" if none can be told).
 AXIS_UNITS = {"phi": "1", "mean_radius_m": "m", "shell_thickness_m": "m", "B_T": "T",
-              "gradB_T_per_m": "T/m", "radius_sd": "1"}
+              "gradB_T_per_m": "T/m", "gsd": "1"}
 
 _STUDY_KEYS = {
     "name": str, "seed": int, "realizations": int, "n_particles": int, "evaluator": str,
@@ -234,7 +234,7 @@ def _check_scalar_value(where: str, axis: str, v):
         raise InputError(f"{where} values must be >= 0 T, got {v:g}")
     if axis in ("mean_radius_m",) and not 0 < v < 1e-5:
         raise InputError(f"{where} values must be in (0, 1e-05) m, got {v:g}")
-    if axis in ("shell_thickness_m", "radius_sd") and v < 0:
+    if axis in ("shell_thickness_m",) and v < 0:
         raise InputError(f"{where} values must be >= 0 {_unit_of(axis)}, got {v:g}")
     if axis == "law":
         raise InputError(f"{where} values must be names of magnetization laws, got {v!r}")

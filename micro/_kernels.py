@@ -106,6 +106,69 @@ def placement_rsa_bodies(offsets, radii, body_start, candidates, gap, box, ncell
         return 0
     return 2 if state[1] >= max_attempts else 1
 
+
+@nb.njit(cache=True)
+def placement_build_cells(centers, box, ncell, head, nxt):
+    """Fill the cell list ``head`` (ncell^3,) / ``nxt`` (N,) with all particles of ``centers``."""
+    head[:] = -1
+    for i in range(centers.shape[0]):
+        c = placement_cell_of(centers[i], box, ncell)
+        nxt[i] = head[c]
+        head[c] = i
+
+
+@nb.njit(cache=True)
+def placement_relax_step(centers, radii, gap, push_scale, box, ncell, head, nxt, disp):
+    """Overlap-removal displacements: every pair closer than its contact distance
+    a = r_i + r_j + gap moves each partner away along the centre line by half of
+    (a * push_scale - distance), so that alone it would end slightly beyond contact.
+    Writes disp (N, 3); returns the number of overlapping pairs (each counted once).
+    """
+    count = 0
+    p = np.empty(3)
+    d = np.empty(3)
+    for i in range(centers.shape[0]):
+        disp[i, 0] = 0.0
+        disp[i, 1] = 0.0
+        disp[i, 2] = 0.0
+        for k in range(3):
+            p[k] = centers[i, k]
+        ci = placement_cell_of(p, box, ncell)
+        cz = ci % ncell
+        cy = (ci // ncell) % ncell
+        cx = ci // (ncell * ncell)
+        lo = -1 if ncell >= 3 else 0
+        hi = 1 if ncell >= 3 else ncell - 1
+        for ax in range(lo, hi + 1):
+            for ay in range(lo, hi + 1):
+                for az in range(lo, hi + 1):
+                    if ncell >= 3:
+                        c = (((cx + ax) % ncell) * ncell + (cy + ay) % ncell) * ncell \
+                            + (cz + az) % ncell
+                    else:
+                        c = (ax * ncell + ay) * ncell + az
+                    j = head[c]
+                    while j >= 0:
+                        if j != i:
+                            s2 = 0.0
+                            for k in range(3):
+                                d[k] = p[k] - centers[j, k]
+                                d[k] -= box * np.rint(d[k] / box)
+                                s2 += d[k] * d[k]
+                            lim = radii[i] + radii[j] + gap
+                            if s2 < lim * lim:
+                                dist = np.sqrt(s2)
+                                if i < j:
+                                    count += 1
+                                if dist > 0.0:
+                                    f = 0.5 * (lim * push_scale - dist) / dist
+                                    for k in range(3):
+                                        disp[i, k] += f * d[k]
+                                else:     # coincident centres: split along x by index order
+                                    disp[i, 0] += 0.5 * lim if i < j else -0.5 * lim
+                        j = nxt[j]
+    return count
+
 # ---------------------------------------------------------------------------------------------
 # Dipoles (direct sums, Ewald real space, forces) -- owned by dipoles.py
 # ---------------------------------------------------------------------------------------------

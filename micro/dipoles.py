@@ -143,7 +143,7 @@ class DipoleSum:
     """
 
     def __init__(self, box_m, centers_m, *, accuracy=1e-6, summation="pme", demag_factor=None,
-                 alpha_per_m=None, pme_order=6, pme_grid=None):
+                 alpha_per_m=None, pme_order=None, pme_grid=None):
         self.box_m = check_positive("box_m", box_m, "m")
         check_range("accuracy", accuracy, 1e-12, 0.1, "(relative)")
         check_choice("summation", summation, ("ewald", "pme"))

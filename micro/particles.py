@@ -37,6 +37,7 @@ __all__ = ["LogNormal", "Histogram", "Monodisperse", "CoreShell", "default_distr
            "SEED_SIGMA_AM2_KG"]
 
 ARRANGEMENTS = ("dispersed", "clusters", "chains")
+PLACEMENTS = ("auto", "rsa", "compress")
 
 # Material constants (room temperature).
 #: Density of alpha-iron [kg/m^3]; CRC Handbook of Chemistry and Physics (97th ed., 2016),
@@ -474,70 +475,45 @@ def cluster_packing_density(offsets_m: np.ndarray, radii_m: np.ndarray) -> float
     return float(v.sum() / (rg2 * 5.0 / 3.0) ** 1.5)
 
 
-def _relax_in_ball(x, r, gap, R, rng, iters):
-    """Push overlapping spheres apart, keeping them inside a ball of radius R.
+def _grow_cluster(r, gap, rng, n_dir=64):
+    """A dense random cluster: spheres added largest first, each at the deepest surface site.
 
-    Returns (clean, x): whether no pair is closer than its contact distance, and the positions.
+    For each new sphere, ``n_dir`` random rays leave the current volume-weighted centroid; along
+    each ray the sphere is put just outside every member it would overlap (the largest root of
+    |c + t u - x_j| = r + r_j + gap), and the ray with the smallest such t wins. Every sphere
+    is placed at least ``gap`` from all earlier ones, so the cluster is overlap-free by
+    construction (the factor 1 + 1e-9 keeps rounding on the safe side).
     """
-    from scipy.spatial import cKDTree
-
-    # Aim slightly beyond contact so that the final strict check passes despite rounding.
-    margin = 1.0 + 1e-7
-    rmax = r.max()
-    for _ in range(iters):
-        pairs = cKDTree(x).query_pairs(2 * rmax + gap, output_type="ndarray")
-        if pairs.size:
-            i, j = pairs[:, 0], pairs[:, 1]
-            d = x[j] - x[i]
-            dist = np.linalg.norm(d, axis=1)
-            need = (r[i] + r[j] + gap) * margin
-            bad = dist < need / margin
-            if not bad.any():
-                return True, x
-            i, j, d, dist, need = i[bad], j[bad], d[bad], dist[bad], need[bad]
-            # Coincident centres get a random direction.
-            zero = dist < 1e-12 * need
-            if zero.any():
-                d[zero] = rng.normal(size=(int(zero.sum()), 3))
-                dist[zero] = np.linalg.norm(d[zero], axis=1)
-            push = (0.5 * (need - dist) / dist)[:, None] * d
-            dx = np.zeros_like(x)
-            np.add.at(dx, i, -push)
-            np.add.at(dx, j, push)
-            x = x + dx
-        else:
-            return True, x
-        # Project back inside the confining ball.
-        norm = np.linalg.norm(x, axis=1)
-        lim = np.maximum(R - r, 0.0)
-        out = norm > lim
-        x[out] *= (lim[out] / norm[out])[:, None]
-    return False, x
+    k = r.size
+    order = np.argsort(-r, kind="stable")
+    x = np.zeros((k, 3))
+    v = r ** 3
+    for m in range(1, k):
+        i = order[m]
+        placed = order[:m]
+        c = (v[placed, None] * x[placed]).sum(0) / v[placed].sum()
+        u = rng.normal(size=(n_dir, 3))
+        u /= np.linalg.norm(u, axis=1)[:, None]
+        w = x[placed] - c
+        contact = r[i] + r[placed] + gap
+        b = u @ w.T
+        disc = b * b - (np.sum(w * w, axis=1) - contact * contact)[None, :]
+        t = np.where(disc > 0, b + np.sqrt(np.maximum(disc, 0.0)), 0.0).max(axis=1)
+        best = int(np.argmin(t))
+        x[i] = c + t[best] * (1 + 1e-9) * u[best]
+    return x
 
 
 def _compact_cluster(r, density, gap, rng):
     """Centres (k, 3) relative to the volume-weighted centroid of a cluster of radii ``r`` whose
     :func:`cluster_packing_density` equals ``density``.
 
-    A dense random cluster is built by relaxing random overlapping positions inside a confining
-    ball (confinement density a little above the target), then expanded uniformly about its
-    centroid until the packing density is exactly ``density`` (expansion never creates
-    overlaps).
+    A dense random cluster (:func:`_grow_cluster`, packing density about 0.55-0.65) is
+    expanded uniformly about its centroid until its packing density is exactly ``density``;
+    expansion only increases distances, so it never creates overlaps.
     """
     k = r.size
-    reff3 = np.sum((r + 0.5 * gap) ** 3)
-    eta = min(1.15 * density, 0.58)
-    for _attempt in range(12):
-        R = (reff3 / eta) ** (1.0 / 3.0) + 0.5 * gap
-        u = rng.normal(size=(k, 3))
-        u /= np.linalg.norm(u, axis=1)[:, None]
-        x = u * (rng.random(k) ** (1 / 3) * np.maximum(R - r, 0.0))[:, None]
-        ok, x = _relax_in_ball(x, r, gap, R, rng, iters=3000)
-        if ok:
-            break
-        eta *= 0.93
-    else:  # pragma: no cover - relaxation at eta ~ 0.3 always succeeds
-        raise InputError(f"could not build a cluster of {k} particles")
+    x = _grow_cluster(r, gap, rng)
     v = r ** 3
     x = x - (v[:, None] * x).sum(0) / v.sum()
     d1 = cluster_packing_density(x, r)
@@ -563,7 +539,8 @@ def _random_rotation(rng):
 
 def _chain_offsets(r, gap, direction):
     """Centres of touching (surface distance ``gap``) spheres along ``direction``, centroid 0."""
-    s = np.concatenate([[0.0], np.cumsum(r[:-1] + r[1:] + gap)])
+    # 1 + 1e-9: neighbours touch (at distance gap) without rounding ever making them overlap.
+    s = np.concatenate([[0.0], np.cumsum((r[:-1] + r[1:] + gap) * (1 + 1e-9))])
     x = s[:, None] * direction[None, :]
     v = r ** 3
     return x - (v[:, None] * x).sum(0) / v.sum()
@@ -572,8 +549,8 @@ def _chain_offsets(r, gap, direction):
 def _chain_lengths(n_agg, mean_length, max_length, rng):
     """Chain lengths >= 2 from a geometric distribution of mean ``mean_length`` summing to n_agg.
 
-    The most probable (Flory) distribution of linear aggregates; lengths above ``max_length``
-    (chains longer than half the box) are cut to it.
+    The most probable (Flory) distribution of linear aggregates, P(l) ~ (1 - p)^(l - 2),
+    l >= 2, cut at ``max_length``; a last length of 1 (isolated particle) is dropped.
     """
     p = 1.0 / (mean_length - 1.0)
     lengths = []
@@ -587,7 +564,11 @@ def _chain_lengths(n_agg, mean_length, max_length, rng):
 
 def _bodies(radii, box, rng, arrangement, gap, cluster_size, cluster_density, chain_length,
             direction, agglomerated_fraction):
-    """Split particles into rigid bodies: list of (radii (k,), offsets (k, 3), is_group)."""
+    """Split particles into rigid bodies.
+
+    Returns (groups, singles): a list of (particle indices (k,), centre offsets (k, 3)) for the
+    clusters or chains, and the indices of the isolated particles.
+    """
     n = radii.size
     perm = rng.permutation(n)
     n_agg = int(round(agglomerated_fraction * n)) if arrangement != "dispersed" else 0
@@ -595,25 +576,42 @@ def _bodies(radii, box, rng, arrangement, gap, cluster_size, cluster_density, ch
     if arrangement == "clusters" and n_agg >= 2:
         n_cl = max(1, int(round(n_agg / cluster_size)))
         for idx in np.array_split(perm[:n_agg], n_cl):
-            if idx.size < 2:
-                continue
-            r = radii[idx]
-            x = _compact_cluster(r, cluster_density, gap, rng) @ _random_rotation(rng).T
-            groups.append(idx)
-            yield r, x, True
+            if idx.size >= 2:
+                x = _compact_cluster(radii[idx], cluster_density, gap, rng)
+                groups.append((idx, x @ _random_rotation(rng).T))
     elif arrangement == "chains" and n_agg >= 2:
-        max_len = max(2, int(0.5 * box / (2 * radii.max() + gap)))
+        # Chains must span less than half the box (periodic unwrapping); longer ones are cut.
+        limit = 0.5 * box - 2.0 * radii.max() - gap
         start = 0
-        for ell in _chain_lengths(n_agg, chain_length, max_len, rng):
+        for ell in _chain_lengths(n_agg, chain_length, n_agg, rng):
             idx = perm[start:start + ell]
             start += ell
-            groups.append(idx)
-            yield radii[idx], _chain_offsets(radii[idx], gap, direction), True
+            pieces, piece, span = [], [idx[0]], 0.0
+            for j in idx[1:]:
+                step = (radii[piece[-1]] + radii[j] + gap) * (1 + 1e-9)
+                if span + step > limit:
+                    pieces.append(piece)
+                    piece, span = [j], 0.0
+                else:
+                    piece.append(j)
+                    span += step
+            pieces.append(piece)
+            for piece in pieces:
+                if len(piece) >= 2:
+                    piece = np.asarray(piece)
+                    groups.append((piece, _chain_offsets(radii[piece], gap, direction)))
     used = np.zeros(n, bool)
-    for idx in groups:
+    for idx, _x in groups:
         used[idx] = True
-    for i in perm[~used[perm]]:
-        yield radii[i:i + 1], np.zeros((1, 3)), False
+    return groups, perm[~used[perm]]
+
+
+def _span(x):
+    """Largest distance between two centres of a body [m] (0 for a single particle)."""
+    if len(x) < 2:
+        return 0.0
+    from scipy.spatial.distance import pdist
+    return float(pdist(x).max())
 
 
 def _place_bodies(offsets, radii, body_start, box, gap, rng, max_attempts, kernel,
@@ -655,10 +653,74 @@ def _place_bodies(offsets, radii, body_start, box, gap, rng, max_attempts, kerne
     return centers, state, status
 
 
+def _relax(x, radii, gap, box, iters, push_scale=1.0 + 1e-6):
+    """Remove overlaps by repeated half-overlap pushes (cell lists); (clean, positions)."""
+    contact = 2.0 * radii.max() + gap
+    ncell = max(1, int(box / (contact * (1 + 1e-9))))
+    while ncell ** 3 > 8 * x.shape[0] + 27:
+        ncell -= 1
+    head = np.empty(ncell ** 3, dtype=np.int64)
+    nxt = np.empty(x.shape[0], dtype=np.int64)
+    disp = np.empty_like(x)
+    x = np.ascontiguousarray(x)
+    for _ in range(iters):
+        K.placement_build_cells(x, box, ncell, head, nxt)
+        if K.placement_relax_step(x, radii, gap, push_scale, box, ncell, head, nxt, disp) == 0:
+            return True, x
+        x = np.mod(x + disp, box)
+    return False, x
+
+
+def _compress(radii, box, gap, rng, max_attempts, progress=False):
+    """Grow-and-relax placement of single spheres beyond the reach of RSA.
+
+    The spheres are first placed by RSA at volume fraction 0.25 in a larger box; the box is
+    then shrunk in steps (positions scaled affinely) and the overlaps created by each step are
+    removed by :func:`_relax`. The step shrinks when relaxation stalls; below a 1e-4 relative
+    step the packing is declared jammed. Returns the centres in the box of edge ``box``.
+    """
+    n = radii.size
+    phi_target = 4.0 / 3.0 * np.pi * np.sum(radii ** 3) / box ** 3
+    phi0 = min(phi_target, 0.25)
+    L = box * (phi_target / phi0) ** (1.0 / 3.0)
+    x, state, status = _place_bodies(np.zeros((n, 3)), radii, np.arange(n + 1, dtype=np.int64),
+                                     L, gap, rng, max_attempts, K.placement_rsa_bodies)
+    if status != 0:
+        raise InputError(f"could not place the particles at phi = {phi0:g} to start compression")
+    step = 0.02
+    L0 = L
+    bar = None
+    if progress and L0 > box:
+        from tqdm import tqdm
+        bar = tqdm(total=100, desc="compressing", unit="%", file=__import__("sys").stderr)
+    try:
+        while L > box:
+            L_new = max(box, L * (1.0 - step))
+            ok, y = _relax(x * (L_new / L), radii, gap, L_new, iters=400)
+            if ok:
+                if bar is not None:
+                    bar.n = int(100 * (L0 - L_new) / (L0 - box))
+                    bar.refresh()
+                x, L = y, L_new
+                step = min(1.5 * step, 0.02)
+            else:
+                step *= 0.5
+                if step < 1e-4:
+                    reached = phi_target * (box / L) ** 3
+                    raise InputError(f"compression jammed at phi = {reached:.4f} below the "
+                                     f"requested phi = {phi_target:.4g}; this is the densest "
+                                     f"packing reachable for this distribution and gap: lower "
+                                     f"phi or gap_m")
+    finally:
+        if bar is not None:
+            bar.close()
+    return np.mod(x * (box / L), box)
+
+
 def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangement="dispersed",
                  gap_m=0.0, cluster_size=20, cluster_density=0.5, chain_length=5.0,
                  chain_direction=(0.0, 0.0, 1.0), agglomerated_fraction=1.0,
-                 max_attempts=200_000, progress=False) -> RVE:
+                 max_attempts=200_000, placement="auto", progress=False) -> RVE:
     """Draw ``n`` particles and place them in a periodic cube at volume fraction ``phi``.
 
     Parameters
@@ -696,6 +758,12 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
         Fraction of the particles in clusters or chains, in [0, 1].
     max_attempts : int
         Random positions tried for one body before the placement is declared jammed.
+    placement : {"auto", "rsa", "compress"}
+        "rsa": random sequential addition only (a jam is an error naming the phi reached);
+        "compress": grow and relax (RSA at phi 0.25 in a larger box, then stepwise affine
+        compression with overlap removal), reaching denser packings than RSA (monodisperse
+        RSA saturates at 0.384) but only for ``arrangement="dispersed"``; "auto": RSA, and for
+        dispersed particles compression if RSA jams.
     progress : bool
         Show a progress bar on stderr.
 
@@ -726,6 +794,10 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
     direction = direction / np.linalg.norm(direction)
     agg = check_range("agglomerated_fraction", agglomerated_fraction, 0.0, 1.0)
     max_attempts = int(check_range("max_attempts", max_attempts, 1, 1e9))
+    check_choice("placement", placement, PLACEMENTS)
+    if placement == "compress" and arrangement != "dispersed":
+        raise InputError(f"placement 'compress' works for arrangement 'dispersed' only, got "
+                         f"{arrangement!r}; use placement 'rsa'")
     comp.check_against(dist)
     core_sigma = comp.core_sigma(dist)
 
@@ -737,42 +809,62 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
                          f"than twice the largest contact distance {2 * radii.max() + gap:.4g} m; "
                          f"use more particles")
 
-    bodies = list(_bodies(radii, box, rng, arrangement, gap, cluster_size, cluster_density,
-                          chain_length, direction, agg))
-    extent = np.array([np.max(np.linalg.norm(x, axis=1) + r) for r, x, _g in bodies])
-    if 2 * extent.max() + gap > 0.5 * box:
-        raise InputError(f"a cluster of diameter {2 * extent.max():.4g} m does not fit in half the "
-                         f"box edge {box:.4g} m; use more particles or smaller clusters")
-    order = np.argsort(-extent, kind="stable")          # largest first
-    bodies = [bodies[b] for b in order]
-    sizes = np.array([r.size for r, _x, _g in bodies])
-    body_start = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-    r_all = np.ascontiguousarray(np.concatenate([r for r, _x, _g in bodies]))
-    off = np.ascontiguousarray(np.concatenate([x for _r, x, _g in bodies]))
-    centers, state, status = _place_bodies(off, r_all, body_start, box, gap, rng, max_attempts,
-                                           K.placement_rsa_bodies, progress)
+    groups, singles = _bodies(radii, box, rng, arrangement, gap, cluster_size, cluster_density,
+                              chain_length, direction, agg)
+    span = max([_span(x) for _idx, x in groups], default=0.0)
+    if span + 2.0 * radii.max() + gap > 0.5 * box:
+        raise InputError(f"a cluster spanning {span + 2 * radii.max():.4g} m does not fit in half "
+                         f"the box edge {box:.4g} m; use more particles (n) or smaller clusters")
+    # Bodies: the groups, then the single particles; members listed body by body.
+    n_groups = len(groups)
+    member = np.concatenate([idx for idx, _x in groups] + [singles]).astype(np.int64)
+    off = np.concatenate([x for _idx, x in groups] + [np.zeros((singles.size, 3))])
+    sizes = np.concatenate([[idx.size for idx, _x in groups],
+                            np.ones(singles.size)]).astype(np.int64)
+    body_of = np.repeat(np.arange(sizes.size), sizes)
+    extent = np.concatenate([[np.max(np.linalg.norm(x, axis=1) + radii[idx]) for idx, x in groups],
+                             radii[singles]])
+    order = np.argsort(-extent, kind="stable")          # largest body first
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    by_body = np.argsort(rank[body_of], kind="stable")
+    member, off, body_of = member[by_body], off[by_body], body_of[by_body]
+    body_start = np.concatenate([[0], np.cumsum(sizes[order])]).astype(np.int64)
+    r_all = np.ascontiguousarray(radii[member])
+    off = np.ascontiguousarray(off)
+    method = "rsa"
+    if placement == "compress":
+        centers, status, method = _compress(r_all, box, gap, rng, max_attempts, progress), 0, \
+            "compress"
+    else:
+        centers, state, status = _place_bodies(off, r_all, body_start, box, gap, rng,
+                                               max_attempts, K.placement_rsa_bodies, progress)
     if status == 2:
         placed = int(body_start[state[0]])
         reached = float(np.sum(r_all[:placed] ** 3) * 4.0 / 3.0 * np.pi / box ** 3)
-        raise InputError(f"random sequential addition jammed at phi = {reached:.4f} "
-                         f"({placed} of {n} particles placed, {max_attempts} attempts for the next "
-                         f"body) below the requested phi = {phi:g}; this is the reachable limit "
-                         f"for this distribution, arrangement and gap: lower phi or gap_m")
-
+        if placement == "auto" and arrangement == "dispersed":
+            centers, method = _compress(r_all, box, gap, rng, max_attempts, progress), "compress"
+        else:
+            raise InputError(
+                f"random sequential addition jammed at phi = {reached:.4f} ({placed} of {n} "
+                f"particles placed, {max_attempts} attempts for the next body) below the "
+                f"requested phi = {phi:g}; this is the reachable limit for this distribution, "
+                f"arrangement and gap: lower phi or gap_m" + (
+                    "" if arrangement != "dispersed" else ", or use placement 'compress'"))
+    # Cluster ids numbered in placement order; -1 for isolated particles.
+    is_group = body_of < n_groups
     cluster_id = np.full(n, -1, dtype=np.int64)
-    k = 0
-    for b, (_r, _x, is_group) in enumerate(bodies):
-        if is_group:
-            cluster_id[body_start[b]:body_start[b + 1]] = k
-            k += 1
+    cluster_id[is_group] = rank[body_of[is_group]]
+    cluster_id[is_group] = np.unique(cluster_id[is_group], return_inverse=True)[1]
     rc, mass, m_sat = comp.apply(r_all, core_sigma)
     params = {
         "phi": phi, "n": n, "distribution": dist.params(), "composition": comp.params(core_sigma),
         "arrangement": arrangement, "gap_m": gap, "cluster_size": cluster_size,
         "cluster_density": cluster_density, "chain_length": chain_length,
         "chain_direction": direction.tolist(), "agglomerated_fraction": agg,
-        "max_attempts": max_attempts, "attempts": int(state[2]),
-        "generator": "micro.particles.generate_rve (RSA, cell lists, largest body first)",
+        "max_attempts": max_attempts, "placement": placement, "placement_used": method,
+        "generator": "micro.particles.generate_rve (RSA with cell lists, largest body first; "
+                     "grow-and-relax compression beyond the RSA limit)",
     }
     return RVE(box_m=box, centers_m=centers, radii_m=r_all, core_radii_m=rc, m_sat_Am2=m_sat,
                mass_kg=mass, cluster_id=cluster_id, seed=seed, params=params)
@@ -780,7 +872,7 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
 
 #: Upper bound accepted for phi; whether RSA reaches a given phi depends on the distribution,
 #: arrangement and gap, and a jam is reported with the phi actually reached.
-PHI_MAX = 0.45
+PHI_MAX = 0.6
 
 
 def check_finite_vector(name, value):
@@ -908,14 +1000,16 @@ def describe(rve: RVE) -> dict:
           float(np.mean(rve.cluster_id >= 0)) if rve.n else 0.0}
     if groups:
         sizes = np.array([idx.size for idx, _x in groups])
-        dens = np.array([cluster_packing_density(x, rve.radii_m[idx]) for idx, x in groups])
         cl.update({"size_mean": float(sizes.mean()), "size_min": int(sizes.min()),
-                   "size_max": int(sizes.max()), "packing_density_mean": float(dens.mean()),
-                   "packing_density_min": float(dens.min()),
-                   "packing_density_max": float(dens.max())})
+                   "size_max": int(sizes.max())})
         if rve.params.get("arrangement") == "chains":
             u = np.asarray(rve.params.get("chain_direction", (0, 0, 1)), float)
             cos = np.array([abs(chain_axis(x) @ u) for _idx, x in groups])
             cl["alignment_order_parameter"] = float(np.mean(1.5 * cos ** 2 - 0.5))
+        else:
+            dens = np.array([cluster_packing_density(x, rve.radii_m[idx]) for idx, x in groups])
+            cl.update({"packing_density_mean": float(dens.mean()),
+                       "packing_density_min": float(dens.min()),
+                       "packing_density_max": float(dens.max())})
     out["clusters"] = cl
     return out

@@ -60,15 +60,17 @@ def _demag_scalar(aspect: float) -> float:
     # u = k R; end faces are disks of radius R a distance L = 2 R aspect apart
     ratio = 2.0 * aspect                       # L / R
     f = lambda u: (special.j1(u) / u) ** 2 * -math.expm1(-u * ratio) if u > 0 else 0.0
-    # pieces of length pi up to U = 200 pi so quad sees smooth arches; beyond U the integrand
-    # averages to 1 / (pi u^3) (J1^2 ~ 2 cos^2(u - 3 pi/4) / (pi u)), whose tail 1 / (2 pi U^2)
-    # = 4e-7 is added in closed form.
+    # pieces of length pi up to U = 200 pi so quad sees smooth arches; beyond U, J1^2 averages
+    # to 1 / (pi u) (J1 ~ sqrt(2 / (pi u)) cos(u - 3 pi / 4)), so the tail is the smooth
+    # integral of (1 - exp(-u L/R)) / (pi u^3) (at most 1 / (2 pi U^2) = 4e-7).
     edges = np.arange(0, 201) * math.pi
     total = 0.0
     for a, b in zip(edges[:-1], edges[1:]):
         val, _ = integrate.quad(f, a, b, limit=100, epsabs=1e-14, epsrel=1e-12)
         total += val
-    total += 1.0 / (2.0 * math.pi * edges[-1] ** 2)
+    tail, _ = integrate.quad(lambda u: -math.expm1(-u * ratio) / (math.pi * u ** 3),
+                             edges[-1], np.inf, epsabs=1e-15)
+    total += tail
     return total / aspect                      # (2R/L) = 1/aspect
 
 

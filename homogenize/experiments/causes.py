@@ -193,7 +193,8 @@ def parameters(spec: ModelSpec, exp: Experiment) -> list[Param]:
             ps.append(Param("H_c_A_per_m", True, 1e-4 * Hmax, 2.0 * Hmax,
                             (0.01 * Hmax, 0.05 * Hmax, 0.2 * Hmax)))
     if spec.has("hyperelasticity") and spec.hyper == "mooney-rivlin":
-        ps.append(Param("beta", False, -0.5, 1.0, (0.0, 0.5)))
+        # beta = C2 / (C1 + C2); beta < 0 (C2 < 0) stiffens in tension, as fits often need
+        ps.append(Param("beta", False, -2.0, 1.0, (0.0, 0.5, -0.5)))
     if spec.has("hyperelasticity") and spec.hyper == "gent":
         ps.append(Param("J_m", True, 0.3, 1e4, (3.0, 30.0, 300.0)))
     return ps

@@ -360,8 +360,8 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
         for cause in remaining:
             best = None
             variants = {}
-            for v in VARIANTS.get(cause, (None,)):
-                cand = _candidate(current.spec.plus(cause, v), cause, exp, folds)
+            for spec, v in _specs_with(current.spec, cause):
+                cand = _candidate(spec, cause, exp, folds)
                 if bar is not None:
                     bar.update(1)
                 if v is not None:
@@ -373,25 +373,107 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
         rounds.append(tried)
         top = min(tried, key=lambda c: c.cv_rmse)
         e_cur = current.cv_pred - exp.y
-        e_new = top.cv_pred - exp.y
-        p = _paired_p(e_cur, e_new) if folds is not None else 1.0
-        if not (folds is not None and top.cv_rmse <= (1.0 - min_gain) * current.cv_rmse
-                and p < alpha):
+        p = _paired_p(e_cur, top.cv_pred - exp.y) if folds is not None else 1.0
+        if folds is not None and _passes(current, top, p, min_gain, alpha):
+            corr = residual_correlations(exp, e_cur)
+            steps.append({"cause": top.cause, "cv_rmse": top.cv_rmse,
+                          "params": _step_params(current, top),
+                          "evidence": _evidence(exp, current, top, p, corr),
+                          "p_value": p, "correlations": corr})
+            current = top
+            remaining = [c for c in remaining if c != top.cause]
+            continue
+        if folds is None:
+            break
+        # look-ahead: two causes that only help together (e.g. large deflection AND
+        # self-weight, where self-weight alone makes a linear beam worse). Pairs of the three
+        # best candidates that changed the prediction at all.
+        helping = sorted((c for c in tried if not np.array_equal(c.cv_pred, current.cv_pred)),
+                         key=lambda c: c.cv_rmse)[:3]
+        best_pair = None
+        for i in range(len(helping)):
+            for j in range(i + 1, len(helping)):
+                a, b = helping[i], helping[j]
+                spec_b = b.spec
+                var_b = None
+                if b.cause in VARIANTS:
+                    var_b = spec_b.law if b.cause == "field_dependent_magnetization" else spec_b.hyper
+                from dataclasses import replace as _replace
+                spec = a.spec.plus(b.cause, var_b)
+                if b.spec.law and not a.spec.law:
+                    spec = _replace(spec, law=b.spec.law)
+                if b.spec.hyper and not a.spec.hyper:
+                    spec = _replace(spec, hyper=b.spec.hyper)
+                pair = _candidate(spec, b.cause, exp, folds)
+                if bar is not None:
+                    bar.update(1)
+                if best_pair is None or pair.cv_rmse < best_pair[2].cv_rmse:
+                    best_pair = (a, b, pair)
+        if best_pair is None:
+            break
+        a, b, pair = best_pair
+        p = _paired_p(e_cur, pair.cv_pred - exp.y)
+        if not _passes(current, pair, p, min_gain, alpha):
             break
         corr = residual_correlations(exp, e_cur)
-        steps.append({"cause": top.cause, "cv_rmse": top.cv_rmse,
-                      "params": _step_params(top), "evidence": _evidence(exp, current, top, p, corr),
-                      "p_value": p, "correlations": corr})
-        current = top
-        remaining = [c for c in remaining if c != top.cause]
+        p_a = _paired_p(e_cur, a.cv_pred - exp.y)
+        steps.append({"cause": a.cause, "cv_rmse": a.cv_rmse, "params": _step_params(current, a),
+                      "evidence": _evidence(exp, current, a, p_a, corr)
+                      + f"; not significant alone, accepted jointly with {b.cause}",
+                      "p_value": p_a, "correlations": corr})
+        corr2 = residual_correlations(exp, a.cv_pred - exp.y)
+        p_b = _paired_p(a.cv_pred - exp.y, pair.cv_pred - exp.y)
+        steps.append({"cause": b.cause, "cv_rmse": pair.cv_rmse, "params": _step_params(a, pair),
+                      "evidence": _evidence(exp, a, pair, p_b, corr2)
+                      + f"; accepted jointly with {a.cause}: together {current.cv_rmse:.3g} -> "
+                        f"{pair.cv_rmse:.3g}, paired test p = {p:.2g}",
+                      "p_value": p, "correlations": corr2})
+        current = pair
+        remaining = [c for c in remaining if c not in (a.cause, b.cause)]
     if bar is not None:
         bar.close()
     return Diagnosis(exp, baseline, current, steps, rounds, skipped, folds)
 
 
-def _step_params(c: Candidate) -> dict:
-    """Parameters the accepted extension added (with their standard errors)."""
-    out = _params_out(c)
+def _passes(current: Candidate, cand: Candidate, p: float, min_gain: float, alpha: float) -> bool:
+    """The acceptance criterion: >= min_gain lower cv_rmse AND paired test p < alpha."""
+    return cand.cv_rmse <= (1.0 - min_gain) * current.cv_rmse and p < alpha
+
+
+def _specs_with(spec: ModelSpec, cause: str):
+    """``spec`` plus ``cause``, in every physical form: the new cause's own forms, and -- since
+    an added cause changes which law fits best -- every form of a law already in the model.
+    Yields (spec, label of the form or None)."""
+    from dataclasses import replace
+    forms = VARIANTS.get(cause)
+    if forms:
+        for v in forms:
+            yield spec.plus(cause, v), v
+        return
+    if spec.law is not None:
+        for law in VARIANTS["field_dependent_magnetization"]:
+            yield replace(spec, law=law).plus(cause), f"law {law}"
+        return
+    if spec.hyper is not None:
+        for h in VARIANTS["hyperelasticity"]:
+            yield replace(spec, hyper=h).plus(cause), f"hyperelastic law {h}"
+        return
+    yield spec.plus(cause), None
+
+
+def _step_params(before: Candidate, after: Candidate) -> dict:
+    """Parameters the accepted extension added, with their standard errors (``_sd``), and the
+    physical form chosen (``law`` / ``hyperelastic_law``) when the step chose or changed it."""
+    new = _params_out(after)
+    old = _params_out(before)
+    out = {k: v for k, v in new.items()
+           if k not in old and k not in ("law", "hyperelastic_law") and not k.endswith("_sd")}
+    for k in list(out):
+        if k + "_sd" in new:
+            out[k + "_sd"] = new[k + "_sd"]
+    for k in ("law", "hyperelastic_law"):
+        if k in new and new.get(k) != old.get(k):
+            out[k] = new[k]
     return out
 
 

@@ -17,7 +17,7 @@ evaluator = "synthetic"
 
 [grid]
 phi = 0.035
-arrangement = ["dispersed", "chained"]
+arrangement = ["dispersed", "chains"]
 B_T = [0.05, 0.3]
 gradB_T_per_m = 1.78
 
@@ -86,20 +86,20 @@ def test_batch_via_scheduler_writes_table(table):
     assert parts_dir_for(table).is_dir()
 
 
-def test_compare_chained_vs_dispersed(table, tmp_path, capsys):
+def test_compare_chains_vs_dispersed(table, tmp_path, capsys):
     js = tmp_path / "cmp.json"
     rc = main(["compare", str(table), "arrangement=dispersed,B_T=0.3",
-               "arrangement=chained,B_T=0.3", "--quantity", "f_eff", "--json", str(js),
+               "arrangement=chains,B_T=0.3", "--quantity", "f_eff", "--json", str(js),
                "--permutations", "999"])
     out = capsys.readouterr().out
     assert rc == 0 and "Welch" in out and "permutation" in out and "Hedges" in out
     res = json.loads(js.read_text())
     t = read_table(table)
     a = t.select("arrangement=dispersed,B_T=0.3")
-    b = t.select("arrangement=chained,B_T=0.3")
+    b = t.select("arrangement=chains,B_T=0.3")
     vals = t.component_values("f_eff", "z")
     assert np.isclose(res["difference"], vals[b].mean() - vals[a].mean())
-    # the synthetic chained force is 25 % higher, sd 5 %: effect size 5, with 10 + 10
+    # the synthetic chains force is 25 % higher, sd 5 %: effect size 5, with 10 + 10
     # realizations the expected t is 11 (power ~ 1 at p < 0.01)
     assert res["p_welch"] < 0.01 and res["p_permutation"] < 0.05 and res["hedges_g"] > 1
     # by index, the same result
@@ -125,7 +125,7 @@ def test_rve_size_recovers_kanit_exponent(scheduler, tmp_path, capsys):
     grow as 1/V. Tolerance: sd of log s^2 with 8 realizations is sqrt(2/7) = 0.53 per size;
     over a factor 16 in V the slope's se is ~0.3, so |alpha - 1| < 1 is a 3-sigma band."""
     p = tmp_path / "s.toml"
-    p.write_text(STUDY.replace('arrangement = ["dispersed", "chained"]', "")
+    p.write_text(STUDY.replace('arrangement = ["dispersed", "chains"]', "")
                  .replace("B_T = [0.05, 0.3]", "B_T = 0.3"))
     rc = main(["rve-size", str(p), "--out", str(tmp_path / "rs"), "--scheduler", scheduler,
                "--no-progress"])
@@ -139,3 +139,46 @@ def test_rve_size_recovers_kanit_exponent(scheduler, tmp_path, capsys):
     assert 40 < row["sizes"][0]["realizations_needed"] < 400
     assert (tmp_path / "rs" / "rve_size.png").stat().st_size > 1000
     assert "alpha" in capsys.readouterr().out
+
+
+def test_default_study_file_is_valid():
+    from homogenize._chain import DEFAULT_STUDY
+    from homogenize._study import load_study
+    s = load_study(DEFAULT_STUDY)
+    assert s.evaluator == "rve" and dict(s.axes)["phi"] == (0.0175, 0.035)
+    assert dict(s.axes)["gradB_T_per_m"] == (1.78,)
+    # sized for a few minutes on 2 cores (~0.5 s per 200-particle RVE on one core)
+    assert len(s.tasks()) * 0.5 / 2 < 180
+
+
+def test_chain_reduced_real_rves(scheduler, tmp_path):
+    """The whole chain on a reduced study of real RVEs (particles -> dipoles -> beam)."""
+    from homogenize._chain import SEED, seed_strip
+    p = tmp_path / "chain.toml"
+    p.write_text('[study]\nseed = 3\nrealizations = 3\nn_particles = 40\n'
+                 '[grid]\nphi = [0.0175, 0.035]\nB_T = [0.01, 0.3]\ngradB_T_per_m = 1.78\n')
+    out = tmp_path / "chain"
+    assert main(["chain", str(p), "--out", str(out), "--scheduler", scheduler,
+                 "--no-progress"]) == 0
+    res = json.loads((out / "chain.json").read_text())
+    assert (out / "deflection_vs_B.png").stat().st_size > 1000
+    assert "phi = 0.035" in (out / "summary.md").read_text()
+    assert (out / "table.h5").exists() and not parts_dir_for(out / "table.h5").exists()
+    strip = seed_strip()
+    # the strip satisfies the paper's premise: EB deflection 4 mm at 43.79 kN/m^3
+    L, t = strip["length_m"], strip["thickness_m"]
+    assert np.isclose(1.5 * SEED["f_paper_N_m3"] * L ** 4 / (2e6 * t ** 2), 4e-3, rtol=1e-12)
+    t_tab = read_table(out / "table.h5")
+    for c in res["curves"]:
+        for g in c["grid"]:
+            # EB deflection is 4 mm x f / 43.79 kN/m^3 (linear, geometry-independent) ...
+            assert np.isclose(g["deflection_eb_m"], 4e-3 * g["f_eff_N_m3"] / 43.79e3, rtol=1e-9)
+            # ... the elastica is below it (a dead load bends less at large rotation) ...
+            assert g["deflection_elastica_m"] <= g["deflection_eb_m"] * (1 + 1e-9)
+            # ... and the force at a grid point is that point's mean in the table
+            i = t_tab.select(f"phi={c['phi']!r},B_T={g['B_T']!r}")
+            assert np.isclose(g["f_eff_N_m3"], t_tab.values["f_eff_N_m3"][i, :, 2].mean())
+    # dilute limit: the force per particle volume hardly depends on phi (interactions at
+    # 1.75-3.5 vol% change it by a few %), so doubling phi doubles the force within 10 %
+    f = {c["phi"]: c["grid"][0]["f_eff_N_m3"] for c in res["curves"]}
+    assert 1.8 < f[0.035] / f[0.0175] < 2.2

@@ -95,7 +95,7 @@ def test_welch_matches_scipy_and_permutation_is_exact_for_small_samples():
 def test_tests_detect_a_real_difference_and_not_a_null_one():
     """Dispersed vs clustered points of the synthetic model differ by 10 % in f_eff."""
     study = parse_study(STUDY.format(seed=2, n=12, phis="0.035").replace(
-        "gradB_T_per_m = 1.78", 'gradB_T_per_m = 1.78\narrangement = ["dispersed", "clustered"]'))
+        "gradB_T_per_m = 1.78", 'gradB_T_per_m = 1.78\narrangement = ["dispersed", "clusters"]'))
     ev = SyntheticEvaluator()
     tasks = study.tasks()
     by_point = {}
@@ -103,7 +103,7 @@ def test_tests_detect_a_real_difference_and_not_a_null_one():
         by_point.setdefault(t.grid_index, []).append(ev(t)["f_eff_N_m3"][2])
     pts = study.points()
     i_d = next(i for i, p in enumerate(pts) if p["arrangement"] == "dispersed" and p["B_T"] == 0.2)
-    i_c = next(i for i, p in enumerate(pts) if p["arrangement"] == "clustered" and p["B_T"] == 0.2)
+    i_c = next(i for i, p in enumerate(pts) if p["arrangement"] == "clusters" and p["B_T"] == 0.2)
     r = welch_permutation(by_point[i_d], by_point[i_c], n_resamples=1999)
     assert r.p_welch < 1e-3 and r.p_permutation < 1e-2 and r.hedges_g > 1
     # two independent samples of the same distribution: no significant difference (this seed)
@@ -197,3 +197,22 @@ def test_interpolated_interval_covers_truth_at_stated_rate():
         hits += e.ci_low <= mu <= e.ci_high
     lo, hi = _binomial_band(0.95, trials)
     assert lo <= hits / trials <= hi, hits / trials
+
+
+def test_tip_deflection_from_table_propagates_the_force_interval():
+    from homogenize.tables import tip_deflection_from_table
+    study, table = _synthetic_table(2, 5)
+    L, w, t = 0.0187, 5e-3, 1e-3
+    r = tip_deflection_from_table(table, 0.02, 0.05, 1.78, L, w, t, model="eb")
+    f = r.force
+    # Euler-Bernoulli closed form, delta = 3 f L^4 / (2 E t^2), at the mean and at both ends
+    for defl, force in ((r.deflection_m, f.mean), (r.ci_low_m, f.ci_low), (r.ci_high_m, f.ci_high)):
+        assert math.isclose(defl, 1.5 * force * L ** 4 / (2e6 * t ** 2), rel_tol=1e-12)
+    assert r.E_Pa == 2e6 and r.E_estimate is None and not r.large_deflection
+    # large load: the elastica (dead load) bends less than linear theory, and it is flagged
+    big = tip_deflection_from_table(table, 0.04, 0.2, 1.78, 0.05, w, t)
+    assert big.deflection_m < big.deflection_eb_m and big.large_deflection
+    assert big.ci_low_m < big.deflection_m < big.ci_high_m
+    # a stiffer matrix given explicitly scales the linear deflection down exactly
+    r2 = tip_deflection_from_table(table, 0.02, 0.05, 1.78, L, w, t, model="eb", E_Pa=4e6)
+    assert math.isclose(r2.deflection_m, r.deflection_m / 2, rel_tol=1e-12)

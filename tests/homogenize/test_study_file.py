@@ -15,7 +15,7 @@ evaluator = "synthetic"
 
 [grid]
 B_T = [0.01, 0.1, 0.5]
-arrangement = ["dispersed", "clustered"]
+arrangement = ["dispersed", "clusters"]
 phi = [0.0175, 0.035]
 gradB_T_per_m = 1.78
 """
@@ -32,7 +32,7 @@ def test_grid_expansion_canonical_order_and_size():
     assert len(pts) == s.n_points == 12
     # C order: the last axis with several values varies fastest
     assert [p["B_T"] for p in pts[:3]] == [0.01, 0.1, 0.5]
-    assert pts[3]["arrangement"] == "clustered" and pts[6]["phi"] == 0.035
+    assert pts[3]["arrangement"] == "clusters" and pts[6]["phi"] == 0.035
     assert len({tuple(p.values()) for p in pts}) == 12
     tasks = s.tasks()
     assert len(tasks) == 36
@@ -40,8 +40,8 @@ def test_grid_expansion_canonical_order_and_size():
 
 
 def test_order_of_keys_in_file_does_not_change_points_or_seeds():
-    swapped = GOOD.replace('B_T = [0.01, 0.1, 0.5]\narrangement = ["dispersed", "clustered"]',
-                           'arrangement = ["dispersed", "clustered"]\nB_T = [0.01, 0.1, 0.5]')
+    swapped = GOOD.replace('B_T = [0.01, 0.1, 0.5]\narrangement = ["dispersed", "clusters"]',
+                           'arrangement = ["dispersed", "clusters"]\nB_T = [0.01, 0.1, 0.5]')
     assert swapped != GOOD
     a, b = parse_study(GOOD), parse_study(swapped)
     assert a.points() == b.points()
@@ -100,7 +100,7 @@ def test_scalar_axis_and_defaults(tmp_path):
     ('[study]\nseed = 1\nrealizations = 2\nevaluator = "synthetic"\n', ["[grid]"]),
     ('[grid]\nB_T = 0.1\n', ["[study]"]),
     (GOOD.replace('evaluator = "synthetic"', 'evaluator = "magic"'), ["evaluator", "magic"]),
-    (GOOD.replace('"clustered"', '"stacked"'), ["arrangement", "stacked"]),
+    (GOOD.replace('"clusters"', '"stacked"'), ["arrangement", "stacked"]),
     ("[study\nseed = 1", ["not valid TOML"]),
     (GOOD + "\n[rve_size]\nn_particles = [10]\n", ["[rve_size]", "two sizes"]),
     (GOOD + "\n[rve_size]\nn_particles = [10, -20]\n", ["[rve_size]", "-20"]),

@@ -1,0 +1,72 @@
+"""Benchmark of ``mapsim batch``: realizations per minute with 1 and 2 Dask workers.
+
+A fixed small study of real RVEs (particles -> self-consistent dipoles) runs on a local cluster
+of 1 worker process (the reference) and of 2; the ratio is the parallel speed-up (ideal 2 on
+two free cores). Each cluster is started and warmed up (imports, numba caches) before the
+clock starts, so the figure is the steady-state throughput. ``max_rel_error`` is the largest
+relative difference between the two tables: 0, since the table must not depend on the number
+of workers.
+"""
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+_STUDY = """
+[study]
+name = "bench"
+seed = 1
+realizations = {R}
+n_particles = {N}
+evaluator = "rve"
+[grid]
+phi = 0.035
+B_T = [0.05, 0.5]
+gradB_T_per_m = 1.78
+"""
+
+
+def _warm(task):
+    from homogenize._evaluate import RVEEvaluator
+    RVEEvaluator()(task)
+    return True
+
+
+def _timed_batch(study, out, workers):
+    from dask.distributed import Client, LocalCluster
+    from .tables import run_batch
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address="127.0.0.1:0",
+                      env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}) as cluster, \
+            Client(cluster) as client:
+        warm = study.replace(seed=study.seed + 1).tasks()[0]
+        client.run(_warm, warm)
+        t0 = time.perf_counter()
+        run_batch(study, out, client=client, progress=False)
+        return time.perf_counter() - t0
+
+
+def bench_records(quick: bool) -> list[dict]:
+    from ._study import parse_study
+    from .tables import read_table
+    R, N = (4, 60) if quick else (12, 150)
+    study = parse_study(_STUDY.format(R=R, N=N), "bench-study.toml")
+    n = len(study.tasks())
+    with tempfile.TemporaryDirectory() as d:
+        t1 = _timed_batch(study, Path(d) / "w1.h5", 1)
+        t2 = _timed_batch(study, Path(d) / "w2.h5", 2)
+        a, b = read_table(Path(d) / "w1.h5"), read_table(Path(d) / "w2.h5")
+        err = 0.0
+        for q, v in a.values.items():
+            scale = np.maximum(np.abs(v), 1e-300)
+            err = max(err, float(np.max(np.abs(b.values[q] - v) / scale)))
+    return [{
+        "name": f"tables: batch of {n} RVEs ({N} particles), 2 workers vs 1",
+        "n": n, "seconds": t2, "reference": "same batch, 1 worker", "reference_seconds": t1,
+        "ratio": t1 / t2, "max_rel_error": err,
+        "realizations_per_minute_1_worker": 60.0 * n / t1,
+        "realizations_per_minute_2_workers": 60.0 * n / t2,
+    }]

@@ -1,0 +1,225 @@
+"""``mapsim rve``: generate a periodic RVE of core-shell particles and summarise it.
+
+Draws particles from a size distribution, gives them an Fe core and an Fe3O4 shell, places
+them without overlap in a periodic cube (dispersed, compact clusters or chains) and prints the
+particle count, box edge, achieved volume fraction, size and cluster statistics. Writes the
+RVE to HDF5 (``--out``, with a run manifest beside it), the summary to JSON (``--json``), the
+particle surfaces to PLY/GLB (``--ply``/``--glb``) and a picture (``--png``).
+
+Magnetics hook: if ``micro.dipoles`` provides ``add_cli_arguments(parser)`` and
+``cli_summary(args, rve) -> dict``, its options are added to this command and its summary is
+printed and stored under the key ``"magnetics"``.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+from pathlib import Path
+
+from micro._io import manifest, write_json
+from micro._validate import InputError
+
+_DESCRIPTION = __doc__
+
+
+def _magnetics_module():
+    """``micro.dipoles`` if it offers the CLI hook functions, else None."""
+    try:
+        mod = importlib.import_module("micro.dipoles")
+    except ModuleNotFoundError as exc:
+        if exc.name == "micro.dipoles":
+            return None
+        raise
+    if hasattr(mod, "add_cli_arguments") and hasattr(mod, "cli_summary"):
+        return mod
+    return None
+
+
+def register(sub, formatter):
+    p = sub.add_parser("rve", formatter_class=formatter, description=_DESCRIPTION,
+                       help="generate a periodic particle RVE and summarise it")
+    g = p.add_argument_group("RVE size and seed")
+    g.add_argument("--phi", type=float, default=0.0175,
+                   help="particle volume fraction [1] (outer volumes / box volume), met exactly "
+                        "by choosing the box edge")
+    g.add_argument("--n", type=int, default=2000, help="number of particles [1]")
+    g.add_argument("--seed", type=int, default=0, help="random seed (same seed, same RVE)")
+
+    g = p.add_argument_group("size distribution of the outer radius")
+    g.add_argument("--distribution", choices=("lognormal", "monodisperse", "histogram"),
+                   default="lognormal", help="kind of radius distribution")
+    g.add_argument("--mean-radius", type=float, default=25e-9,
+                   help="lognormal: mean radius of the truncated distribution [m]")
+    g.add_argument("--median-radius", type=float, default=None,
+                   help="lognormal: median of the parent lognormal [m] (replaces --mean-radius)")
+    g.add_argument("--gsd", type=float, default=1.4,
+                   help="lognormal: geometric standard deviation [1], > 1")
+    g.add_argument("--r-min", type=float, default=10e-9, help="lognormal: smallest radius [m]")
+    g.add_argument("--r-max", type=float, default=50e-9, help="lognormal: largest radius [m]")
+    g.add_argument("--radius", type=float, default=25e-9, help="monodisperse: radius [m]")
+    g.add_argument("--histogram", default=None, metavar="CSV",
+                   help="histogram: CSV file with columns radius_m and count (number) or "
+                        "weight (mass fraction); implies --distribution histogram")
+
+    g = p.add_argument_group("core-shell composition")
+    g.add_argument("--shell", type=float, default=0.0,
+                   help="Fe3O4 shell thickness [m]; 0 = homogeneous particles with the seed's "
+                        "178 A m^2/kg")
+    g.add_argument("--core-density", type=float, default=7870.0, help="core density [kg/m^3]")
+    g.add_argument("--core-sigma", type=float, default=None,
+                   help="core specific saturation moment [A m^2/kg] (default 218 with a shell, "
+                        "178 without)")
+    g.add_argument("--shell-density", type=float, default=5170.0, help="shell density [kg/m^3]")
+    g.add_argument("--shell-sigma", type=float, default=92.0,
+                   help="shell specific saturation moment [A m^2/kg]")
+    g.add_argument("--calibrate-sigma", type=float, default=None,
+                   help="measured mass-averaged specific moment of the powder [A m^2/kg]: "
+                        "the core moment is calibrated to reproduce it")
+
+    g = p.add_argument_group("arrangement")
+    g.add_argument("--arrangement", choices=("dispersed", "clusters", "chains"),
+                   default="dispersed", help="isolated particles, compact clusters or chains")
+    g.add_argument("--gap", type=float, default=0.0,
+                   help="minimum surface-to-surface distance between particles [m]")
+    g.add_argument("--cluster-size", type=int, default=20,
+                   help="clusters: particles per cluster [1]")
+    g.add_argument("--cluster-density", type=float, default=0.5,
+                   help="clusters: internal packing density [1] (solid volume / "
+                        "gyration-equivalent sphere)")
+    g.add_argument("--chain-length", type=float, default=5.0,
+                   help="chains: mean particles per chain [1] (geometric distribution)")
+    g.add_argument("--chain-direction", type=float, nargs=3, default=(0.0, 0.0, 1.0),
+                   metavar=("X", "Y", "Z"), help="chains: axis direction [1]")
+    g.add_argument("--agglomerated-fraction", type=float, default=1.0,
+                   help="clusters/chains: fraction of particles that are agglomerated [1]")
+    g.add_argument("--max-attempts", type=int, default=200_000,
+                   help="random positions tried per body before declaring a jam [1]")
+
+    g = p.add_argument_group("output")
+    g.add_argument("--out", default=None, metavar="H5",
+                   help="write the RVE to this HDF5 file (and a manifest <name>.manifest.json)")
+    g.add_argument("--json", default=None, metavar="FILE", help="write the summary as JSON")
+    g.add_argument("--ply", default=None, metavar="FILE",
+                   help="write particle surfaces as PLY [m] (colours: clusters)")
+    g.add_argument("--glb", default=None, metavar="FILE",
+                   help="write particle surfaces as binary glTF [m]")
+    g.add_argument("--png", default=None, metavar="FILE",
+                   help="write a picture: 3D view, mid-plane slice, radius histogram")
+    g.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar on stderr (default: on for n >= 20000)")
+
+    # ---- magnetics hook: options of micro.dipoles (added when that module provides them) ----
+    mag = _magnetics_module()
+    if mag is not None:
+        mag.add_cli_arguments(p)
+    p.set_defaults(func=_cmd)
+
+
+def generator_kwargs(args) -> dict:
+    """Keyword arguments of :func:`micro.particles.generate_rve` from parsed CLI options."""
+    from micro import particles as P
+
+    kind = "histogram" if args.histogram else args.distribution
+    if kind == "histogram":
+        if not args.histogram:
+            raise InputError("--distribution histogram needs --histogram CSV")
+        dist = P.Histogram.from_csv(args.histogram)
+    elif kind == "monodisperse":
+        dist = P.Monodisperse(args.radius)
+    elif args.median_radius is not None:
+        dist = P.LogNormal(args.median_radius, args.gsd, args.r_min, args.r_max)
+    else:
+        dist = P.LogNormal.from_mean(args.mean_radius, args.gsd, args.r_min, args.r_max)
+    comp = P.CoreShell(shell_m=args.shell, core_density_kg_m3=args.core_density,
+                       core_sigma_Am2_kg=args.core_sigma, shell_density_kg_m3=args.shell_density,
+                       shell_sigma_Am2_kg=args.shell_sigma,
+                       calibrate_sigma_Am2_kg=args.calibrate_sigma)
+    return dict(distribution=dist, composition=comp, arrangement=args.arrangement,
+                gap_m=args.gap, cluster_size=args.cluster_size,
+                cluster_density=args.cluster_density, chain_length=args.chain_length,
+                chain_direction=tuple(args.chain_direction),
+                agglomerated_fraction=args.agglomerated_fraction, max_attempts=args.max_attempts)
+
+
+def _check_outputs(args):
+    """Refuse bad output names before any work is done."""
+    for opt, suffixes in (("out", (".h5", ".hdf5")), ("ply", (".ply",)), ("glb", (".glb",)),
+                          ("png", (".png",)), ("json", (".json",))):
+        val = getattr(args, opt)
+        if val is not None and Path(val).suffix.lower() not in suffixes:
+            raise InputError(f"--{opt} {val}: file name must end in {' or '.join(suffixes)}")
+
+
+def _fmt_summary(s: dict) -> str:
+    nm = 1e9
+    r = s["radius_m"]
+    lines = [
+        f"particles            {s['n']}",
+        f"box edge             {s['box_m']:.6g} m ({s['box_m'] * nm:.1f} nm)",
+        f"volume fraction      {s['phi']:.6g} (target {s['phi_target']:g}, relative error "
+        f"{s['phi_rel_error']:.1e})",
+        f"radius [nm]          mean {r['mean'] * nm:.2f}  std {r['std'] * nm:.2f}  "
+        f"min {r['min'] * nm:.2f}  median {r['median'] * nm:.2f}  max {r['max'] * nm:.2f}  "
+        f"volume-weighted mean {r['volume_weighted_mean'] * nm:.2f}",
+        f"core radius mean     {s['core_radius_mean_m'] * nm:.2f} nm",
+        f"specific moment      {s['specific_moment_Am2_kg']:.5g} A m^2/kg (mass average); "
+        f"composite M_sat {s['M_sat_composite_A_m']:.5g} A/m",
+        f"smallest gap         {s['min_gap_m'] * nm:.4g} nm (required {s['gap_m'] * nm:g} nm)",
+    ]
+    c = s["clusters"]
+    if c["n_clusters"]:
+        line = (f"{s['arrangement']:<20} {c['n_clusters']} with {c['size_mean']:.2f} particles on "
+                f"average ({c['size_min']}-{c['size_max']}), agglomerated fraction "
+                f"{c['agglomerated_fraction']:.3f}")
+        if "packing_density_mean" in c:
+            line += (f", packing density {c['packing_density_mean']:.4f} "
+                     f"({c['packing_density_min']:.4f}-{c['packing_density_max']:.4f})")
+        if "alignment_order_parameter" in c:
+            line += f", alignment S = {c['alignment_order_parameter']:.4f}"
+        lines.append(line)
+    else:
+        lines.append("clusters             none (all particles isolated)")
+    return "\n".join(lines)
+
+
+def _cmd(args) -> int:
+    from micro.particles import describe, generate_rve
+
+    _check_outputs(args)
+    kw = generator_kwargs(args)
+    progress = args.progress if args.progress is not None else args.n >= 20000
+    rve = generate_rve(args.phi, args.n, args.seed, progress=progress, **kw)
+    summary = describe(rve)
+
+    # ---- magnetics hook: summary of micro.dipoles for this RVE (if that module offers it) ----
+    mag = _magnetics_module()
+    if mag is not None:
+        mag_summary = mag.cli_summary(args, rve)
+        if mag_summary:
+            summary["magnetics"] = mag_summary
+
+    print(_fmt_summary(summary))
+    if "magnetics" in summary:
+        print("magnetics            " + json.dumps(summary["magnetics"], default=str))
+
+    config = {k: v for k, v in vars(args).items() if k != "func"}
+    if args.out:
+        rve.save(args.out)
+        out = Path(args.out)
+        write_json(out.with_name(out.stem + ".manifest.json"), manifest(config, args.seed))
+        print(f"wrote {args.out}")
+    if args.ply or args.glb:
+        from micro._viz import export_mesh
+        for f in (args.ply, args.glb):
+            if f:
+                export_mesh(rve, f)
+                print(f"wrote {f}")
+    if args.png:
+        from micro._viz import save_picture
+        save_picture(rve, args.png, kw["distribution"])
+        print(f"wrote {args.png}")
+    if args.json:
+        write_json(args.json, {"summary": summary, "manifest": manifest(config, args.seed)})
+        print(f"wrote {args.json}")
+    return 0

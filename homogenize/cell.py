@@ -1,0 +1,474 @@
+"""Periodic cell problems on a voxel mesh: effective stiffness, effective body force, magnetic stress.
+
+Displacement ``u = E x + w`` with the fluctuation ``w`` periodic (node index mod n, see
+:mod:`homogenize._assembly`) and the mean strain ``E`` prescribed. The rigid translation is
+fixed by pinning one matrix node (the loads are balanced, so the pin carries no force).
+
+* Stiffness: six unit mean strains (Voigt order 11, 22, 33, 23, 13, 12; engineering shear)
+  give the columns of ``C_eff`` = volume average of the stress.
+* Magnetic case (zero mean strain): the force ``F_i`` on particle ``i`` is spread as a uniform body
+  force over its voxels; ``f_eff = sum F_i / V`` is balanced by the uniform counter-load ``-f_eff``
+  (on the macro scale it is carried by the macroscopic stress gradient). The macroscopic stress at
+  zero macroscopic strain (Hill-Mandel / virtual work with the unit-strain fields) is
+
+      stress_mag = <sigma(w_mag)> - (1/V) sym( int x (x) b dV ),
+
+  the mean FE stress plus the first moment of the applied forces. For pair forces the second
+  term is exactly the virial ``-(1/V) sum_pairs r_ij (x) F_ij``; in a homogeneous matrix the first
+  term vanishes identically, and stiff inclusions add a correction of relative order
+  ``(a / r)^3``. Because net forces on particles of a PERIODIC system do not tell which image a
+  partner sits at, pass the dipole solver's pairwise ``virial_stress_Pa`` when you have it; it
+  replaces the first-moment term (whose cell-cut choice is then irrelevant).
+
+Solver: smoothed-aggregation AMG (pyamg, rigid-body near-nullspace, built once and reused for all
+load cases) as preconditioner of a conjugate-gradient method DEFLATED by the six rigid-body modes
+of every stiff particle. Plain AMG-CG needs ~15x more iterations at Fe/PDMS contrast (1e5)
+than at contrast 1, because each stiff particle adds six near-zero modes (its rigid motions in the
+soft matrix); deflation removes exactly those (Vuik, Segal & Meijerink 1999).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from micro._validate import InputError, check_choice, check_finite, check_positive, check_range
+
+from . import _assembly as asm
+from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
+                               isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
+from .mesh import VoxelMesh, voxelize
+
+__all__ = ["Material", "CellResult", "homogenize_rve", "homogenize_mesh", "isotropic_projection",
+           "anisotropy_index", "voigt_to_tensor", "tensor_to_voigt",
+           "hashin_shtrikman_bounds", "eshelby_dilute", "mori_tanaka", "guth_gold",
+           "bulk_shear", "young_poisson", "lame", "isotropic_stiffness_voigt", "FE_PDMS_CONTRAST"]
+
+VOIGT = asm.VOIGT
+CASES = ("e11", "e22", "e33", "g23", "g13", "g12")
+FE_PDMS_CONTRAST = 211e9 / 2e6
+
+
+@dataclass(frozen=True)
+class Material:
+    """Isotropic linear elastic material: Young's modulus [Pa] and Poisson's ratio [1]."""
+
+    E_Pa: float
+    nu: float
+
+    def __post_init__(self):
+        check_positive("E_Pa (Young's modulus)", self.E_Pa, "Pa")
+        check_range("nu (Poisson's ratio)", self.nu, -1.0, 0.5, "", lo_open=True, hi_open=True)
+
+    @property
+    def lame_Pa(self) -> tuple[float, float]:
+        return lame(self.E_Pa, self.nu)
+
+    @property
+    def bulk_shear_Pa(self) -> tuple[float, float]:
+        return bulk_shear(self.E_Pa, self.nu)
+
+
+@dataclass(frozen=True, eq=False)
+class CellResult:
+    """Result of :func:`homogenize_rve`. Units: Pa, N/m^3, m; strains dimensionless.
+
+    C_eff_Pa : (6, 6) effective stiffness, Voigt order 11, 22, 33, 23, 13, 12, engineering shear
+    E_eff_Pa, nu_eff, K_eff_Pa, G_eff_Pa : isotropic projection of C_eff
+    anisotropy_index : universal anisotropy index A^U (0 for isotropic)
+    f_eff_N_m3 : (3,) effective body force = sum of particle forces / cell volume
+    stress_mag_Pa : (3, 3) macroscopic magnetic stress at zero mean strain (None without forces)
+    stress_mag_elastic_Pa, stress_mag_moment_Pa : its two parts (mean FE stress, force moment)
+    strain_mag : (3, 3) strain of a stress-free sample, ``-C_eff^-1 stress_mag``
+    n_dof, voxels, h_m, phi_voxel : mesh size
+    iterations, residuals : per load case, CG iterations and final relative residual
+    timings_s : seconds per stage
+    """
+
+    C_eff_Pa: np.ndarray
+    E_eff_Pa: float
+    nu_eff: float
+    K_eff_Pa: float
+    G_eff_Pa: float
+    anisotropy_index: float
+    f_eff_N_m3: np.ndarray
+    stress_mag_Pa: np.ndarray | None
+    stress_mag_elastic_Pa: np.ndarray | None
+    stress_mag_moment_Pa: np.ndarray | None
+    strain_mag: np.ndarray | None
+    n_dof: int
+    voxels: int
+    h_m: float
+    phi_voxel: float
+    n_particles: int
+    n_unresolved: int
+    iterations: dict
+    residuals: dict
+    residual_history: dict
+    timings_s: dict
+    settings: dict
+    mesh: VoxelMesh = field(repr=False)
+    fields: dict = field(repr=False, default_factory=dict)
+
+    def summary(self) -> dict:
+        """JSON-ready dictionary of the scalar and tensor results (no fields, no mesh)."""
+        out = {
+            "C_eff_Pa": self.C_eff_Pa, "E_eff_Pa": self.E_eff_Pa, "nu_eff": self.nu_eff,
+            "K_eff_Pa": self.K_eff_Pa, "G_eff_Pa": self.G_eff_Pa,
+            "anisotropy_index": self.anisotropy_index, "f_eff_N_m3": self.f_eff_N_m3,
+            "stress_mag_Pa": self.stress_mag_Pa, "stress_mag_elastic_Pa": self.stress_mag_elastic_Pa,
+            "stress_mag_moment_Pa": self.stress_mag_moment_Pa, "strain_mag": self.strain_mag,
+            "n_dof": self.n_dof, "voxels": self.voxels, "h_m": self.h_m,
+            "phi_voxel": self.phi_voxel, "n_particles": self.n_particles,
+            "n_unresolved": self.n_unresolved, "iterations": self.iterations,
+            "residuals": self.residuals, "timings_s": self.timings_s, "settings": self.settings,
+        }
+        return out
+
+
+# ------------------------------------------------------------------------------------------------
+# tensor helpers
+# ------------------------------------------------------------------------------------------------
+
+def voigt_to_tensor(v, engineering: bool = False) -> np.ndarray:
+    """(6,) Voigt vector -> symmetric (3, 3); ``engineering`` halves the shear entries (strain)."""
+    v = np.asarray(v, dtype=float)
+    T = np.zeros((3, 3))
+    for a, (r, c) in enumerate(VOIGT):
+        val = v[a] / 2.0 if (engineering and r != c) else v[a]
+        T[r, c] = T[c, r] = val
+    return T
+
+
+def tensor_to_voigt(T, engineering: bool = False) -> np.ndarray:
+    """Symmetric (3, 3) -> (6,) Voigt; ``engineering`` doubles the shear entries (strain)."""
+    T = np.asarray(T, dtype=float)
+    return np.array([T[r, c] * (2.0 if (engineering and r != c) else 1.0) for r, c in VOIGT])
+
+
+def isotropic_projection(C) -> tuple[float, float, float, float]:
+    """Closest isotropic stiffness (Voigt-average formulas): (E, nu, K, G) [Pa, 1, Pa, Pa]."""
+    C = np.asarray(C, dtype=float)
+    K = (C[0, 0] + C[1, 1] + C[2, 2] + 2.0 * (C[0, 1] + C[0, 2] + C[1, 2])) / 9.0
+    G = ((C[0, 0] + C[1, 1] + C[2, 2]) - (C[0, 1] + C[0, 2] + C[1, 2])
+         + 3.0 * (C[3, 3] + C[4, 4] + C[5, 5])) / 15.0
+    E, nu = young_poisson(K, G)
+    return float(E), float(nu), float(K), float(G)
+
+
+def anisotropy_index(C) -> float:
+    """Universal anisotropy index ``A^U = 5 G_V / G_R + K_V / K_R - 6`` (Ranganathan & Ostoja-
+    Starzewski 2008): 0 for an isotropic stiffness, > 0 otherwise."""
+    C = np.asarray(C, dtype=float)
+    S = np.linalg.inv(C)
+    _, _, KV, GV = isotropic_projection(C)
+    KR = 1.0 / (S[0, 0] + S[1, 1] + S[2, 2] + 2.0 * (S[0, 1] + S[0, 2] + S[1, 2]))
+    GR = 15.0 / (4.0 * (S[0, 0] + S[1, 1] + S[2, 2]) - 4.0 * (S[0, 1] + S[0, 2] + S[1, 2])
+                 + 3.0 * (S[3, 3] + S[4, 4] + S[5, 5]))
+    return float(5.0 * GV / GR + KV / KR - 6.0)
+
+
+# ------------------------------------------------------------------------------------------------
+# the solver
+# ------------------------------------------------------------------------------------------------
+
+class _CellSolver:
+    """Stiffness matrix, AMG hierarchy and particle deflation space of one voxel mesh."""
+
+    def __init__(self, mesh: VoxelMesh, lam, mu, *, deflate: bool, stiff_mask, tol: float,
+                 maxiter: int):
+        import pyamg
+
+        self.mesh, self.lam, self.mu = mesh, lam, mu
+        self.n, self.h = mesh.n, mesh.h_m
+        self.tol, self.maxiter = tol, maxiter
+        t = {}
+        t0 = time.perf_counter()
+        K = asm.assemble_bsr(lam, mu, self.h)
+        t["assembly"] = time.perf_counter() - t0
+        # pin one node surrounded by matrix voxels only (rigid translation; loads are balanced)
+        soft = (mu <= mu.min() * (1.0 + 1e-12))
+        node_soft = np.all(asm.node_coefficients(soft.astype(np.float64)) > 0.5, axis=1)
+        cand = np.flatnonzero(node_soft)
+        self.pin = int(cand[0]) if cand.size else 0
+        ptr, ind = K.indptr, K.indices
+        K.data[ind == self.pin] = 0.0
+        K.data[ptr[self.pin]:ptr[self.pin + 1]] = 0.0
+        diag_scale = float(np.mean(K.diagonal()))
+        row = np.arange(ptr[self.pin], ptr[self.pin + 1])
+        K.data[row[ind[row] == self.pin][0]] = diag_scale * np.eye(3)
+        self.K = K
+        t0 = time.perf_counter()
+        B = asm.rigid_body_modes(self.n, self.h)
+        self.ml = pyamg.smoothed_aggregation_solver(K, B=B, symmetry="hermitian", max_coarse=1000)
+        self.M = self.ml.aspreconditioner(cycle="V")
+        t["amg_setup"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.Z = self._deflation_space(stiff_mask) if deflate else None
+        if self.Z is not None:
+            self.KZ = (K @ self.Z).tocsc()
+            Ec = (self.Z.T @ self.KZ).tocsc()
+            from scipy.sparse.linalg import splu
+            self.Esolve = splu(Ec).solve
+        t["deflation_setup"] = time.perf_counter() - t0
+        self.timings = t
+
+    def _deflation_space(self, stiff_mask):
+        """Rigid-body modes (3 translations, 3 rotations) of every stiff particle, at the nodes of
+        its voxels, as a sparse (3N, 6 P) matrix. Rotations about the particle centre, scaled by
+        the radius so all columns are O(1)."""
+        mesh, n, h = self.mesh, self.n, self.h
+        owner = np.where(stiff_mask, mesh.owner, -1)
+        parts = np.unique(owner[owner >= 0])
+        if parts.size == 0:
+            return None
+        rows, cols, vals = [], [], []
+        vox = np.argwhere(owner >= 0)                       # (m, 3) as (k, j, i)
+        pid = owner[owner >= 0]
+        col_of = {p: c for c, p in enumerate(parts)}
+        nodes_all, pid_all = [], []
+        for ax, ay, az in asm.CORNERS:
+            k, j, i = vox[:, 0] + az, vox[:, 1] + ay, vox[:, 2] + ax
+            nodes_all.append(np.stack([i, j, k], axis=1))    # unwrapped node (i, j, k)
+            pid_all.append(pid)
+        nodes = np.concatenate(nodes_all)
+        pids = np.concatenate(pid_all)
+        flat = (nodes[:, 0] % n) + n * ((nodes[:, 1] % n) + n * (nodes[:, 2] % n))
+        key = flat * (mesh.n_particles + 1) + pids
+        _, first = np.unique(key, return_index=True)
+        nodes, pids, flat = nodes[first], pids[first], flat[first]
+        keep = flat != self.pin
+        nodes, pids, flat = nodes[keep], pids[keep], flat[keep]
+        c = mesh.centers_m[pids]
+        x = nodes * h
+        d = x - c
+        d -= mesh.box_m * np.round(d / mesh.box_m)           # unwrap around the particle centre
+        d /= mesh.radii_m[pids][:, None]
+        pc = np.array([col_of[p] for p in pids], dtype=np.int64) if pids.size else pids
+        base = 6 * pc
+        for comp in range(3):                                  # translations
+            rows.append(3 * flat + comp); cols.append(base + comp); vals.append(np.ones(flat.size))
+        rot = ((1, 2, 3, -1), (2, 1, 3, +1),                   # about x: (0, -z, y)
+               (0, 2, 4, +1), (2, 0, 4, -1),                   # about y: (z, 0, -x)
+               (0, 1, 5, -1), (1, 0, 5, +1))                   # about z: (-y, x, 0)
+        for comp, coord, col, sign in rot:
+            rows.append(3 * flat + comp); cols.append(base + col); vals.append(sign * d[:, coord])
+        Z = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(3 * n ** 3, 6 * parts.size))
+        return Z
+
+    def solve(self, f: np.ndarray):
+        """Solve K w = f (pinned node), deflated AMG-preconditioned CG. Returns (w, history)."""
+        f = f.copy()
+        f[3 * self.pin:3 * self.pin + 3] = 0.0
+        K, M = self.K, self.M
+        bnorm = float(np.linalg.norm(f))
+        if bnorm == 0.0:
+            return np.zeros_like(f), [0.0]
+        if self.Z is not None:
+            Z, KZ, Es = self.Z, self.KZ, self.Esolve
+            x = Z @ Es(Z.T @ f)
+            r = f - K @ x
+
+            def project(z):           # z - Z E^-1 (KZ)^T z : K-orthogonal to the deflation space
+                return z - Z @ Es(KZ.T @ z)
+        else:
+            x = np.zeros_like(f)
+            r = f.copy()
+
+            def project(z):
+                return z
+        hist = [float(np.linalg.norm(r)) / bnorm]
+        z = M @ r
+        p = project(z)
+        rz = float(r @ z)
+        it = 0
+        while hist[-1] > self.tol and it < self.maxiter:
+            q = K @ p
+            alpha = rz / float(p @ q)
+            x += alpha * p
+            r -= alpha * q
+            it += 1
+            hist.append(float(np.linalg.norm(r)) / bnorm)
+            if hist[-1] <= self.tol:
+                break
+            z = M @ r
+            rz_new = float(r @ z)
+            p = project(z) + (rz_new / rz) * p
+            rz = rz_new
+        x[3 * self.pin:3 * self.pin + 3] = 0.0
+        w = x.reshape(-1, 3)
+        w -= w.mean(axis=0)     # zero-mean fluctuation (the pin only fixed the translation)
+        return x, hist
+
+
+def _material_fields(mesh: VoxelMesh, matrix: Material, particle: Material):
+    lm, mm = matrix.lame_Pa
+    lp, mp = particle.lame_Pa
+    f = mesh.fraction
+    # fraction-weighted (Voigt) mixing inside mixed voxels; 0/1 fractions for method="centre"
+    return (1.0 - f) * lm + f * lp, (1.0 - f) * mm + f * mp
+
+
+def _force_density(mesh: VoxelMesh, forces_N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Body force per voxel [N/m^3], shape (n, n, n, 3), and first moment sum x (x) F [N m]."""
+    n, h, L = mesh.n, mesh.h_m, mesh.box_m
+    b = np.zeros((n ** 3, 3))
+    moment = np.zeros((3, 3))
+    ptr, vox, wts = mesh.force_ptr, mesh.force_voxels, mesh.force_weights
+    centres = mesh.voxel_centres_m().reshape(-1, 3)
+    for p in range(mesh.n_particles):
+        sl = slice(ptr[p], ptr[p + 1])
+        v, w = vox[sl], wts[sl]
+        wn = w / w.sum()
+        np.add.at(b, v, wn[:, None] * forces_N[p][None, :] / h ** 3)
+        d = centres[v] - mesh.centers_m[p]
+        d -= L * np.round(d / L)        # the particle's voxels, unwrapped around its centre
+        xbar = mesh.centers_m[p] + wn @ d
+        moment += np.outer(xbar - 0.5 * L, forces_N[p])
+    f_eff = forces_N.sum(axis=0) / L ** 3
+    b -= f_eff                            # uniform counter-load: zero net force on the cell
+    # (its first moment about the cell centre is zero, so `moment` is already the full moment)
+    return b.reshape(n, n, n, 3), moment
+
+
+def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
+                    matrix: Material = Material(2e6, 0.45), particle: Material = Material(211e9, 0.29),
+                    rigid: bool = False, deflate: bool = True, tol: float = 1e-8,
+                    maxiter: int = 2000, keep_fields: bool = False, cases=CASES,
+                    progress: bool = False) -> CellResult:
+    """Solve the periodic cell problems on a prepared voxel mesh. See :func:`homogenize_rve`."""
+    check_positive("tol", tol, "")
+    t_start = time.perf_counter()
+    if rigid:
+        # rigid particles as the stiff limit: 1e6 x the matrix modulus, same Poisson's ratio as
+        # the particle; deflation makes the iteration count independent of this contrast and the
+        # relative error of the rigid limit is O(1e-6) (tested against increasing contrast).
+        particle = Material(matrix.E_Pa * 1e6, particle.nu)
+    lam, mu = _material_fields(mesh, matrix, particle)
+    stiff = particle.E_Pa > 10.0 * matrix.E_Pa
+    solver = _CellSolver(mesh, lam, mu, deflate=deflate and stiff,
+                         stiff_mask=mesh.fraction >= 0.5, tol=tol, maxiter=maxiter)
+    iters, resid, hist, fields = {}, {}, {}, {}
+    C = np.zeros((6, 6))
+    t_solve = time.perf_counter()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(cases) + (forces_N is not None), desc="cell problems", unit="case",
+                   leave=False)
+    for name in cases:
+        a = CASES.index(name)
+        E = voigt_to_tensor(np.eye(6)[a], engineering=True)
+        f = asm.affine_load(lam, mu, mesh.h_m, E)
+        w, h = solver.solve(f)
+        eps = asm.element_mean_strain(w, mesh.n, mesh.h_m) + E
+        C[:, a] = asm.voigt_stress_mean(lam, mu, eps)
+        iters[name], resid[name], hist[name] = len(h) - 1, h[-1], h
+        if keep_fields:
+            fields[name] = w.reshape(mesh.n, mesh.n, mesh.n, 3)
+        if bar is not None:
+            bar.update()
+        if h[-1] > tol:
+            raise RuntimeError(f"cell problem {name} did not converge: residual {h[-1]:.2e} after "
+                               f"{maxiter} iterations")
+    full = len(cases) == 6
+    asym = float(np.abs(C - C.T).max() / np.abs(C).max()) if full else float("nan")
+    if full:
+        C = 0.5 * (C + C.T)
+        E_eff, nu_eff, K_eff, G_eff = isotropic_projection(C)
+        AU = anisotropy_index(C)
+    else:
+        E_eff = nu_eff = K_eff = G_eff = AU = float("nan")
+
+    L = mesh.box_m
+    f_eff = np.zeros(3)
+    stress = stress_el = stress_mo = strain = None
+    if forces_N is not None:
+        forces_N = np.asarray(check_finite("forces_N", forces_N, "N"), dtype=float)
+        if forces_N.shape != (mesh.n_particles, 3):
+            raise InputError(f"forces_N must have shape ({mesh.n_particles}, 3) [N], got "
+                             f"{forces_N.shape}")
+        b, moment = _force_density(mesh, forces_N)
+        f_eff = forces_N.sum(axis=0) / L ** 3
+        load = asm.body_force_load(b, mesh.h_m)
+        w, h = solver.solve(load)
+        eps = asm.element_mean_strain(w, mesh.n, mesh.h_m)
+        stress_el = voigt_to_tensor(asm.voigt_stress_mean(lam, mu, eps))
+        if virial_stress_Pa is not None:
+            V = np.asarray(check_finite("virial_stress_Pa", virial_stress_Pa, "Pa"), dtype=float)
+            if V.shape != (3, 3):
+                raise InputError(f"virial_stress_Pa must have shape (3, 3) [Pa], got {V.shape}")
+            stress_mo = 0.5 * (V + V.T)
+        else:
+            stress_mo = -0.5 * (moment + moment.T) / L ** 3
+        stress = stress_el + stress_mo
+        iters["magnetic"], resid["magnetic"], hist["magnetic"] = len(h) - 1, h[-1], h
+        if full:
+            strain = voigt_to_tensor(-np.linalg.solve(C, tensor_to_voigt(stress)), engineering=True)
+        if keep_fields:
+            fields["magnetic"] = w.reshape(mesh.n, mesh.n, mesh.n, 3)
+            fields["magnetic_body_force_N_m3"] = b
+        if bar is not None:
+            bar.update()
+    if bar is not None:
+        bar.close()
+    if keep_fields:
+        fields["lambda_Pa"], fields["mu_Pa"] = lam, mu
+    timings = dict(solver.timings)
+    timings["solve"] = time.perf_counter() - t_solve
+    timings["total"] = time.perf_counter() - t_start
+    settings = {"matrix_E_Pa": matrix.E_Pa, "matrix_nu": matrix.nu,
+                "particle_E_Pa": particle.E_Pa, "particle_nu": particle.nu, "rigid": rigid,
+                "deflate": solver.Z is not None, "tol": tol, "method": mesh.method,
+                "amg_levels": len(solver.ml.levels),
+                "amg_operator_complexity": float(solver.ml.operator_complexity()),
+                "C_asymmetry_rel": asym,
+                "virial_from_dipoles": virial_stress_Pa is not None}
+    return CellResult(
+        C_eff_Pa=C, E_eff_Pa=E_eff, nu_eff=nu_eff, K_eff_Pa=K_eff, G_eff_Pa=G_eff,
+        anisotropy_index=AU, f_eff_N_m3=f_eff, stress_mag_Pa=stress,
+        stress_mag_elastic_Pa=stress_el, stress_mag_moment_Pa=stress_mo, strain_mag=strain,
+        n_dof=mesh.n_dof, voxels=mesh.n, h_m=mesh.h_m, phi_voxel=mesh.phi_voxel,
+        n_particles=mesh.n_particles, n_unresolved=int((~mesh.resolved).sum()),
+        iterations=iters, residuals=resid, residual_history=hist, timings_s=timings,
+        settings=settings, mesh=mesh, fields=fields)
+
+
+def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
+                   matrix_E_Pa: float = 2e6, matrix_nu: float = 0.45,
+                   particle_E_Pa: float = 211e9, particle_nu: float = 0.29, rigid: bool = False,
+                   method: str = "centre", deflate: bool = True, tol: float = 1e-8,
+                   maxiter: int = 2000, keep_fields: bool = False, progress: bool = False
+                   ) -> CellResult:
+    """Effective stiffness, body force and magnetic stress of an RVE by periodic voxel FEM.
+
+    Parameters
+    ----------
+    rve : RVE -- (or any object with ``box_m``, ``centers_m`` (N, 3), ``radii_m`` (N,) in m)
+    voxels : int -- voxels per cube edge (>= 4)
+    forces_N : ndarray, shape (N, 3), optional -- force on each particle [N] (external gradient
+        plus dipole-dipole); enables the magnetic load case
+    virial_stress_Pa : ndarray, shape (3, 3), optional -- pairwise virial stress from the dipole
+        solver [Pa]; replaces the force first moment in ``stress_mag`` (needed for periodic RVEs
+        with interacting pairs across the cell boundary)
+    matrix_E_Pa, matrix_nu : matrix Young's modulus [Pa] (> 0) and Poisson's ratio (-1, 0.5)
+    particle_E_Pa, particle_nu : particle material (default Fe: 211 GPa, 0.29)
+    rigid : bool -- particles as rigid bodies (stiff limit, 1e6 x matrix modulus)
+    method : {"centre", "fraction"} -- voxel phase assignment (see :func:`homogenize.mesh.voxelize`)
+    deflate : bool -- deflate the rigid-body modes of stiff particles in CG (default True)
+    tol : float -- relative residual of CG per load case
+    keep_fields : bool -- keep the displacement fields (for VTU/PNG output)
+
+    Returns
+    -------
+    CellResult
+    """
+    matrix = Material(matrix_E_Pa, matrix_nu)
+    particle = Material(particle_E_Pa, particle_nu)
+    mesh = voxelize(rve, voxels, method=method)
+    return homogenize_mesh(mesh, forces_N=forces_N, virial_stress_Pa=virial_stress_Pa,
+                           matrix=matrix, particle=particle, rigid=rigid, deflate=deflate,
+                           tol=tol, maxiter=maxiter, keep_fields=keep_fields, progress=progress)

@@ -1,0 +1,186 @@
+"""Human report of a diagnosis: Markdown plus PNG plots (data, seed and extended model,
+held-out residuals against every covariate before and after)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from micro._io import atomic_path, atomic_write_text
+
+from .causes import DESCRIPTIONS
+from .diagnose import Diagnosis, covariates, residual_correlations
+
+__all__ = ["write_report", "UNITS", "X_AXIS"]
+
+UNITS = {"deflection": "m", "magnetization": "A/m", "magnetostriction": "-", "tensile": "Pa"}
+X_AXIS = {"deflection": ("gradB_T_per_m", "dB/dz [T/m]"), "magnetization": ("H_A_per_m", "H [A/m]"),
+          "magnetostriction": ("B_T", "mu0 H [T]"), "tensile": ("strain", "engineering strain [-]")}
+
+
+def _fmt(v):
+    if isinstance(v, str):
+        return v
+    if v == 0 or not math.isfinite(v):
+        return f"{v}"
+    return f"{v:.4g}"
+
+
+def _params_table(params: dict) -> str:
+    names = [k for k in params if not k.endswith("_sd")]
+    if not names:
+        return "(no fitted parameter)"
+    rows = ["| parameter | value | standard error |", "|---|---|---|"]
+    for k in names:
+        sd = params.get(k + "_sd")
+        rows.append(f"| `{k}` | {_fmt(params[k])} | {_fmt(sd) if sd is not None else '-'} |")
+    return "\n".join(rows)
+
+
+def _plot_data(d: Diagnosis, path: Path):
+    import matplotlib
+    from matplotlib.figure import Figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    _ = matplotlib
+    exp = d.exp
+    xname, xlabel = X_AXIS[exp.kind]
+    x = exp.columns[xname]
+    fig = Figure(figsize=(11, 4.5))
+    FigureCanvasAgg(fig)
+    ax1, ax2 = fig.subplots(1, 2)
+    groups = exp.groups
+    colors = [f"C{i % 10}" for i in range(int(groups.max()) + 1)]
+    for g in range(int(groups.max()) + 1):
+        for down in (False, True):
+            m = (groups == g) & (exp.down == down)
+            if not m.any():
+                continue
+            o = np.argsort(x[m])
+            lab = f"{exp.specimen[m][0]}{' down' if down else ''}"
+            ax1.plot(x[m][o], exp.y[m][o], "o", color=colors[g], ms=4, mfc="none" if down else None,
+                     label=lab if g < 8 else None)
+            ax1.plot(x[m][o], d.baseline.fit.prediction[m][o], ":", color=colors[g], lw=1)
+            ax1.plot(x[m][o], d.final.fit.prediction[m][o], "-", color=colors[g], lw=1.2)
+    ax1.set_xlabel(xlabel)
+    ax1.set_ylabel(f"{exp.measured_name} [{UNITS[exp.kind]}]")
+    ax1.set_title("data (o), seed model (dotted), extended model (solid)", fontsize=9)
+    if int(groups.max()) < 8:
+        ax1.legend(fontsize=7)
+    lo = float(min(exp.y.min(), d.baseline.cv_pred.min(), d.final.cv_pred.min()))
+    hi = float(max(exp.y.max(), d.baseline.cv_pred.max(), d.final.cv_pred.max()))
+    ax2.plot([lo, hi], [lo, hi], "k-", lw=0.8)
+    ax2.plot(exp.y, d.baseline.cv_pred, "s", ms=4, mfc="none", color="C3",
+             label=f"seed (cv_rmse {d.baseline.cv_rmse:.3g})")
+    ax2.plot(exp.y, d.final.cv_pred, "o", ms=4, color="C0",
+             label=f"extended (cv_rmse {d.final.cv_rmse:.3g})")
+    ax2.set_xlabel(f"measured [{UNITS[exp.kind]}]")
+    ax2.set_ylabel("held-out prediction")
+    ax2.legend(fontsize=8)
+    ax2.set_title("held-out predictions against data", fontsize=9)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+
+
+def _plot_residuals(d: Diagnosis, path: Path):
+    from matplotlib.figure import Figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    exp = d.exp
+    cov = {k: v for k, v in covariates(exp).items() if np.unique(v).size >= 2}
+    if not cov:
+        cov = {"row": np.arange(exp.n_rows, dtype=float)}
+    n = len(cov)
+    ncol = min(3, n)
+    nrow = int(math.ceil(n / ncol))
+    fig = Figure(figsize=(4 * ncol, 3.2 * nrow))
+    FigureCanvasAgg(fig)
+    axes = np.atleast_1d(fig.subplots(nrow, ncol)).ravel()
+    r0 = d.baseline.cv_pred - exp.y
+    r1 = d.final.cv_pred - exp.y
+    for ax, (name, v) in zip(axes, cov.items()):
+        ax.axhline(0, color="k", lw=0.6)
+        ax.plot(v, r0, "s", ms=3.5, mfc="none", color="C3", label="seed")
+        ax.plot(v, r1, "o", ms=3.5, color="C0", label="extended")
+        ax.set_xlabel(name)
+        ax.set_ylabel(f"held-out residual [{UNITS[exp.kind]}]", fontsize=8)
+    axes[0].legend(fontsize=8)
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+
+
+def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Path:
+    """Write ``report.md``, ``data.png`` and ``residuals.png`` into ``out_dir``; returns the
+    Markdown path. ``discussion`` (Markdown) is inserted verbatim as its own section."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    exp = d.exp
+    res = d.as_dict()
+    _plot_data(d, out / "data.png")
+    _plot_residuals(d, out / "residuals.png")
+    unit = UNITS[exp.kind]
+    lines = [f"# Diagnosis: {exp.title or exp.kind}", ""]
+    src = f"`{exp.toml_path}`" if exp.toml_path else "in-memory experiment"
+    n_spec = int(exp.groups.max()) + 1
+    lines += [f"Experiment {src}: kind **{exp.kind}**, {exp.n_rows} rows, {n_spec} specimen(s); "
+              f"measured column `{exp.measured_name}` [{unit}].", ""]
+    if d.folds is None:
+        lines += ["Too few rows to hold any out: the 'held-out' prediction is the a priori model "
+                  "(scale 1, the file's E, nothing fitted), and no cause can be accepted.", ""]
+    elif n_spec >= 3:
+        lines += [f"Cross-validation: {len(d.folds)} folds of whole specimens.", ""]
+    else:
+        lines += [f"Cross-validation: {len(d.folds)} random folds of rows (fewer than 3 "
+                  "specimens).", ""]
+    lines += ["## Verdict", ""]
+    if res["causes"]:
+        lines += ["The seed model misses: " + "; then ".join(
+            f"**{c}** ({DESCRIPTIONS[c]})" for c in res["causes"]) + ".", "",
+            f"Held-out RMSE: seed {res['baseline']['cv_rmse']:.4g} {unit} -> extended "
+            f"{res['final']['cv_rmse']:.4g} {unit}; gain **{res['gain']:.3g}**.", ""]
+    else:
+        lines += ["No extension lowers the held-out error significantly: the seed model explains "
+                  f"these data within what they can tell (held-out RMSE "
+                  f"{res['baseline']['cv_rmse']:.4g} {unit}).", ""]
+    lines += ["Acceptance criterion: the best candidate must lower the cross-validated RMSE by "
+              "at least 10 % AND a one-sided Wilcoxon signed-rank test on the paired held-out "
+              "squared errors must give p < 0.01.", ""]
+    lines += ["## Seed model", "", f"Held-out RMSE {res['baseline']['cv_rmse']:.4g} {unit}.", "",
+              _params_table(res["baseline"]["params"]), ""]
+    for i, s in enumerate(res["steps"]):
+        lines += [f"## Step {i + 1}: {s['cause']}", "", DESCRIPTIONS[s["cause"]] + ".", "",
+                  f"Evidence: {s['evidence']}.", "", "Parameters this step added (standard errors from the Jacobian at the optimum):", "",
+                  _params_table(s["params"]), ""]
+    lines += ["## Candidates tried", ""]
+    for r, tried in enumerate(d.rounds):
+        base = d.baseline if r == 0 else None
+        lines += [f"Round {r + 1} (on top of {'the seed model' if base else res['steps'][r - 1]['cause']}):", "",
+                  "| cause | cv_rmse | forms tried |", "|---|---|---|"]
+        for c in sorted(tried, key=lambda c: c.cv_rmse):
+            forms = ", ".join(f"{k}: {v:.3g}" for k, v in c.variants.items()) or "-"
+            lines.append(f"| {c.cause} | {c.cv_rmse:.4g} | {forms} |")
+        lines.append("")
+    if d.skipped:
+        lines += ["Not tried (the data cannot show them, or the physics is not available):", ""]
+        lines += [f"- `{c}`: {why}" for c, why in d.skipped.items()]
+        lines.append("")
+    lines += ["## Final model", "", f"Held-out RMSE {res['final']['cv_rmse']:.4g} {unit}.", "",
+              _params_table(res["final"]["params"]), ""]
+    c0 = residual_correlations(exp, d.baseline.cv_pred - exp.y)
+    c1 = residual_correlations(exp, d.final.cv_pred - exp.y)
+    if c0:
+        lines += ["## Residuals against covariates (Spearman rank correlation of held-out "
+                  "residuals)", "", "| covariate | seed | extended |", "|---|---|---|"]
+        for k in c0:
+            lines.append(f"| {k} | {c0[k]:+.2f} | {c1.get(k, float('nan')):+.2f} |")
+        lines.append("")
+    lines += ["![data, seed and extended model](data.png)", "",
+              "![held-out residuals against every covariate](residuals.png)", ""]
+    if discussion:
+        lines += ["## Discussion", "", discussion.strip(), ""]
+    md = out / "report.md"
+    atomic_write_text(md, "\n".join(lines))
+    return md

@@ -1,0 +1,90 @@
+"""The ``mapsim rve`` command (homogenize/_cli_rve.py)."""
+import json
+
+import numpy as np
+import pytest
+
+from homogenize.cli import main
+from micro import RVE
+
+
+def test_rve_command_writes_everything(tmp_path, capsys):
+    out = tmp_path / "rve.h5"
+    rc = main(["rve", "--phi", "0.02", "--n", "300", "--seed", "1", "--out", str(out),
+               "--json", str(tmp_path / "s.json"), "--ply", str(tmp_path / "p.ply"),
+               "--glb", str(tmp_path / "p.glb"), "--png", str(tmp_path / "p.png"),
+               "--arrangement", "clusters", "--cluster-size", "6", "--agglomerated-fraction",
+               "0.5", "--gap", "1e-9"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    for words in ("particles            300", "box edge", "volume fraction      0.02",
+                  "radius [nm]", "clusters"):
+        assert words in text
+    rve = RVE.load(out)
+    summary = json.loads((tmp_path / "s.json").read_text())["summary"]
+    assert summary["n"] == rve.n == 300
+    assert summary["box_m"] == pytest.approx(rve.box_m, rel=1e-15)
+    assert summary["phi"] == pytest.approx(0.02, rel=1e-12)
+    assert summary["clusters"]["n_clusters"] == 25
+    assert summary["min_gap_m"] >= 1e-9 * (1 - 1e-9)
+    man = json.loads((tmp_path / "rve.manifest.json").read_text())
+    assert man["seed"] == 1 and man["config"]["cluster_size"] == 6
+    for f in ("p.ply", "p.glb", "p.png"):
+        assert (tmp_path / f).stat().st_size > 1000
+    # Same command line, same RVE.
+    assert main(["rve", "--phi", "0.02", "--n", "300", "--seed", "1", "--out",
+                 str(tmp_path / "again.h5"), "--arrangement", "clusters", "--cluster-size", "6",
+                 "--agglomerated-fraction", "0.5", "--gap", "1e-9"]) == 0
+    assert RVE.load(tmp_path / "again.h5") == rve
+
+
+def test_core_shell_and_histogram_options(tmp_path, capsys):
+    h = tmp_path / "h.csv"
+    h.write_text("radius_m,count\n15e-9,3\n25e-9,5\n35e-9,2\n")
+    assert main(["rve", "--n", "200", "--histogram", str(h), "--shell", "3e-9",
+                 "--calibrate-sigma", "150", "--json", str(tmp_path / "s.json")]) == 0
+    s = json.loads((tmp_path / "s.json").read_text())["summary"]
+    assert s["radius_m"]["min"] >= 10e-9 and s["radius_m"]["max"] <= 40e-9
+    assert s["core_radius_mean_m"] == pytest.approx(s["radius_m"]["mean"] - 3e-9, rel=1e-12)
+    assert abs(s["specific_moment_Am2_kg"] - 150) < 5      # calibrated on the population
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--phi", "0"], ["phi"]),
+    (["--phi", "0.9"], ["phi", "0.45"]),
+    (["--r-min", "6e-8"], ["r_min", "r_max"]),
+    (["--shell=-1e-9"], ["shell thickness"]),
+    (["--shell", "2e-8"], ["shell thickness", "smallest particle radius"]),
+    (["--histogram", "nope.csv"], ["nope.csv", "does not exist"]),
+    (["--out", "x.txt"], ["--out", ".h5"]),
+    (["--chain-direction", "0", "0", "0", "--arrangement", "chains"], ["chain_direction"]),
+])
+def test_bad_input_exit_2_one_line_no_files(tmp_path, capsys, monkeypatch, argv, words):
+    monkeypatch.chdir(tmp_path)
+    rc = main(["rve", "--n", "100", "--out", "r.h5", "--json", "s.json"] + argv
+              if "--out" not in argv else ["rve", "--n", "100"] + argv)
+    assert rc == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mapsim rve: error:") and "\n" not in err
+    for w in words:
+        assert w in err
+    assert list(tmp_path.iterdir()) == [] or all(p.name == "nope.csv" for p in tmp_path.iterdir())
+
+
+def test_argparse_errors_exit_2(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["rve", "--arrangement", "rods"])
+    assert exc.value.code == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["rve", "--n", "ten"])
+    assert exc.value.code == 2
+
+
+def test_help_states_units_and_defaults(capsys):
+    with pytest.raises(SystemExit):
+        main(["rve", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for opt in ("--phi", "--mean-radius", "--shell", "--gap", "--cluster-density"):
+        assert opt in text
+    assert "[m]" in text and "[kg/m^3]" in text and "[A m^2/kg]" in text
+    assert "(default: 2.5e-08)" in text
