@@ -50,8 +50,10 @@ def _timed_batch(study, out, workers):
 
 
 def bench_records(quick: bool) -> list[dict]:
+    import os
     from ._study import parse_study
     from .tables import read_table
+    load_before = os.getloadavg()[0]
     R, N = (4, 60) if quick else (12, 150)
     study = parse_study(_STUDY.format(R=R, N=N), "bench-study.toml")
     n = len(study.tasks())
@@ -69,4 +71,7 @@ def bench_records(quick: bool) -> list[dict]:
         "ratio": t1 / t2, "max_rel_error": err,
         "realizations_per_minute_1_worker": 60.0 * n / t1,
         "realizations_per_minute_2_workers": 60.0 * n / t2,
+        # the speed-up needs two free cores: the 1-minute load average tells whether it had them
+        "load_average_1min": [load_before, os.getloadavg()[0]],
+        "cpu_count": os.cpu_count(),
     }]

@@ -95,6 +95,9 @@ def register(sub, formatter):
                    help="clusters/chains: fraction of particles that are agglomerated [1]")
     g.add_argument("--max-attempts", type=int, default=200_000,
                    help="random positions tried per body before declaring a jam [1]")
+    g.add_argument("--placement", choices=("auto", "rsa", "compress"), default="auto",
+                   help="rsa: random sequential addition; compress: grow and relax (dispersed "
+                        "only, reaches denser packings); auto: rsa, compress if rsa jams")
 
     g = p.add_argument_group("output")
     g.add_argument("--out", default=None, metavar="H5",
@@ -139,7 +142,8 @@ def generator_kwargs(args) -> dict:
                 gap_m=args.gap, cluster_size=args.cluster_size,
                 cluster_density=args.cluster_density, chain_length=args.chain_length,
                 chain_direction=tuple(args.chain_direction),
-                agglomerated_fraction=args.agglomerated_fraction, max_attempts=args.max_attempts)
+                agglomerated_fraction=args.agglomerated_fraction, max_attempts=args.max_attempts,
+                placement=args.placement)
 
 
 def _check_outputs(args):

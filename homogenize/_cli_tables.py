@@ -81,7 +81,7 @@ def _cmd_rve_size(args) -> int:
     try:
         res = rve_size_study(study, args.out, workers=args.workers, scheduler=args.scheduler,
                              progress=not args.no_progress, quantity=args.quantity,
-                             component=args.component, target=args.target)
+                             component=args.component, target=args.target, at=args.at)
     except BatchError as exc:
         print(f"mapsim rve-size: {exc}", file=sys.stderr)
         return 1
@@ -176,6 +176,9 @@ def register(sub, formatter):
     p.add_argument("--target", type=float, default=None,
                    help="target relative precision of the mean, e.g. 0.02 "
                         "(default: [rve_size] target_rel_precision, else 0.02)")
+    p.add_argument("--at", default=None, metavar="AXIS=VALUE,...",
+                   help="fix grid axes to one of their values, e.g. \"phi=0.035,B_T=0.1\" "
+                        "(default: every grid point of the study)")
     _add_cluster_options(p)
     p.set_defaults(func=_cmd_rve_size)
 
@@ -213,3 +216,112 @@ def register(sub, formatter):
     p.add_argument("--width", type=float, default=5e-3, help="assumed strip width [m]")
     _add_cluster_options(p)
     p.set_defaults(func=_cmd_chain)
+
+
+# --------------------------------------------------------------------------- mapsim beam --table
+def add_beam_table_options(p) -> None:
+    """Options of ``mapsim beam`` that take the body force from a batch table."""
+    g = p.add_argument_group(
+        "body force from a table (mapsim batch)",
+        "With --table, the body force and its confidence interval are interpolated from the "
+        "table at (--phi, --B, --gradB) and replace --body-force-N-m3; the interval is "
+        "propagated to the tip deflection of every model.")
+    g.add_argument("--table", default=None, help="effective-parameter table (HDF5) "
+                                                 "(default: none, use --body-force-N-m3)")
+    g.add_argument("--phi", type=float, default=None, help="particle volume fraction [-]")
+    g.add_argument("--B", dest="B_T", type=float, default=None,
+                   help="applied flux density at the strip [T]")
+    g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=None,
+                   help="field gradient d|B|/dz [T/m]")
+    g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
+                   help="values of other grid axes with several values, e.g. "
+                        "arrangement=chains")
+    g.add_argument("--E-from-table", action="store_true",
+                   help="use the table's E_eff (FEM) and its interval instead of --E-Pa")
+
+
+def _parse_at(text):
+    out = {}
+    for item in (text or "").split(","):
+        if not item.strip():
+            continue
+        if "=" not in item:
+            raise InputError(f"--at {text!r}: expected axis=value pairs separated by commas")
+        a, v = (x.strip() for x in item.split("=", 1))
+        try:
+            out[a] = float(v)
+        except ValueError:
+            out[a] = v
+    return out
+
+
+def beam_from_table(args) -> int:
+    """``mapsim beam --table``: tip deflection with the interval propagated from the table."""
+    import math
+
+    from homogenize.macro.cantilever import Strip, solve_cantilever
+    from homogenize.macro.fem import Material
+    from micro._validate import check_positive
+
+    from .tables import body_force_from_table, modulus_from_table, read_table
+    for name, v in (("--phi", args.phi), ("--B", args.B_T), ("--gradB", args.gradB_T_per_m)):
+        if v is None:
+            raise InputError(f"{name} is required with --table")
+    table = read_table(args.table)
+    others = _parse_at(args.table_at)
+    force = body_force_from_table(table, args.phi, args.B_T, args.gradB_T_per_m, **others)
+    E, E_est = args.E_Pa, None
+    if args.E_from_table:
+        E_est = modulus_from_table(table, args.phi, **{k: v for k, v in others.items()
+                                                       if k not in ("B_T", "gradB_T_per_m")})
+        if E_est is None:
+            raise InputError(f"--E-from-table: {args.table} has no E_eff (the study ran "
+                             f"without fem = true)")
+        E = E_est.mean
+    strip = Strip(args.length_m, args.width_m, args.thickness_m)
+    mat = Material(E, args.nu, args.density_kg_m3)
+    check_positive("nz", args.nz, "")
+    forces = {"mean": force.mean, "ci_low": force.ci_low, "ci_high": force.ci_high}
+    if force.ci_low < 0:
+        raise InputError(f"the force interval reaches below zero ({force.ci_low:g} N/m^3) at "
+                         f"B = {args.B_T:g} T: too few realizations for a deflection interval")
+    rows = []
+    for model in args.model:
+        tips = {}
+        for k, f in forces.items():
+            r = solve_cantilever(strip, mat, f, model=model, order=args.order, nz=args.nz,
+                                 gravity_m_s2=args.gravity_m_s2, n_steps=args.steps)
+            tips[k] = r.tip_m
+        lo, hi = tips["ci_low"], tips["ci_high"]
+        if E_est is not None and tips["mean"] > 0:
+            # deflection ~ 1/E: the modulus interval adds in quadrature (relative)
+            rel_E = (E_est.ci_high - E_est.ci_low) / (2 * E_est.mean)
+            m = tips["mean"]
+            lo = m * (1 - math.hypot(1 - lo / m, rel_E))
+            hi = m * (1 + math.hypot(hi / m - 1, rel_E))
+        rows.append({"model": model, "tip_m": tips["mean"], "ci_low_m": lo, "ci_high_m": hi})
+    lvl = f"{100 * force.confidence:g} %"
+    print(f"body force from {args.table} at phi = {args.phi:g}, B = {args.B_T:g} T, "
+          f"dB/dz = {args.gradB_T_per_m:g} T/m: {force.mean:.6g} N/m^3, {lvl} interval "
+          f"[{force.ci_low:.6g}, {force.ci_high:.6g}]")
+    print(f"E = {E:.6g} Pa" + ("" if E_est is None else
+                               f" (table, {lvl} interval [{E_est.ci_low:.6g}, {E_est.ci_high:.6g}])"))
+    print(f"{'model':<12} {'tip [m]':>12} {lvl + ' interval [m]':>30}")
+    for r in rows:
+        print(f"{r['model']:<12} {r['tip_m']:12.6g}   [{r['ci_low_m']:.6g}, {r['ci_high_m']:.6g}]")
+    small = {r["model"]: r["tip_m"] for r in rows}
+    if "eb" in small and "elastica" in small and small["eb"] > 0 \
+            and abs(small["elastica"] - small["eb"]) > 0.01 * small["eb"]:
+        print(f"note: large deflection (tip/L = {small['elastica'] / args.length_m:.2f}): the "
+              f"elastica differs from Euler-Bernoulli by "
+              f"{100 * (small['elastica'] / small['eb'] - 1):+.1f} %; use it (or neo-hookean)")
+    if args.json:
+        from micro._io import manifest, write_json
+        write_json(args.json, {"table": str(args.table), "phi": args.phi, "B_T": args.B_T,
+                               "gradB_T_per_m": args.gradB_T_per_m, "other_axes": others,
+                               "force_N_m3": vars(force), "E_Pa": E,
+                               "E_estimate_Pa": None if E_est is None else vars(E_est),
+                               "strip": vars(strip), "results": rows,
+                               "manifest": manifest({k: v for k, v in vars(args).items()
+                                                     if k != "func"}, None)})
+    return 0

@@ -21,12 +21,39 @@ from ._stats import fit_power_law, realizations_needed
 from ._study import Study, load_study
 from .tables import _dask_client, read_table, run_batch
 
-__all__ = ["rve_size_study"]
+__all__ = ["rve_size_study", "restrict_grid"]
+
+
+def restrict_grid(study: Study, at: str | None) -> Study:
+    """The study with some grid axes fixed to one of their values (``"phi=0.035,B_T=0.1"``)."""
+    if not at:
+        return study
+    axes = dict(study.axes)
+    for item in at.split(","):
+        if "=" not in item:
+            raise InputError(f"--at {at!r}: expected axis=value pairs separated by commas")
+        a, v = (x.strip() for x in item.split("=", 1))
+        if a not in axes:
+            raise InputError(f"--at {at!r}: unknown axis {a!r}; axes: {', '.join(axes)}")
+        hits = [g for g in axes[a] if (g == v if isinstance(g, str) else
+                                       _isclose_text(g, v))]
+        if not hits:
+            raise InputError(f"--at {at!r}: {a} = {v} is not a grid value; values: "
+                             f"{list(axes[a])}")
+        axes[a] = (hits[0],)
+    return study.replace(axes=tuple((a, axes[a]) for a, _ in study.axes))
+
+
+def _isclose_text(g, v: str) -> bool:
+    try:
+        return math.isclose(float(v), g, rel_tol=1e-9)
+    except ValueError:
+        return False
 
 
 def rve_size_study(study, out_dir, *, evaluator=None, workers=None, scheduler=None,
                    processes=True, client=None, progress=True, quantity=None, component=None,
-                   target=None) -> dict:
+                   target=None, at: str | None = None) -> dict:
     """Run the ``[rve_size]`` batches of ``study`` into ``out_dir`` and analyse them.
 
     Returns a dict (also written as ``out_dir/rve_size.json``, with ``rve_size.md`` and the plot
@@ -39,6 +66,7 @@ def rve_size_study(study, out_dir, *, evaluator=None, workers=None, scheduler=No
     if spec is None:
         raise InputError(f"{study.path}: missing table [rve_size] (n_particles = [...], "
                          f"realizations, quantity, component, target_rel_precision)")
+    study = restrict_grid(study, at)
     quantity = quantity or spec.quantity
     component = spec.component if component is None else component
     target = spec.target_rel_precision if target is None else target

@@ -66,8 +66,8 @@ class PeriodicSum:
 
     def __init__(self, pos, accuracy=1e-6, method="pme", alpha=None, pme_order=None,
                  neighbours=None, grid=None):
-        self.pos = np.ascontiguousarray(pos, dtype=np.float64)
-        n = self.pos.shape[0]
+        pos = np.ascontiguousarray(pos, dtype=np.float64)
+        n = pos.shape[0]
         self.n = n
         self.method = method
         self.accuracy = float(accuracy)
@@ -84,6 +84,11 @@ class PeriodicSum:
                 alpha = s / min(rc, 0.5)
         self.alpha = float(alpha)
         self.rc = s / self.alpha
+        # work on particles sorted by cell: neighbours are then close in memory
+        self.perm = _CellList(pos, self.rc).order
+        self.inv = np.empty_like(self.perm)
+        self.inv[self.perm] = np.arange(n)
+        self.pos = np.ascontiguousarray(pos[self.perm])
         self.cells = _CellList(self.pos, self.rc)
         if method == "ewald":
             self._setup_ewald()
@@ -170,6 +175,8 @@ class PeriodicSum:
             g[:, :, -1] = 0.0
         self.g = g
         self.kx, self.ky, self.kz = kx, ky, kz
+        self.kv1 = np.ascontiguousarray(2 * np.pi * n1)
+        self.kv3 = np.ascontiguousarray(2 * np.pi * n3)
         self.k2g = k2
         # weights of the half-space (rfft) sum over full k-space
         wz = np.full(n3.shape, 2.0)
@@ -185,6 +192,14 @@ class PeriodicSum:
         K.pme_spread(self.gpos, mom, self.order, q)
         qh = scipy.fft.rfftn(q, axes=(1, 2, 3), workers=-1)
         kx, ky, kz = self.kx, self.ky, self.kz
+        if not want_force:
+            hg = np.empty_like(qh)
+            K.pme_influence(qh, self.kv1, self.kv3, self.g, float(kk) ** 3, hg)
+            grid = scipy.fft.irfftn(hg, s=(kk, kk, kk), axes=(1, 2, 3), workers=-1,
+                                    overwrite_x=True)
+            out = np.empty((self.n, 3))
+            K.pme_gather(self.gpos, np.ascontiguousarray(grid), self.order, out)
+            return out, None, None, None
         s = kx * qh[0] + ky * qh[1] + kz * qh[2]          # k . Q^
         gs = -self.g * s * (kk ** 3)
         hg = np.stack([kx * gs, ky * gs, kz * gs])
@@ -224,12 +239,12 @@ class PeriodicSum:
     def field(self, mom):
         """Periodic dipolar field at every particle from all others and all images (box units,
         tin-foil boundary): shape (N, 3)."""
-        mom = np.ascontiguousarray(mom, dtype=np.float64)
+        mom = np.ascontiguousarray(np.asarray(mom, dtype=np.float64)[self.perm])
         self.evaluations += 1
         h, _f, _v = self._real(mom, False)
         hr = self._ewald_recip(mom, False)[0] if self.method == "ewald" else \
             self._pme_recip(mom, False)[0]
-        return h * _INV4PI + hr + self._self_coef() * mom
+        return (h * _INV4PI + hr + self._self_coef() * mom)[self.inv]
 
     def _self_coef(self):
         # minus the field of the particle's own Gaussian at its centre: + alpha^3/(3 pi^1.5) m
@@ -251,7 +266,7 @@ class PeriodicSum:
         Returns ``h (N,3), f (N,3), u, P (3,3)`` in box units; the force on i is
         ``mu0 (m_i . grad) H`` from all other dipoles, ``u = -(1/2) sum m_i . h_i``.
         """
-        mom = np.ascontiguousarray(mom, dtype=np.float64)
+        mom = np.ascontiguousarray(np.asarray(mom, dtype=np.float64)[self.perm])
         self.evaluations += 1
         h, f, v = self._real(mom, True)
         if self.method == "ewald":
@@ -262,7 +277,7 @@ class PeriodicSum:
         f = f * _INV4PI + fr
         p_real = -(v.sum(axis=0).reshape(3, 3).T) * _INV4PI   # dU/deps_ab = -sum F_a r_b
         u = -0.5 * float(np.einsum("ij,ij->", mom, h))
-        return h, f, u, p_real + pr
+        return h[self.inv], f[self.inv], u, p_real + pr
 
 
 def pme_order_for(accuracy: float) -> int:

@@ -243,8 +243,8 @@ def _ewald_real_impl(pos, mom, order, cell_start, ncell, noff, alpha, rc, want_f
     ``order``/``cell_start``: particles sorted by cell (cell c holds order[cell_start[c]:
     cell_start[c+1]]), ``ncell`` cells per edge; ``noff`` >= rc * ncell neighbour cells are
     visited per direction, wrapping (with the image shift) as often as needed, so any rc works.
-    ``out_h`` (N,3): field sum C (m_j.r) r - B m_j. With ``want_force``: ``out_f`` (N,3) force
-    on i and ``out_vir`` (N,9) half of sum_j r (x) F (row-major), both without mu0/(4 pi).
+    ``out_h`` (N,3): field sum B2 (m_j.r) r - B1 m_j. With ``want_force``: ``out_f`` (N,3)
+    force on i and ``out_vir`` (N,9) half of sum_j r (x) F (row-major), without mu0/(4 pi).
     """
     n = pos.shape[0]
     rc2 = rc * rc
@@ -254,62 +254,46 @@ def _ewald_real_impl(pos, mom, order, cell_start, ncell, noff, alpha, rc, want_f
         cx = ewald_cell_index(xi, ncell)
         cy = ewald_cell_index(yi, ncell)
         cz = ewald_cell_index(zi, ncell)
-        hx = hy = hz = 0.0
-        fx = fy = fz = 0.0
+        h = np.zeros(3)
+        f = np.zeros(3)
         v = np.zeros(9)
         for ox in range(-noff, noff + 1):
             gx = cx + ox
-            sx = (gx // ncell)
+            sx = gx // ncell
             gx -= sx * ncell
             for oy in range(-noff, noff + 1):
                 gy = cy + oy
-                sy = (gy // ncell)
+                sy = gy // ncell
                 gy -= sy * ncell
                 for oz in range(-noff, noff + 1):
                     gz = cz + oz
-                    sz = (gz // ncell)
+                    sz = gz // ncell
                     gz -= sz * ncell
                     c = (gx * ncell + gy) * ncell + gz
                     for t in range(cell_start[c], cell_start[c + 1]):
                         j = order[t]
-                        dx = xi - pos[j, 0] - sx
-                        dy = yi - pos[j, 1] - sy
-                        dz = zi - pos[j, 2] - sz
-                        r2 = dx * dx + dy * dy + dz * dz
+                        d = (xi - pos[j, 0] - sx, yi - pos[j, 1] - sy, zi - pos[j, 2] - sz)
+                        r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
                         if r2 >= rc2 or r2 == 0.0:
                             continue
                         b1, b2, b3 = ewald_b123(math.sqrt(r2), alpha)
-                        mjx, mjy, mjz = mom[j, 0], mom[j, 1], mom[j, 2]
-                        mjr = mjx * dx + mjy * dy + mjz * dz
-                        hx += b2 * mjr * dx - b1 * mjx
-                        hy += b2 * mjr * dy - b1 * mjy
-                        hz += b2 * mjr * dz - b1 * mjz
+                        mjr = mom[j, 0] * d[0] + mom[j, 1] * d[1] + mom[j, 2] * d[2]
+                        for a in range(3):
+                            h[a] += b2 * mjr * d[a] - b1 * mom[j, a]
                         if want_force:
-                            mir = mix * dx + miy * dy + miz * dz
-                            mm = mix * mjx + miy * mjy + miz * mjz
+                            mir = mix * d[0] + miy * d[1] + miz * d[2]
+                            mm = mix * mom[j, 0] + miy * mom[j, 1] + miz * mom[j, 2]
                             g = b2 * mm - b3 * mir * mjr
-                            px = g * dx + b2 * (mjr * mix + mir * mjx)
-                            py = g * dy + b2 * (mjr * miy + mir * mjy)
-                            pz = g * dz + b2 * (mjr * miz + mir * mjz)
-                            fx += px
-                            fy += py
-                            fz += pz
-                            v[0] += 0.5 * dx * px
-                            v[1] += 0.5 * dx * py
-                            v[2] += 0.5 * dx * pz
-                            v[3] += 0.5 * dy * px
-                            v[4] += 0.5 * dy * py
-                            v[5] += 0.5 * dy * pz
-                            v[6] += 0.5 * dz * px
-                            v[7] += 0.5 * dz * py
-                            v[8] += 0.5 * dz * pz
-        out_h[i, 0] = hx
-        out_h[i, 1] = hy
-        out_h[i, 2] = hz
+                            for a in range(3):
+                                pa = g * d[a] + b2 * (mjr * mom[i, a] + mir * mom[j, a])
+                                f[a] += pa
+                                for b in range(3):
+                                    v[3 * b + a] += 0.5 * d[b] * pa
+        for a in range(3):
+            out_h[i, a] = h[a]
         if want_force:
-            out_f[i, 0] = fx
-            out_f[i, 1] = fy
-            out_f[i, 2] = fz
+            for a in range(3):
+                out_f[i, a] = f[a]
             for q in range(9):
                 out_vir[i, q] = v[q]
 
@@ -389,6 +373,18 @@ def pme_bspline(frac, p, w):
 
 
 @nb.njit(cache=True)
+def pme_stencil(g, p, kk, w, idx):
+    """B-spline weights ``w`` (p,) and wrapped grid indices ``idx`` (p,) along one axis for a
+    particle at grid coordinate g in [0, K)."""
+    f = math.floor(g)
+    pme_bspline(g - f, p, w)
+    i0 = int(f)
+    for q in range(p):
+        j = i0 - q
+        idx[q] = j + kk if j < 0 else (j - kk if j >= kk else j)
+
+
+@nb.njit(cache=True)
 def pme_spread(gpos, val, p, out):
     """Spread per-particle values ``val`` (N, C) onto ``out`` (C, K, K, K) with order-p
     B-splines; ``gpos`` (N, 3) are grid coordinates in [0, K). Serial: no write races."""
@@ -398,23 +394,20 @@ def pme_spread(gpos, val, p, out):
     wx = np.empty(p)
     wy = np.empty(p)
     wz = np.empty(p)
+    ix = np.empty(p, dtype=np.int64)
+    iy = np.empty(p, dtype=np.int64)
+    iz = np.empty(p, dtype=np.int64)
     for i in range(n):
-        fx = math.floor(gpos[i, 0])
-        fy = math.floor(gpos[i, 1])
-        fz = math.floor(gpos[i, 2])
-        pme_bspline(gpos[i, 0] - fx, p, wx)
-        pme_bspline(gpos[i, 1] - fy, p, wy)
-        pme_bspline(gpos[i, 2] - fz, p, wz)
-        for a in range(p):
-            ga = (int(fx) - a) % kk
-            for b in range(p):
-                gb = (int(fy) - b) % kk
-                wab = wx[a] * wy[b]
-                for c in range(p):
-                    gc = (int(fz) - c) % kk
-                    w = wab * wz[c]
-                    for d in range(nc):
-                        out[d, ga, gb, gc] += w * val[i, d]
+        pme_stencil(gpos[i, 0], p, kk, wx, ix)
+        pme_stencil(gpos[i, 1], p, kk, wy, iy)
+        pme_stencil(gpos[i, 2], p, kk, wz, iz)
+        for d in range(nc):
+            vd = val[i, d]
+            for a in range(p):
+                for b in range(p):
+                    wab = wx[a] * wy[b] * vd
+                    for c in range(p):
+                        out[d, ix[a], iy[b], iz[c]] += wab * wz[c]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -424,26 +417,39 @@ def pme_gather(gpos, grid, p, out):
     n = gpos.shape[0]
     nc = grid.shape[0]
     kk = grid.shape[1]
-    for i in nb.prange(n):
+    nchunk = 64
+    for ch in nb.prange(nchunk):
         wx = np.empty(p)
         wy = np.empty(p)
         wz = np.empty(p)
-        acc = np.zeros(nc)
-        fx = math.floor(gpos[i, 0])
-        fy = math.floor(gpos[i, 1])
-        fz = math.floor(gpos[i, 2])
-        pme_bspline(gpos[i, 0] - fx, p, wx)
-        pme_bspline(gpos[i, 1] - fy, p, wy)
-        pme_bspline(gpos[i, 2] - fz, p, wz)
-        for a in range(p):
-            ga = (int(fx) - a) % kk
-            for b in range(p):
-                gb = (int(fy) - b) % kk
-                wab = wx[a] * wy[b]
-                for c in range(p):
-                    gc = (int(fz) - c) % kk
-                    w = wab * wz[c]
-                    for d in range(nc):
-                        acc[d] += w * grid[d, ga, gb, gc]
-        for d in range(nc):
-            out[i, d] = acc[d]
+        ix = np.empty(p, dtype=np.int64)
+        iy = np.empty(p, dtype=np.int64)
+        iz = np.empty(p, dtype=np.int64)
+        for i in range(ch * n // nchunk, (ch + 1) * n // nchunk):
+            pme_stencil(gpos[i, 0], p, kk, wx, ix)
+            pme_stencil(gpos[i, 1], p, kk, wy, iy)
+            pme_stencil(gpos[i, 2], p, kk, wz, iz)
+            for d in range(nc):
+                acc = 0.0
+                for a in range(p):
+                    for b in range(p):
+                        wab = wx[a] * wy[b]
+                        for c in range(p):
+                            acc += wab * wz[c] * grid[d, ix[a], iy[b], iz[c]]
+                out[i, d] = acc
+
+
+@nb.njit(cache=True, parallel=True)
+def pme_influence(qh, kv, kvz, g, scale, out):
+    """k-space step of dipolar PME: ``out[a] = -scale g(k) k_a (k . qh(k))`` for the rfft grids
+    ``qh`` (3, K, K, K/2+1) (complex); ``kv`` (K,) and ``kvz`` (K/2+1,) are the wavenumbers."""
+    kk = qh.shape[1]
+    kz = qh.shape[3]
+    for a in nb.prange(kk):
+        for b in range(kk):
+            for c in range(kz):
+                s = kv[a] * qh[0, a, b, c] + kv[b] * qh[1, a, b, c] + kvz[c] * qh[2, a, b, c]
+                t = -scale * g[a, b, c] * s
+                out[0, a, b, c] = kv[a] * t
+                out[1, a, b, c] = kv[b] * t
+                out[2, a, b, c] = kvz[c] * t

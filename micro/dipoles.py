@@ -387,7 +387,8 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
     B_T : float or (3,) -- applied flux density mu0 H [T]; a scalar points along z
     gradB_T_per_m : float or (3, 3) -- d|B|/dz [T/m], or the gradient tensor dB_a/dx_b
     law : str or MagnetizationLaw -- "saturated", "linear", "frohlich-kennelly", "langevin";
-        the particle volume in the laws is the outer (core + shell) sphere
+        the particle volume in the laws is the outer (core + shell) sphere. "saturated" is the
+        seed's assumption, every moment m_sat along the applied field (no iteration)
     demag_factor : float in [0, 1] or None -- specimen demagnetizing factor; None = metallic
     tol : float -- relative residual of the moments at convergence (default 1e-8)
     accuracy : float -- relative accuracy of the periodic field sums (default 1e-6)
@@ -433,7 +434,12 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
     else:
         x0 = law_obj.moment(H_app, m_sat, vol).ravel() / m_scale
     t0 = time.perf_counter()
-    if method == "anderson":
+    if law_obj.name == "saturated":
+        # The seed's assumption: every particle saturated along the applied field. Saturated
+        # moments along their *local* field are a frustrated spin problem (several or no fixed
+        # points once neighbour fields exceed the applied one), not a magnetization law.
+        x, its, hist, ok = x0, 0, [0.0], True
+    elif method == "anderson":
         x, its, hist, ok = _anderson(g, x0, tol, int(max_iter))
     elif method == "fixed-point":
         x, its, hist, ok = _fixed_point(g, x0, tol, int(max_iter))

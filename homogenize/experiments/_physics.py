@@ -286,9 +286,20 @@ def _project_law(law, H_abs, Ms, chi0):
 # ------------------------------------------------------------------------------------------
 # filler stiffening: adapter onto homogenize.cell closed forms
 
-def stiffening_ratio(phi, nu_matrix: float):
-    """E_eff / E_matrix of rigid spheres at volume fraction phi (homogenize.cell)."""
-    raise Unavailable("homogenize.cell is not available")
+#: Iron particles (the FEM helper's defaults for ``homogenize_rve``).
+PARTICLE_E_PA, PARTICLE_NU = 211e9, 0.29
+
+
+def stiffening_ratio(phi, nu_matrix: float, E_matrix_Pa: float = 2e6):
+    """E_eff / E_matrix of iron spheres at volume fraction phi [-]: the Mori-Tanaka estimate of
+    ``homogenize.cell`` (the Hashin-Shtrikman bound on the matrix side for spheres), with
+    E_eff from the effective bulk and shear moduli."""
+    cell = _module("homogenize.cell")
+    Km, Gm = cell.bulk_shear(E_matrix_Pa, nu_matrix)
+    Kp, Gp = cell.bulk_shear(PARTICLE_E_PA, PARTICLE_NU)
+    K, G = cell.mori_tanaka(np.asarray(phi, dtype=float), Km, Gm, Kp, Gp)
+    E, _ = cell.young_poisson(K, G)
+    return np.asarray(E) / E_matrix_Pa
 
 
 # ------------------------------------------------------------------------------------------

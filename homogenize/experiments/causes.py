@@ -23,8 +23,8 @@ dipolar_interaction             mean-field local field of randomly placed dipole
 oxide_shell                     Fe core + Fe3O4 shell per particle (``micro.particles.CoreShell``
                                 calibrated to the powder's sigma_s at its nominal radius):
                                 smaller particles carry less moment (``shell_m``)
-filler_stiffening               effective modulus of rigid spheres in the matrix,
-                                ``homogenize.cell`` closed form (none)
+filler_stiffening               effective modulus of iron spheres in the matrix: the
+                                Mori-Tanaka estimate of ``homogenize.cell`` (none)
 geometric_nonlinearity          elastica instead of Euler-Bernoulli, from
                                 ``homogenize.macro.closed_form`` (none)
 hyperelasticity                 incompressible neo-Hookean (none), Mooney-Rivlin (``beta``) or
@@ -209,7 +209,7 @@ def _applied_field(exp: Experiment) -> np.ndarray:
 
 def _stiffening(spec, exp):
     if spec.has("filler_stiffening"):
-        return P.stiffening_ratio(exp.columns["phi"], exp.matrix.nu)
+        return P.stiffening_ratio(exp.columns["phi"], exp.matrix.nu, exp.matrix.E_Pa)
     return 1.0
 
 

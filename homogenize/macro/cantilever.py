@@ -18,7 +18,7 @@ import numpy as np
 from homogenize.macro import closed_form as cf
 from homogenize.macro.fem import Material, box_mesh, linear_solve, neo_hookean_solve, \
     probe_displacement
-from micro._validate import check_choice, check_positive
+from micro._validate import InputError, check_choice, check_positive
 
 __all__ = ["Strip", "CantileverResult", "MODELS", "beam_divisions", "solve_cantilever",
            "tip_deflection_m"]
@@ -87,11 +87,23 @@ def _mesh(strip: Strip, divisions, half=False):
                     np.linspace(0.0, strip.thickness_m, nz + 1))
 
 
-def _clamp(strip: Strip, lateral: str, half=False):
+def _clamp(strip: Strip, lateral: str, half=False, clamp="full"):
     tol = 1e-9 * strip.length_m
 
     def fixed(basis):
-        dofs = [basis.get_dofs(lambda x: x[0] < tol).all()]
+        if clamp == "full":
+            dofs = [basis.get_dofs(lambda x: x[0] < tol).all()]
+        else:
+            # beam-theory clamp: the root section stays plane (u_x = 0) and its neutral line is
+            # held (u_z = 0 at z = t/2); lateral contraction of the root is free
+            x = basis.doflocs
+            comp = np.arange(x.shape[1]) % 3
+            root = x[0] < tol
+            line = root & (np.abs(x[2] - strip.thickness_m / 2) < tol) & (comp == 2)
+            if not line.any():
+                raise InputError("clamp='beam' needs nodes on the line z = t/2 at the root: use "
+                                 "an even number of layers nz or quadratic elements")
+            dofs = [np.nonzero(root & (comp == 0))[0], np.nonzero(line)[0]]
         if half:
             # mirror plane y = w/2 of the symmetric load case: u_y = 0 (dof 3 g + 1)
             mid = basis.get_dofs(lambda x: x[1] > strip.width_m / 2 - tol).all()
@@ -107,7 +119,8 @@ def _clamp(strip: Strip, lateral: str, half=False):
 def solve_cantilever(strip: Strip, material: Material, f_N_m3: float, *, model: str = "fem",
                      order: int = 2, divisions=None, nz: int = 2, aspect: float = 3.0,
                      gravity_m_s2: float = 0.0, lateral: str = "free", solver: str = "auto",
-                     n_steps: int = 4, half: bool = True) -> CantileverResult:
+                     n_steps: int = 4, half: bool = True, clamp: str = "full"
+                     ) -> CantileverResult:
     """Tip deflection of the clamped strip under the body force ``f_N_m3`` (+ self-weight).
 
     Parameters
@@ -128,9 +141,15 @@ def solve_cantilever(strip: Strip, material: Material, f_N_m3: float, *, model: 
     n_steps : load increments of the neo-Hookean solver
     half : bool -- model half the width with the mirror condition u_y = 0 at y = w/2 (exact for
         this symmetric load; halves the cost)
+    clamp : "full" (all displacements zero on the root face, a glued or gripped strip) or
+        "beam" (root plane, neutral line fixed, lateral contraction free: the boundary condition
+        of beam theory; needs ``half``)
     """
     check_choice("model", model, MODELS)
     check_choice("lateral", lateral, ("free", "plane-strain"))
+    check_choice("clamp", clamp, ("full", "beam"))
+    if clamp == "beam" and not half:
+        raise InputError("clamp='beam' uses the mirror plane y = w/2: set half=True")
     f = check_positive("f_N_m3", f_N_m3, "N/m^3", allow_zero=True)
     g = check_positive("gravity_m_s2", gravity_m_s2, "m/s^2", allow_zero=True)
     total = f + material.density_kg_m3 * g
@@ -153,7 +172,7 @@ def solve_cantilever(strip: Strip, material: Material, f_N_m3: float, *, model: 
         raise ValueError(f"divisions must be three positive integers, got {divisions}")
     mesh = _mesh(strip, divisions, half)
     load = np.array([0.0, 0.0, -total])
-    fixed = _clamp(strip, lateral, half)
+    fixed = _clamp(strip, lateral, half, clamp)
     if model == "fem":
         sol = linear_solve(mesh, material, load, fixed, order=order, solver=solver)
     else:

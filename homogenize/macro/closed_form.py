@@ -146,14 +146,16 @@ def _elastica_alpha(alphas):
     out = []
     a_prev = 0.0
     for a in alphas:
-        # continuation: never jump by more than 2 in alpha (theta_tip ~ alpha/6 rad per unit)
-        steps = np.linspace(a_prev, a, int(np.ceil((a - a_prev) / 2.0)) + 1)[1:] if a > a_prev \
-            else [a]
-        for ak in steps:
+        # continuation: steps of at most max(2, alpha/2) keep the previous shape a good guess
+        ak = a_prev
+        while ak < a or ak == a_prev == a:
+            ak = min(a, max(ak + 2.0, 1.5 * ak))
             sol = solve_bvp(_rhs(ak), _bc, s, y, tol=1e-9, max_nodes=100000)
             if not sol.success:
                 raise RuntimeError(f"elastica did not converge at alpha={ak:g}: {sol.message}")
             s, y = sol.x, sol.y
+            if ak == a:
+                break
         a_prev = a
         out.append((-y[3, -1], 1.0 - y[2, -1]))
     return np.array(out).reshape(-1, 2)

@@ -158,7 +158,8 @@ def linear_solve(mesh, material: Material, body_force_N_m3, fixed_dofs, *, order
 
     @LinearForm
     def load(v, w):
-        return fvec[0] * v.value[0] + fvec[1] * v.value[1] + fvec[2] * v.value[2]
+        vv = np.asarray(v)
+        return fvec[0] * vv[0] + fvec[1] * vv[1] + fvec[2] * vv[2]
 
     rhs = asm(load, basis)
     u, name, it, res = _solve_free(K, rhs, fixed_dofs(basis), solver, rtol, basis)
@@ -213,7 +214,7 @@ class _NeoHookeanAssembler:
         # G[e, q, a, j]: reference gradient of scalar shape function a; N[e, q, a]
         self.G = np.ascontiguousarray(
             np.stack([sb.basis[a][0].grad for a in range(sb.Nbfun)]).transpose(2, 3, 0, 1))
-        self.N = np.stack([sb.basis[a][0].value for a in range(sb.Nbfun)]).transpose(1, 2, 0)
+        self.N = np.stack([np.asarray(sb.basis[a][0]) for a in range(sb.Nbfun)]).transpose(1, 2, 0)
         self.dx = sb.dx
         nb = sb.Nbfun
         edofs = sb.element_dofs.T  # (ne, nb)

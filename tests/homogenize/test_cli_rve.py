@@ -51,7 +51,7 @@ def test_core_shell_and_histogram_options(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, words", [
     (["--phi", "0"], ["phi"]),
-    (["--phi", "0.9"], ["phi", "0.45"]),
+    (["--phi", "0.9"], ["phi", "0.6"]),
     (["--r-min", "6e-8"], ["r_min", "r_max"]),
     (["--shell=-1e-9"], ["shell thickness"]),
     (["--shell", "2e-8"], ["shell thickness", "smallest particle radius"]),

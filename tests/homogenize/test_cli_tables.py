@@ -125,13 +125,16 @@ def test_rve_size_recovers_kanit_exponent(scheduler, tmp_path, capsys):
     grow as 1/V. Tolerance: sd of log s^2 with 8 realizations is sqrt(2/7) = 0.53 per size;
     over a factor 16 in V the slope's se is ~0.3, so |alpha - 1| < 1 is a 3-sigma band."""
     p = tmp_path / "s.toml"
-    p.write_text(STUDY.replace('arrangement = ["dispersed", "chains"]', "")
-                 .replace("B_T = [0.05, 0.3]", "B_T = 0.3"))
+    p.write_text(STUDY)
+    assert main(["rve-size", str(p), "--out", str(tmp_path / "rs"), "--at", "B_T=0.7"]) == 2
+    assert "not a grid value" in capsys.readouterr().err
     rc = main(["rve-size", str(p), "--out", str(tmp_path / "rs"), "--scheduler", scheduler,
-               "--no-progress"])
+               "--no-progress", "--at", "B_T=0.3,arrangement=dispersed"])
     assert rc == 0
     res = json.loads((tmp_path / "rs" / "rve_size.json").read_text())
+    assert len(res["points"]) == 1
     row = res["points"][0]
+    assert row["point"]["B_T"] == 0.3 and row["point"]["arrangement"] == "dispersed"
     assert abs(row["alpha"] - 1.0) < 1.0
     need = [s["realizations_needed_fit"] for s in row["sizes"]]
     assert need[0] > need[1] > need[2]
@@ -182,3 +185,35 @@ def test_chain_reduced_real_rves(scheduler, tmp_path):
     # 1.75-3.5 vol% change it by a few %), so doubling phi doubles the force within 10 %
     f = {c["phi"]: c["grid"][0]["f_eff_N_m3"] for c in res["curves"]}
     assert 1.8 < f[0.035] / f[0.0175] < 2.2
+
+
+def test_beam_with_table_propagates_interval(table, tmp_path, capsys):
+    """`mapsim beam --table`: the force and its interval come from the table; with
+    Euler-Bernoulli the deflection is 3 f L^4 / (2 E t^2) at the mean and at both ends."""
+    pytest.importorskip("homogenize.macro._cli")
+    from homogenize.tables import body_force_from_table
+    js = tmp_path / "beam.json"
+    L, t = 0.02, 1e-3
+    rc = main(["beam", "--table", str(table), "--phi", "0.035", "--B", "0.1", "--gradB", "3.56",
+               "--at", "arrangement=dispersed", "--model", "eb", "elastica",
+               "--length-m", str(L), "--thickness-m", str(t), "--json", str(js)])
+    assert rc == 0, capsys.readouterr().err
+    res = json.loads(js.read_text())
+    f = body_force_from_table(table, 0.035, 0.1, 3.56, arrangement="dispersed")
+    eb = next(r for r in res["results"] if r["model"] == "eb")
+    for key, force in (("tip_m", f.mean), ("ci_low_m", f.ci_low), ("ci_high_m", f.ci_high)):
+        assert np.isclose(eb[key], 1.5 * force * L ** 4 / (2e6 * t ** 2), rtol=1e-9)
+    el = next(r for r in res["results"] if r["model"] == "elastica")
+    assert el["ci_low_m"] < el["tip_m"] < el["ci_high_m"] and el["tip_m"] <= eb["tip_m"]
+    # the table's gradient is 1.78 T/m: the force was scaled linearly to 3.56 T/m
+    f0 = body_force_from_table(table, 0.035, 0.1, 1.78, arrangement="dispersed")
+    assert np.isclose(f.mean, 2 * f0.mean, rtol=1e-12)
+    capsys.readouterr()
+    assert main(["beam", "--table", str(table), "--B", "0.1", "--gradB", "1.78"]) == 2
+    assert "--phi is required" in capsys.readouterr().err
+    assert main(["beam", "--table", str(table), "--phi", "0.035", "--B", "0.1", "--gradB",
+                 "1.78"]) == 2
+    assert "give arrangement" in capsys.readouterr().err
+    assert main(["beam", "--table", str(table), "--phi", "0.035", "--B", "0.1", "--gradB",
+                 "1.78", "--at", "arrangement=dispersed", "--E-from-table"]) == 2
+    assert "no E_eff" in capsys.readouterr().err

@@ -119,8 +119,33 @@ def test_monodisperse_and_rsa_jam_names_limit():
     # Monodisperse RSA saturates at phi = 0.3841 (Torquato, Uche & Stillinger, PRE 74 (2006)
     # 061308); asking for 0.42 must stop with a message naming the phi reached.
     with pytest.raises(InputError, match=r"jammed at phi = 0\.3[0-8]") as exc:
-        generate_rve(0.42, 300, 2, distribution=Monodisperse(20e-9), max_attempts=3000)
-    assert "0.42" in str(exc.value)
+        generate_rve(0.42, 300, 2, distribution=Monodisperse(20e-9), max_attempts=3000,
+                     placement="rsa")
+    assert "0.42" in str(exc.value) and "compress" in str(exc.value)
+
+
+@pytest.mark.parametrize("phi, dist, placement", [
+    (0.45, Monodisperse(20e-9), "auto"),       # RSA jams (limit 0.384), compression takes over
+    (0.52, None, "compress"),
+])
+def test_compression_beyond_rsa_limit(phi, dist, placement):
+    rve = generate_rve(phi, 400, 3, distribution=dist, placement=placement, max_attempts=3000,
+                       gap_m=0.5e-9)
+    assert rve.params["placement_used"] == "compress"
+    assert rve.phi == pytest.approx(phi, rel=1e-12)
+    assert brute_force_min_gap(rve) >= 0.5e-9
+    # A compressed packing is still random: no long-range order, g(r) -> 1 at r ~ L/2.
+    g = pair_correlation(rve, np.linspace(0.3 * rve.box_m, 0.5 * rve.box_m, 2))
+    assert abs(g[0] - 1) < 0.1      # ~8000 pairs in the shell: 1.1 % Poisson noise; 9 sigma
+
+
+def test_compression_jam_names_limit():
+    # A gap of 0.2 r makes the spheres effectively (1.1)^3 = 1.33 times larger: phi = 0.5 is
+    # an effective 0.67, beyond random close packing (0.64); the message names the phi reached.
+    with pytest.raises(InputError, match=r"compression jammed at phi = 0\.[34]\d+") as exc:
+        generate_rve(0.5, 150, 1, distribution=Monodisperse(20e-9), gap_m=4e-9,
+                     placement="compress")
+    assert "0.5" in str(exc.value)
 
 
 # ------------------------------------------------------------------------------ placement
@@ -301,9 +326,11 @@ def test_moment_per_mass_falls_as_core_over_particle_volume():
 
 # ------------------------------------------------------------------------------ bad input
 @pytest.mark.parametrize("call, words", [
-    (lambda: generate_rve(0.0, 100, 1), ["phi", "(0, 0.45]"]),
+    (lambda: generate_rve(0.0, 100, 1), ["phi", "(0, 0.6]"]),
     (lambda: generate_rve(-0.1, 100, 1), ["phi"]),
-    (lambda: generate_rve(0.7, 100, 1), ["phi", "0.45"]),
+    (lambda: generate_rve(0.7, 100, 1), ["phi", "0.6"]),
+    (lambda: generate_rve(0.05, 100, 1, arrangement="chains", placement="compress"),
+     ["compress", "dispersed"]),
     (lambda: generate_rve(0.05, 100.5, 1), ["n ", "integer"]),
     (lambda: generate_rve(0.05, 100, -3), ["seed"]),
     (lambda: LogNormal.from_mean(25e-9, 1.4, 60e-9, 50e-9), ["r_min", "r_max", "m"]),

@@ -128,3 +128,16 @@ def test_core_shell_ratio_against_hand_formula():
 def test_composite_density():
     assert P.composite_density_kg_m3(0.0, 1210, 7870) == 1210
     assert P.composite_density_kg_m3(0.261, 1050, 7870) == pytest.approx(2830, rel=1e-3)
+
+
+# --- filler stiffening through homogenize.cell -------------------------------------------------
+
+def test_stiffening_dilute_einstein_limit():
+    """Rigid spheres in an incompressible matrix: E_eff / E_m = 1 + 2.5 phi + O(phi^2)
+    (Einstein / Smallwood). Iron in PDMS is rigid to 1e-5; nu = 0.4999 leaves O(1e-4)."""
+    pytest.importorskip("homogenize.cell")
+    phi = 1e-4
+    slope = (P.stiffening_ratio(phi, 0.4999, 2e6) - 1.0) / phi
+    assert slope == pytest.approx(2.5, rel=2e-3)
+    r = P.stiffening_ratio(np.linspace(0, 0.4, 9), 0.45, 2e6)
+    assert r[0] == 1.0 and np.all(np.diff(r) > 0)
