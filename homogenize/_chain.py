@@ -225,10 +225,18 @@ def _summary(res: dict, study) -> str:
     ]
     for c in res["curves"]:
         b4 = c["B_for_4mm_T"]
+        top = c["grid"][-1]
         lines += [f"## phi = {c['phi']:g}", "",
-                  f"Field needed for the measured 4 mm (elastica): {_fmt_B(b4['mean'])} "
-                  f"(from the interval of the force: {_fmt_B(b4['high_force'])} to "
-                  f"{_fmt_B(b4['low_force'])}).", "",
+                  f"Field needed for the measured 4 mm (elastica): {_fmt_B(b4['mean'])}"
+                  + ("" if b4["mean"] is None else
+                     f" (from the interval of the force: {_fmt_B(b4['high_force'])} to "
+                     f"{_fmt_B(b4['low_force'])})")
+                  + f". At the largest field of the table, "
+                  f"B = {top['B_T']:g} T, the tip deflection is "
+                  f"{1e3 * top['deflection_elastica_m']:.2f} mm and the body force "
+                  f"{top['f_eff_N_m3'] / 1e3:.1f} kN/m^3 "
+                  f"({100 * top['f_eff_N_m3'] / (c['phi'] * 7870 * 178 * res['gradB_T_per_m']):.0f} % "
+                  f"of the saturated value phi rho sigma_s dB/dz).", "",
                   f"| B [T] | f_eff [kN/m^3] | {lvl} interval | d_eff | EB [mm] | "
                   f"elastica [mm] | {lvl} interval [mm] |",
                   "|---:|---:|---:|---:|---:|---:|---:|"]

@@ -45,6 +45,9 @@ def register(sub, formatter):
                         "by choosing the box edge")
     g.add_argument("--n", type=int, default=2000, help="number of particles [1]")
     g.add_argument("--seed", type=int, default=0, help="random seed (same seed, same RVE)")
+    g.add_argument("--load", default=None, metavar="H5",
+                   help="summarise/export an RVE file written by --out instead of generating "
+                        "one (generator options are then ignored)")
 
     g = p.add_argument_group("size distribution of the outer radius")
     g.add_argument("--distribution", choices=("lognormal", "monodisperse", "histogram"),
@@ -91,6 +94,8 @@ def register(sub, formatter):
                    help="chains: mean particles per chain [1] (geometric distribution)")
     g.add_argument("--chain-direction", type=float, nargs=3, default=(0.0, 0.0, 1.0),
                    metavar=("X", "Y", "Z"), help="chains: axis direction [1]")
+    g.add_argument("--chain-spread", type=float, default=0.0,
+                   help="chains: RMS misalignment of the chain axes [deg] (Fisher distribution)")
     g.add_argument("--agglomerated-fraction", type=float, default=1.0,
                    help="clusters/chains: fraction of particles that are agglomerated [1]")
     g.add_argument("--max-attempts", type=int, default=200_000,
@@ -141,7 +146,7 @@ def generator_kwargs(args) -> dict:
     return dict(distribution=dist, composition=comp, arrangement=args.arrangement,
                 gap_m=args.gap, cluster_size=args.cluster_size,
                 cluster_density=args.cluster_density, chain_length=args.chain_length,
-                chain_direction=tuple(args.chain_direction),
+                chain_direction=tuple(args.chain_direction), chain_spread_deg=args.chain_spread,
                 agglomerated_fraction=args.agglomerated_fraction, max_attempts=args.max_attempts,
                 placement=args.placement)
 
@@ -161,26 +166,30 @@ def _fmt_summary(s: dict) -> str:
     lines = [
         f"particles            {s['n']}",
         f"box edge             {s['box_m']:.6g} m ({s['box_m'] * nm:.1f} nm)",
-        f"volume fraction      {s['phi']:.6g} (target {s['phi_target']:g}, relative error "
-        f"{s['phi_rel_error']:.1e})",
+        f"volume fraction      {s['phi']:.6g}" + (
+            f" (target {s['phi_target']:g}, relative error {s['phi_rel_error']:.1e})"
+            if s.get("phi_target") else ""),
         f"radius [nm]          mean {r['mean'] * nm:.2f}  std {r['std'] * nm:.2f}  "
         f"min {r['min'] * nm:.2f}  median {r['median'] * nm:.2f}  max {r['max'] * nm:.2f}  "
         f"volume-weighted mean {r['volume_weighted_mean'] * nm:.2f}",
         f"core radius mean     {s['core_radius_mean_m'] * nm:.2f} nm",
         f"specific moment      {s['specific_moment_Am2_kg']:.5g} A m^2/kg (mass average); "
         f"composite M_sat {s['M_sat_composite_A_m']:.5g} A/m",
-        f"smallest gap         {s['min_gap_m'] * nm:.4g} nm (required {s['gap_m'] * nm:g} nm)",
+        f"smallest gap         {s['min_gap_m'] * nm:.4g} nm" + (
+            f" (required {s['gap_m'] * nm:g} nm)" if s.get("gap_m") is not None else ""),
     ]
     c = s["clusters"]
     if c["n_clusters"]:
-        line = (f"{s['arrangement']:<20} {c['n_clusters']} with {c['size_mean']:.2f} particles on "
+        kind = s["arrangement"] or "clusters"
+        line = (f"{kind:<20} {c['n_clusters']} with {c['size_mean']:.2f} particles on "
                 f"average ({c['size_min']}-{c['size_max']}), agglomerated fraction "
                 f"{c['agglomerated_fraction']:.3f}")
         if "packing_density_mean" in c:
             line += (f", packing density {c['packing_density_mean']:.4f} "
                      f"({c['packing_density_min']:.4f}-{c['packing_density_max']:.4f})")
         if "alignment_order_parameter" in c:
-            line += f", alignment S = {c['alignment_order_parameter']:.4f}"
+            line += (f", alignment S = {c['alignment_order_parameter']:.4f} (expected "
+                     f"{c['alignment_order_parameter_expected']:.4f})")
         lines.append(line)
     else:
         lines.append("clusters             none (all particles isolated)")
@@ -191,9 +200,15 @@ def _cmd(args) -> int:
     from micro.particles import describe, generate_rve
 
     _check_outputs(args)
-    kw = generator_kwargs(args)
-    progress = args.progress if args.progress is not None else args.n >= 20000
-    rve = generate_rve(args.phi, args.n, args.seed, progress=progress, **kw)
+    if args.load:
+        from micro.rve import RVE
+        rve = RVE.load(args.load)
+        dist = None
+    else:
+        kw = generator_kwargs(args)
+        dist = kw["distribution"]
+        progress = args.progress if args.progress is not None else args.n >= 20000
+        rve = generate_rve(args.phi, args.n, args.seed, progress=progress, **kw)
     summary = describe(rve)
 
     # ---- magnetics hook: summary of micro.dipoles for this RVE (if that module offers it) ----
@@ -211,7 +226,7 @@ def _cmd(args) -> int:
     if args.out:
         rve.save(args.out)
         out = Path(args.out)
-        write_json(out.with_name(out.stem + ".manifest.json"), manifest(config, args.seed))
+        write_json(out.with_name(out.stem + ".manifest.json"), manifest(config, rve.seed))
         print(f"wrote {args.out}")
     if args.ply or args.glb:
         from micro._viz import export_mesh
@@ -221,9 +236,9 @@ def _cmd(args) -> int:
                 print(f"wrote {f}")
     if args.png:
         from micro._viz import save_picture
-        save_picture(rve, args.png, kw["distribution"])
+        save_picture(rve, args.png, dist)
         print(f"wrote {args.png}")
     if args.json:
-        write_json(args.json, {"summary": summary, "manifest": manifest(config, args.seed)})
+        write_json(args.json, {"summary": summary, "manifest": manifest(config, rve.seed)})
         print(f"wrote {args.json}")
     return 0

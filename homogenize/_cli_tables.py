@@ -325,3 +325,105 @@ def beam_from_table(args) -> int:
                                "manifest": manifest({k: v for k, v in vars(args).items()
                                                      if k != "func"}, None)})
     return 0
+
+
+# --------------------------------------------------------------------------- mapsim export --table
+_EXPORT_NEEDS = (("body_force_N_m3", "--body-force-N-m3"), ("E_Pa", "--E-Pa"), ("nu", "--nu"),
+                 ("density_kg_m3", "--density-kg-m3"))
+PDMS_DENSITY_KG_M3 = 1210.0     # seed paper
+PARTICLE_DENSITY_KG_M3 = 7870.0  # seed paper
+
+
+def add_export_table_options(p) -> None:
+    """Options of ``mapsim export`` that take the material and force from a batch table.
+
+    The material/force options of ``export`` stop being required: without --table they are
+    checked by :func:`wrap_export` instead.
+    """
+    for action in p._actions:                      # argparse has no public way to relax this
+        if action.dest in dict(_EXPORT_NEEDS):
+            action.required = False
+    g = p.add_argument_group(
+        "from a table (mapsim batch)",
+        "With --table, the body force (and E, nu if the table holds FEM results) are "
+        "interpolated at (--phi, --B, --gradB); explicit --E-Pa/--nu/--density-kg-m3 win. The "
+        "density defaults to the mixture (1 - phi) 1210 + phi 7870 kg/m^3.")
+    g.add_argument("--table", default=None, help="effective-parameter table (HDF5) "
+                                                 "(default: none, give the numbers)")
+    g.add_argument("--phi", type=float, default=None, help="particle volume fraction [-]")
+    g.add_argument("--B", dest="B_T", type=float, default=None, help="applied flux density [T]")
+    g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=None,
+                   help="field gradient d|B|/dz [T/m]")
+    g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
+                   help="values of other grid axes with several values")
+    g.add_argument("--bound", default="mean", choices=("mean", "low", "high"),
+                   help="export the mean force or an end of its confidence interval (run the "
+                        "macro model at both ends to propagate the interval)")
+
+
+def wrap_export(func):
+    """``export`` dispatcher: --table goes to :func:`export_from_table`, else ``func``."""
+    def run(args):
+        if getattr(args, "table", None):
+            return export_from_table(args)
+        for dest, flag in _EXPORT_NEEDS:
+            if getattr(args, dest, None) is None:
+                raise InputError(f"{flag} is required (or take the numbers from --table)")
+        return func(args)
+    return run
+
+
+def export_from_table(args) -> int:
+    from pathlib import Path
+
+    from homogenize.macro.exporters import ExportSpec, export_text
+    from micro._io import atomic_write_text
+
+    from .tables import body_force_from_table, interpolate, modulus_from_table, read_table
+    for name, v in (("--phi", args.phi), ("--B", args.B_T), ("--gradB", args.gradB_T_per_m)):
+        if v is None:
+            raise InputError(f"{name} is required with --table")
+    if args.body_force_N_m3 is not None:
+        raise InputError("give either --table or --body-force-N-m3, not both")
+    table = read_table(args.table)
+    others = _parse_at(args.table_at)
+    f = body_force_from_table(table, args.phi, args.B_T, args.gradB_T_per_m, **others)
+    force = {"mean": f.mean, "low": f.ci_low, "high": f.ci_high}[args.bound]
+    if force < 0:
+        raise InputError(f"the {args.bound} body force is negative ({force:g} N/m^3)")
+    mech = {k: v for k, v in others.items() if k not in ("B_T", "gradB_T_per_m")}
+    E_est = modulus_from_table(table, args.phi, **mech)
+    E = args.E_Pa if args.E_Pa is not None else (2e6 if E_est is None else E_est.mean)
+    if args.nu is not None:
+        nu = args.nu
+    elif "nu_eff" in table.values:
+        coords = {"phi": args.phi, **mech}
+        for a in ("B_T", "gradB_T_per_m"):
+            if a in table.axes and len(table.axes[a]) > 1:
+                coords[a] = {"B_T": args.B_T, "gradB_T_per_m": args.gradB_T_per_m}[a]
+        nu = interpolate(table, "nu_eff", **coords).mean
+    else:
+        nu = 0.45
+    rho = args.density_kg_m3 if args.density_kg_m3 is not None else \
+        (1 - args.phi) * PDMS_DENSITY_KG_M3 + args.phi * PARTICLE_DENSITY_KG_M3
+    spec = ExportSpec(force, E, nu, rho, direction=args.direction,
+                      gravity_m_s2=args.gravity_m_s2, name=args.name, elset=args.elset,
+                      index=args.index)
+    c = "!" if args.to == "elmer" else "**"
+    lvl = f"{100 * f.confidence:g} %"
+    head = [f"{c} mapsim export from table {args.table}: phi = {args.phi:g}, B = {args.B_T:g} T, "
+            f"dB/dz = {args.gradB_T_per_m:g} T/m" + (f", {args.table_at}" if others else ""),
+            f"{c} body force ({args.bound}) {force:.6g} N/m^3; mean {f.mean:.6g}, {lvl} interval "
+            f"[{f.ci_low:.6g}, {f.ci_high:.6g}] N/m^3",
+            f"{c} E = {E:.6g} Pa ({'given' if args.E_Pa is not None else 'table E_eff' if E_est else 'PDMS'}), "
+            f"nu = {nu:.4g}, density = {rho:.6g} kg/m^3"]
+    text = "\n".join(head) + "\n" + export_text(spec, args.to)
+    if args.out == "-":
+        sys.stdout.write(text)
+    else:
+        out = Path(args.out)
+        if out.is_dir():
+            raise InputError(f"--out {out} is a directory; give a file name")
+        atomic_write_text(out, text)
+        print(f"wrote {args.to} snippet to {out}")
+    return 0

@@ -192,6 +192,31 @@ _COMP_KEYS = {"shell_thickness_m": "shell_m", "core_density_kg_m3": "core_densit
 _DISTRIBUTIONS = ("lognormal", "monodisperse")
 
 
+_SOURCE_MODULES = ("micro.rve", "micro.particles", "micro.magnetization", "micro.dipoles",
+                   "micro._ewald", "micro._kernels", "homogenize.mesh", "homogenize.cell",
+                   "homogenize._assembly", "homogenize._evaluate")
+_SOURCE_HASH: list = []
+
+
+def _source_hash() -> str:
+    """sha256 (12 hex digits) of the source files of the evaluation chain."""
+    if not _SOURCE_HASH:
+        import hashlib
+        import importlib.util
+        h = hashlib.sha256()
+        for name in _SOURCE_MODULES:
+            try:
+                spec = importlib.util.find_spec(name)
+            except ModuleNotFoundError:
+                spec = None
+            origin = getattr(spec, "origin", None)
+            h.update(name.encode())
+            if origin and Path(origin).is_file():
+                h.update(Path(origin).read_bytes())
+        _SOURCE_HASH.append(h.hexdigest()[:12])
+    return _SOURCE_HASH[0]
+
+
 def _signature_keys(func) -> set:
     return {k for k, p in inspect.signature(func).parameters.items()
             if p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)}
@@ -229,7 +254,11 @@ class RVEEvaluator:
     ``[cell]`` to :func:`homogenize.cell.homogenize_rve`.
     """
 
-    id = "rve-1"
+    @property
+    def id(self) -> str:
+        """``rve-1-<hash of the physics source code>``: stored results of an older code are
+        never mixed with new ones (a changed solver recomputes everything)."""
+        return f"rve-1-{_source_hash()}"
 
     def check(self, study) -> None:
         names = dict(study.axes)

@@ -78,7 +78,7 @@ def rve_size_study(study, out_dir, *, evaluator=None, workers=None, scheduler=No
         for n in spec.n_particles:
             sub = study.replace(n_particles=n, realizations=spec.realizations)
             path = out_dir / f"rve_size_n{n}.h5"
-            run_batch(sub, path, evaluator=evaluator, client=cl, progress=progress)
+            run_batch(sub, path, evaluator=evaluator, client=cl, progress=progress, clean=True)
             tables[n] = read_table(path)
     first = tables[spec.n_particles[0]]
     q = first.resolve_quantity(quantity)

@@ -5,7 +5,8 @@ realizations. :func:`run_batch` evaluates every realization on a Dask cluster (a
 or an existing one via its scheduler address) and stores each result the moment it arrives, as
 one small file ``<table>.parts/g<grid>_r<realization>_<hash>.npz`` written atomically by the
 client process only. The hash covers everything that determines the result (evaluator
-version, grid point, settings, seed), so running the same command again resumes: stored
+version, for real RVEs including a hash of the physics source code; grid point, settings,
+seed), so running the same command again resumes: stored
 realizations are loaded, not recomputed, and a changed study never reuses stale results.
 The table is then aggregated from the stored parts in grid order, so it is identical whatever
 the number of workers, the order of completion, or how often the batch was interrupted.
@@ -18,8 +19,8 @@ dimensions ``point`` (grid points, C order over the grid axes), ``realization``,
 * one coordinate variable per grid axis, shape (point,): e.g. ``phi``, ``B_T`` [T],
   ``gradB_T_per_m`` [T/m], ``arrangement`` (strings);
 * for each quantity Q (``f_eff_N_m3``, ``phi_eff``, ``d_eff``, ``M_eff_A_per_m``,
-  ``virial_stress_Pa``, ``E_eff_Pa``, ``nu_eff``, ``stress_mag_Pa``, ``volume_m3``,
-  ``phi_rve``): ``Q_mean``, ``Q_sd`` (sample sd, ddof 1), ``Q_ci_low``, ``Q_ci_high``
+  ``virial_stress_Pa``, ``volume_m3``, ``phi_rve``; with ``fem = true`` also ``E_eff_Pa``,
+  ``nu_eff``, ``stress_mag_Pa``, ``strain_mag``): ``Q_mean``, ``Q_sd`` (sample sd, ddof 1), ``Q_ci_low``, ``Q_ci_high``
   (Student-t interval of the mean at the study's confidence), shape (point, [i, [j]]), and the
   per-realization values ``Q`` (point, realization, [i, [j]]); each with a ``units`` attribute;
 * ``n`` (point,): realizations per point; ``seed`` (point, realization): the integer seed of

@@ -46,7 +46,8 @@ def placement_overlaps(p, r, gap, centers, radii, head, nxt, box, ncell):
         for ay in range(lo, hi + 1):
             for az in range(lo, hi + 1):
                 if span == 1:
-                    c = (((cx + ax) % ncell) * ncell + (cy + ay) % ncell) * ncell + (cz + az) % ncell
+                    c = (((cx + ax) % ncell) * ncell + (cy + ay) % ncell) * ncell \
+                        + (cz + az) % ncell
                 else:
                     c = (ax * ncell + ay) * ncell + az
                 j = head[c]

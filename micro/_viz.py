@@ -15,7 +15,7 @@ from ._io import atomic_path
 from ._validate import InputError
 from .rve import RVE
 
-__all__ = ["rve_mesh", "export_mesh", "save_picture"]
+__all__ = ["rve_mesh", "rve_scene", "export_mesh", "save_picture"]
 
 _GREY = np.array([170, 170, 170, 255], dtype=np.uint8)
 
@@ -50,18 +50,32 @@ def rve_mesh(rve: RVE, subdivisions: int | None = None):
     return trimesh.Trimesh(vertices=verts, faces=faces, vertex_colors=colors, process=False)
 
 
+def rve_scene(rve: RVE, subdivisions: int | None = None):
+    """A ``trimesh.Scene``: the particle mesh (:func:`rve_mesh`) and the 12 box edges [m]."""
+    import trimesh
+
+    L = rve.box_m
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float) * L
+    pairs = [(a, b) for a in range(8) for b in range(a + 1, 8)
+             if np.count_nonzero(corners[a] != corners[b]) == 1]
+    # Built directly (load_path would merge vertices closer than trimesh's 1e-8 tolerance,
+    # i.e. the whole nanometre-scale box).
+    box = trimesh.path.Path3D(entities=[trimesh.path.entities.Line(np.array(p)) for p in pairs],
+                              vertices=corners, process=False)
+    return trimesh.Scene({"particles": rve_mesh(rve, subdivisions), "box": box})
+
+
 def export_mesh(rve: RVE, path) -> Path:
-    """Write the particle surfaces to ``path`` (.ply or .glb, metres), atomically."""
+    """Write the particle surfaces to ``path`` atomically: .ply (particle mesh) or .glb (scene
+    with particles and box edges), metres."""
     path = Path(path)
     kind = path.suffix.lower().lstrip(".")
     if kind not in ("ply", "glb"):
         raise InputError(f"mesh file {path} must end in .ply or .glb")
-    mesh = rve_mesh(rve)
     if kind == "glb":
-        import trimesh
-        data = trimesh.Scene(mesh).export(file_type="glb")
+        data = rve_scene(rve).export(file_type="glb")
     else:
-        data = mesh.export(file_type="ply")
+        data = rve_mesh(rve).export(file_type="ply")
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
     return path
@@ -123,7 +137,12 @@ def save_picture(rve: RVE, path, distribution=None) -> Path:
     ax.set_title(f"N = {rve.n}, phi = {rve.phi:.4g}, L = {L:.4g} nm", fontsize=9)
 
     ax = fig.add_subplot(1, 3, 2)
-    xy, rc, cid = _slice_circles(rve, 2, 0.5 * rve.box_m)
+    # Slice across z, or for chains along the plane that contains their axis best.
+    axis = 2
+    if rve.params.get("arrangement") == "chains":
+        axis = int(np.argmin(np.abs(np.asarray(rve.params.get("chain_direction", (0, 0, 1))))))
+    xy, rc, cid = _slice_circles(rve, axis, 0.5 * rve.box_m)
+    names = [n for k, n in enumerate("xyz") if k != axis]
     patches = [Circle(tuple(p * nm), r * nm) for p, r in zip(xy, rc)]
     ax.add_collection(PatchCollection(patches, facecolor=_colors(cid) / 255.0,
                                       edgecolor="k", linewidth=0.3))
@@ -131,9 +150,9 @@ def save_picture(rve: RVE, path, distribution=None) -> Path:
     ax.set_xlim(0, L)
     ax.set_ylim(0, L)
     ax.set_aspect("equal")
-    ax.set_xlabel("x [nm]")
-    ax.set_ylabel("y [nm]")
-    ax.set_title("slice z = L/2 (periodic)", fontsize=9)
+    ax.set_xlabel(f"{names[0]} [nm]")
+    ax.set_ylabel(f"{names[1]} [nm]")
+    ax.set_title(f"slice {'xyz'[axis]} = L/2 (periodic)", fontsize=9)
 
     ax = fig.add_subplot(1, 3, 3)
     r = rve.radii_m * nm

@@ -10,7 +10,8 @@ Three steps, each a small immutable object or pure function:
 3. **Placement** in a periodic cube by random sequential addition (RSA) of rigid *bodies*
    (single particles, compact clusters or chains), largest first, with a minimum surface gap,
    using numba cell lists (O(N)). The box edge is chosen so that the drawn particles fill the
-   requested volume fraction exactly; the size distribution is never adjusted.
+   requested volume fraction exactly; the size distribution is never adjusted. Beyond the
+   reach of RSA, dispersed particles are packed by grow-and-relax compression.
 
 The entry point is :func:`generate_rve`. :func:`describe` summarises an RVE (counts, volume
 fraction, size, gap and cluster statistics).
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import csv
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,12 +34,18 @@ from ._validate import InputError, check_positive, check_range, check_choice
 from .rve import RVE
 
 __all__ = ["LogNormal", "Histogram", "Monodisperse", "CoreShell", "default_distribution",
-           "generate_rve", "describe", "cluster_packing_density", "ARRANGEMENTS",
+           "generate_rve", "describe", "cluster_packing_density", "pair_correlation",
+           "min_surface_gap_m", "pair_distances", "cluster_members", "chain_axis",
+           "chain_kappa", "chain_order_parameter", "ARRANGEMENTS", "PLACEMENTS",
            "FE_DENSITY_KG_M3", "FE_SIGMA_AM2_KG", "FE3O4_DENSITY_KG_M3", "FE3O4_SIGMA_AM2_KG",
            "SEED_SIGMA_AM2_KG"]
 
 ARRANGEMENTS = ("dispersed", "clusters", "chains")
 PLACEMENTS = ("auto", "rsa", "compress")
+#: Upper bound accepted for phi (random close packing of monodisperse spheres is 0.64); whether
+#: a given phi is reached depends on the distribution, arrangement and gap, and a jam is
+#: reported with the phi actually reached.
+PHI_MAX = 0.6
 
 # Material constants (room temperature).
 #: Density of alpha-iron [kg/m^3]; CRC Handbook of Chemistry and Physics (97th ed., 2016),
@@ -140,7 +148,12 @@ class LogNormal(_Distribution):
         # The truncated mean rises monotonically from r_min to r_max as the median moves
         # through a wide bracket around the interval.
         lo, hi = math.log(r_min_m) - 8 * s, math.log(r_max_m) + 8 * s
-        mu = brentq(excess, lo, hi, xtol=1e-14, rtol=1e-14, maxiter=200)
+        try:
+            mu = brentq(excess, lo, hi, xtol=1e-14, rtol=1e-14, maxiter=200)
+        except ValueError:
+            raise InputError(f"no lognormal of gsd {gsd:g} truncated to [{r_min_m:g}, "
+                             f"{r_max_m:g}] m has mean {mean_m:g} m; move the mean away from "
+                             f"the bounds or widen the distribution") from None
         return cls(median_m=math.exp(mu), gsd=gsd, r_min_m=r_min_m, r_max_m=r_max_m)
 
     @property
@@ -546,6 +559,41 @@ def _chain_offsets(r, gap, direction):
     return x - (v[:, None] * x).sum(0) / v.sum()
 
 
+def _fisher_directions(direction, kappa, k, rng):
+    """``k`` unit vectors from the Fisher (von Mises-Fisher) distribution about ``direction``
+    with concentration ``kappa`` (density ~ exp(kappa cos theta)); exact inverse-CDF sampling
+    of cos theta, uniform azimuth. ``kappa = inf`` returns ``direction`` itself."""
+    if not np.isfinite(kappa):
+        return np.tile(direction, (k, 1))
+    u = rng.random(k)
+    w = 1.0 + np.log(u + (1.0 - u) * np.exp(-2.0 * kappa)) / kappa
+    w = np.clip(w, -1.0, 1.0)
+    az = 2.0 * np.pi * rng.random(k)
+    a = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = a - (a @ direction) * direction
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(direction, e1)
+    s = np.sqrt(1.0 - w * w)
+    return ((s * np.cos(az))[:, None] * e1 + (s * np.sin(az))[:, None] * e2
+            + w[:, None] * direction)
+
+
+def chain_kappa(spread_deg: float) -> float:
+    """Fisher concentration for a chain-axis spread [deg]: kappa = 2 / spread^2 (spread in
+    rad), so that the RMS angle to the mean direction is about ``spread_deg`` for small
+    spreads; ``inf`` for 0 (perfect alignment)."""
+    return math.inf if spread_deg == 0 else 2.0 / math.radians(spread_deg) ** 2
+
+
+def chain_order_parameter(kappa: float) -> float:
+    """Expected nematic order S = <(3 cos^2 theta - 1) / 2> of Fisher-distributed axes:
+    S = 1 - 3 L(kappa) / kappa with the Langevin function L = coth(kappa) - 1 / kappa."""
+    if not np.isfinite(kappa):
+        return 1.0
+    lang = 1.0 / math.tanh(kappa) - 1.0 / kappa
+    return 1.0 - 3.0 * lang / kappa
+
+
 def _chain_lengths(n_agg, mean_length, max_length, rng):
     """Chain lengths >= 2 from a geometric distribution of mean ``mean_length`` summing to n_agg.
 
@@ -563,7 +611,7 @@ def _chain_lengths(n_agg, mean_length, max_length, rng):
 
 
 def _bodies(radii, box, rng, arrangement, gap, cluster_size, cluster_density, chain_length,
-            direction, agglomerated_fraction):
+            direction, agglomerated_fraction, kappa=math.inf):
     """Split particles into rigid bodies.
 
     Returns (groups, singles): a list of (particle indices (k,), centre offsets (k, 3)) for the
@@ -599,7 +647,8 @@ def _bodies(radii, box, rng, arrangement, gap, cluster_size, cluster_density, ch
             for piece in pieces:
                 if len(piece) >= 2:
                     piece = np.asarray(piece)
-                    groups.append((piece, _chain_offsets(radii[piece], gap, direction)))
+                    axis = _fisher_directions(direction, kappa, 1, rng)[0]
+                    groups.append((piece, _chain_offsets(radii[piece], gap, axis)))
     used = np.zeros(n, bool)
     for idx, _x in groups:
         used[idx] = True
@@ -618,9 +667,10 @@ def _place_bodies(offsets, radii, body_start, box, gap, rng, max_attempts, kerne
                   progress=False):
     """Run the RSA kernel on batches of uniform candidates drawn from ``rng``.
 
-    Returns (centers (N, 3), state) where state = [bodies placed, failed attempts on the
-    next body, total attempts]. The batch sizes depend only on the state, so the result is
-    a function of the seed alone.
+    ``kernel`` is :func:`micro._kernels.placement_rsa_bodies` or a reference with its
+    signature. Returns (centers (N, 3), state, status) where state = [bodies placed, failed
+    attempts on the next body, total attempts] and status is the kernel's (0 done, 2 jammed).
+    The batch sizes depend only on the state, so the result is a function of the seed alone.
     """
     n = radii.size
     nbody = body_start.size - 1
@@ -635,7 +685,7 @@ def _place_bodies(offsets, radii, body_start, box, gap, rng, max_attempts, kerne
     bar = None
     if progress:
         from tqdm import tqdm
-        bar = tqdm(total=nbody, desc="placing", unit="body", file=__import__("sys").stderr)
+        bar = tqdm(total=nbody, desc="placing", unit="body", file=sys.stderr)
     try:
         while True:
             batch = int(min(max(4096, 2 * (nbody - state[0])), 1 << 20))
@@ -698,7 +748,7 @@ def _compress(radii, box, gap, rng, max_attempts, progress=False):
     bar = None
     if progress and L0 > box:
         from tqdm import tqdm
-        bar = tqdm(total=100, desc="compressing", unit="%", file=__import__("sys").stderr)
+        bar = tqdm(total=100, desc="compressing", unit="%", file=sys.stderr)
     try:
         while L > box:
             L_new = max(box, L * (1.0 - step))
@@ -725,7 +775,8 @@ def _compress(radii, box, gap, rng, max_attempts, progress=False):
 
 def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangement="dispersed",
                  gap_m=0.0, cluster_size=20, cluster_density=0.5, chain_length=5.0,
-                 chain_direction=(0.0, 0.0, 1.0), agglomerated_fraction=1.0,
+                 chain_direction=(0.0, 0.0, 1.0), chain_spread_deg=0.0,
+                 agglomerated_fraction=1.0,
                  max_attempts=200_000, placement="auto", progress=False) -> RVE:
     """Draw ``n`` particles and place them in a periodic cube at volume fraction ``phi``.
 
@@ -759,7 +810,11 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
         Mean number of particles per chain (>= 2); lengths follow a geometric distribution,
         cut at half the box edge.
     chain_direction : sequence of 3 floats
-        Chain axis (normalised here), e.g. the curing field direction.
+        Mean chain axis (normalised here), e.g. the curing field direction.
+    chain_spread_deg : float
+        Misalignment of the chains [deg], in [0, 90]: each chain axis is drawn from a Fisher
+        distribution about ``chain_direction`` with concentration 2 / spread^2 (RMS angle
+        about ``chain_spread_deg``); 0 = all chains exactly along the direction.
     agglomerated_fraction : float
         Fraction of the particles in clusters or chains, in [0, 1].
     max_attempts : int
@@ -794,10 +849,11 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
     cluster_density = check_range("cluster_density (internal packing density)", cluster_density,
                                   0.0, 0.6, "", lo_open=True)
     chain_length = check_range("chain_length (mean particles per chain)", chain_length, 2.0, 1e4)
-    direction = np.asarray(check_finite_vector("chain_direction", chain_direction), float)
+    direction = np.asarray(_check_vector("chain_direction", chain_direction), float)
     if np.linalg.norm(direction) == 0:
         raise InputError("chain_direction must be a non-zero 3-vector")
     direction = direction / np.linalg.norm(direction)
+    spread = check_range("chain_spread_deg", chain_spread_deg, 0.0, 90.0, "deg")
     agg = check_range("agglomerated_fraction", agglomerated_fraction, 0.0, 1.0)
     max_attempts = int(check_range("max_attempts", max_attempts, 1, 1e9))
     check_choice("placement", placement, PLACEMENTS)
@@ -816,7 +872,7 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
                          f"use more particles")
 
     groups, singles = _bodies(radii, box, rng, arrangement, gap, cluster_size, cluster_density,
-                              chain_length, direction, agg)
+                              chain_length, direction, agg, chain_kappa(spread))
     span = max([_span(x) for _idx, x in groups], default=0.0)
     if span + 2.0 * radii.max() + gap > 0.5 * box:
         raise InputError(f"a cluster spanning {span + 2 * radii.max():.4g} m does not fit in half "
@@ -867,7 +923,8 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
         "phi": phi, "n": n, "distribution": dist.params(), "composition": comp.params(core_sigma),
         "arrangement": arrangement, "gap_m": gap, "cluster_size": cluster_size,
         "cluster_density": cluster_density, "chain_length": chain_length,
-        "chain_direction": direction.tolist(), "agglomerated_fraction": agg,
+        "chain_direction": direction.tolist(), "chain_spread_deg": spread,
+        "agglomerated_fraction": agg,
         "max_attempts": max_attempts, "placement": placement, "placement_used": method,
         "generator": "micro.particles.generate_rve (RSA with cell lists, largest body first; "
                      "grow-and-relax compression beyond the RSA limit)",
@@ -876,12 +933,9 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
                mass_kg=mass, cluster_id=cluster_id, seed=seed, params=params)
 
 
-#: Upper bound accepted for phi; whether RSA reaches a given phi depends on the distribution,
-#: arrangement and gap, and a jam is reported with the phi actually reached.
-PHI_MAX = 0.6
 
 
-def check_finite_vector(name, value):
+def _check_vector(name, value):
     try:
         v = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -902,12 +956,11 @@ def _unwrap(centers, box):
 
 
 def pair_distances(rve: RVE, r_max_m: float):
-    """All centre pairs closer than ``r_max_m`` (periodic): (i, j, distance [m]) arrays."""
+    """All centre pairs whose minimum-image distance is below ``r_max_m``: (i, j, d [m])."""
     from scipy.spatial import cKDTree
 
     if rve.n < 2:
         return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
-    r_max_m = min(r_max_m, 0.5 * rve.box_m * (1 - 1e-12))
     tree = cKDTree(rve.centers_m, boxsize=rve.box_m)
     pairs = tree.query_pairs(r_max_m, output_type="ndarray")
     i, j = pairs[:, 0], pairs[:, 1]
@@ -918,21 +971,21 @@ def pair_distances(rve: RVE, r_max_m: float):
 def min_surface_gap_m(rve: RVE) -> float:
     """Smallest surface-to-surface distance over all pairs, periodic images included [m].
 
-    Pairs farther apart than 2 r_max + the reported gap cannot be the closest, so a neighbour
-    search with growing radius finds the minimum; +inf for a single particle far from itself.
+    Pairs with centres farther apart than R have gaps above R - 2 r_max, so a neighbour search
+    whose radius R doubles until the smallest gap found is below R - 2 r_max is exact; a
+    particle's own images (at distance L) count too.
     """
-    if rve.n < 2:
-        return float(rve.box_m - 2 * rve.radii_m.max()) if rve.n else float("inf")
-    reach = 2.0 * rve.radii_m.max()
+    if rve.n == 0:
+        return float("inf")
+    own = rve.box_m - 2.0 * rve.radii_m.max()
+    r2 = 2.0 * rve.radii_m.max()
+    reach = 1.5 * r2
+    all_pairs = math.sqrt(3.0) / 2.0 * rve.box_m * (1 + 1e-9)   # largest minimum-image distance
     while True:
-        i, j, d = pair_distances(rve, reach * 1.5)
-        if i.size:
-            gap = float(np.min(d - rve.radii_m[i] - rve.radii_m[j]))
-            if gap <= reach * 1.5 - 2.0 * rve.radii_m.max():
-                return gap
-        if reach * 1.5 >= 0.5 * rve.box_m:
-            return float(np.min(d - rve.radii_m[i] - rve.radii_m[j])) if i.size else float(
-                0.5 * rve.box_m - 2 * rve.radii_m.max())
+        i, j, d = pair_distances(rve, min(reach, all_pairs))
+        gap = float(np.min(d - rve.radii_m[i] - rve.radii_m[j])) if i.size else float("inf")
+        if gap <= reach - r2 or reach >= all_pairs:
+            return min(gap, own)
         reach *= 2.0
 
 
@@ -1012,6 +1065,8 @@ def describe(rve: RVE) -> dict:
             u = np.asarray(rve.params.get("chain_direction", (0, 0, 1)), float)
             cos = np.array([abs(chain_axis(x) @ u) for _idx, x in groups])
             cl["alignment_order_parameter"] = float(np.mean(1.5 * cos ** 2 - 0.5))
+            cl["alignment_order_parameter_expected"] = chain_order_parameter(
+                chain_kappa(float(rve.params.get("chain_spread_deg", 0.0))))
         else:
             dens = np.array([cluster_packing_density(x, rve.radii_m[idx]) for idx, x in groups])
             cl.update({"packing_density_mean": float(dens.mean()),

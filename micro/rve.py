@@ -1,4 +1,4 @@
-"""The representative volume element (RVE): spherical particles in a periodic cube, and its HDF5 I/O.
+"""The representative volume element (RVE): spheres in a periodic cube, and its HDF5 I/O.
 
 An :class:`RVE` is immutable: its arrays are private read-only copies. Positions are wrapped
 into ``[0, L)^3``; every geometric question that involves periodic images uses the minimum
@@ -40,7 +40,8 @@ def _frozen_array(name, value, dtype, shape):
     try:
         arr = np.array(value, dtype=dtype, copy=True, order="C")
     except (TypeError, ValueError):
-        raise InputError(f"RVE.{name} must be a numeric array, got {type(value).__name__}") from None
+        raise InputError(f"RVE.{name} must be a numeric array, "
+                         f"got {type(value).__name__}") from None
     if arr.shape != shape:
         raise InputError(f"RVE.{name} must have shape {shape}, got {arr.shape}")
     if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
@@ -127,7 +128,8 @@ class RVE:
             return NotImplemented
         return (self.box_m == other.box_m and self.seed == other.seed
                 and self.params == other.params
-                and all(np.array_equal(getattr(self, k), getattr(other, k)) for k, _u, _d in _ARRAYS))
+                and all(np.array_equal(getattr(self, k), getattr(other, k))
+                        for k, _u, _d in _ARRAYS))
 
     __hash__ = None
 
@@ -235,7 +237,8 @@ class RVE:
             raise InputError(f"RVE file {path} is not a readable HDF5 file ({exc})") from None
         with f:
             if f.attrs.get("format") != "mapsim-rve":
-                raise InputError(f"RVE file {path} is not a mapsim RVE (attribute 'format' missing)")
+                raise InputError(f"RVE file {path} is not a mapsim RVE "
+                                 f"(attribute 'format' missing)")
             kw = {}
             for name, unit, _dtype in _ARRAYS:
                 if name not in f:

@@ -11,13 +11,17 @@ Procedure (spec section 5)
 2. **Seed model** (baseline): one fitted scale (``scale``; tensile: ``E_Pa``).
 3. **Forward selection.** Every applicable cause not yet accepted is added to the current model
    (causes with several physical forms -- magnetization law, hyperelastic law -- try each form
-   and keep the one with the lowest ``cv_rmse``). The best candidate is accepted only if
+   and keep the one with the lowest ``cv_rmse``). A candidate passes if
 
    * its ``cv_rmse`` is at least ``min_gain`` (10 %) below the current one, AND
    * a one-sided Wilcoxon signed-rank test on the paired held-out squared errors (current minus
      candidate, one pair per row) gives ``p < alpha`` (0.01);
 
-   then the search repeats on top of it, until no candidate passes.
+   the passing candidate with the lowest ``cv_rmse`` is accepted and the search repeats on top
+   of it. If none passes, pairs of the three best candidates are tried together (two causes
+   can be needed at once: self-weight makes a linear beam worse until the large-deflection
+   solution is there too); a pair passing the same criterion is accepted, both causes named.
+   The search stops when nothing passes.
 4. **Parameters** of the accepted model are fitted on all rows; their standard errors come from
    the Jacobian at the optimum, ``cov = s^2 (J^T J)^-1`` with ``s^2`` the residual variance.
 
@@ -371,10 +375,16 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
             best.variants = variants
             tried.append(best)
         rounds.append(tried)
-        top = min(tried, key=lambda c: c.cv_rmse)
         e_cur = current.cv_pred - exp.y
-        p = _paired_p(e_cur, top.cv_pred - exp.y) if folds is not None else 1.0
-        if folds is not None and _passes(current, top, p, min_gain, alpha):
+        # the candidate with the lowest cv_rmse among those that pass the criterion
+        passing = []
+        if folds is not None:
+            for c in tried:
+                pc = _paired_p(e_cur, c.cv_pred - exp.y)
+                if _passes(current, c, pc, min_gain, alpha):
+                    passing.append((c.cv_rmse, pc, c))
+        if passing:
+            _, p, top = min(passing, key=lambda t: t[0])
             corr = residual_correlations(exp, e_cur)
             steps.append({"cause": top.cause, "cv_rmse": top.cv_rmse,
                           "params": _step_params(current, top),

@@ -140,7 +140,9 @@ def register(sub, formatter) -> None:
     p.add_argument("--elset", default="EALL", help="Abaqus element set of the *DLOAD")
     p.add_argument("--index", type=int, default=1, help="Elmer Material / Body Force number")
     p.add_argument("--out", required=True, help="output file ('-' for stdout)")
-    p.set_defaults(func=_export)
+    from homogenize._cli_tables import add_export_table_options, wrap_export   # --table ...
+    add_export_table_options(p)
+    p.set_defaults(func=wrap_export(_export))
 
     from homogenize.macro.cantilever import MODELS
     p = sub.add_parser(

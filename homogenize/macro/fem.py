@@ -301,3 +301,29 @@ def neo_hookean_solve(mesh, material: Material, body_force_N_m3, fixed_dofs, *, 
                                    f"{max_cuts} step cuts")
             dlam /= 2.0
     return FEMSolution(u, basis, "newton", total_it, tuple(hist), tuple(steps))
+
+
+def _skfem_neo_hookean(basis, u, lam, mu):
+    """Reference: residual and tangent assembled with scikit-fem forms (slow, for checks).
+
+    Same material law, independent assembly (scikit-fem's own loops, quadrature and dof maps).
+    """
+    from skfem import BilinearForm
+    from skfem.helpers import ddot, grad
+
+    def pointwise(w):
+        H = np.moveaxis(np.asarray(grad(w["prev"])), (0, 1), (-2, -1))
+        return _neo_hookean_pointwise(H, lam, mu)
+
+    @BilinearForm
+    def tangent(du, v, w):
+        _, A = pointwise(w)
+        return np.einsum("...ijkl,kl...,ij...->...", A, grad(du), grad(v))
+
+    @LinearForm
+    def residual(v, w):
+        P, _ = pointwise(w)
+        return ddot(np.moveaxis(P, (-2, -1), (0, 1)), grad(v))
+
+    prev = basis.interpolate(u)
+    return asm(residual, basis, prev=prev), asm(tangent, basis, prev=prev)

@@ -1,7 +1,6 @@
 """The ``mapsim rve`` command (homogenize/_cli_rve.py)."""
 import json
 
-import numpy as np
 import pytest
 
 from homogenize.cli import main
@@ -88,3 +87,16 @@ def test_help_states_units_and_defaults(capsys):
         assert opt in text
     assert "[m]" in text and "[kg/m^3]" in text and "[A m^2/kg]" in text
     assert "(default: 2.5e-08)" in text
+
+
+def test_load_summarises_existing_file(tmp_path, capsys):
+    from micro import RVE as _RVE
+    r = _RVE.from_spheres(1e-6, [[0, 0, 0], [5e-7, 5e-7, 5e-7]], [1e-8, 2e-8], seed=5)
+    r.save(tmp_path / "hand.h5")
+    assert main(["rve", "--load", str(tmp_path / "hand.h5"), "--json",
+                 str(tmp_path / "s.json"), "--png", str(tmp_path / "p.png")]) == 0
+    s = json.loads((tmp_path / "s.json").read_text())["summary"]
+    assert s["n"] == 2 and s["seed"] == 5
+    assert s["phi"] == pytest.approx(4 / 3 * 3.141592653589793 * 9e-24 / 1e-18, rel=1e-12)
+    assert main(["rve", "--load", str(tmp_path / "missing.h5")]) == 2
+    assert "does not exist" in capsys.readouterr().err

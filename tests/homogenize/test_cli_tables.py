@@ -217,3 +217,55 @@ def test_beam_with_table_propagates_interval(table, tmp_path, capsys):
     assert main(["beam", "--table", str(table), "--phi", "0.035", "--B", "0.1", "--gradB",
                  "1.78", "--at", "arrangement=dispersed", "--E-from-table"]) == 2
     assert "no E_eff" in capsys.readouterr().err
+
+
+def test_fem_quantities_in_table_and_beam_E_from_table(scheduler, tmp_path, capsys):
+    """With fem = true the table holds E_eff, nu_eff, stress_mag and strain_mag (synthetic
+    values here: the FEM itself is tested by its own module); `beam --E-from-table` uses E_eff
+    and widens the interval by its relative half-width in quadrature."""
+    pytest.importorskip("homogenize.macro._cli")
+    from homogenize.tables import body_force_from_table, modulus_from_table
+    p = tmp_path / "fem.toml"
+    p.write_text('[study]\nseed = 8\nrealizations = 5\nevaluator = "synthetic"\nfem = true\n'
+                 '[grid]\nphi = 0.035\nB_T = [0.05, 0.3]\ngradB_T_per_m = 1.78\n')
+    out = tmp_path / "fem.h5"
+    assert main(["batch", str(p), "--out", str(out), "--scheduler", scheduler,
+                 "--no-progress"]) == 0
+    t = read_table(out)
+    assert t.units["E_eff_Pa"] == "Pa" and t.units["nu_eff"] == "1"
+    assert t.values["stress_mag_Pa"].shape == (2, 5, 3, 3)
+    assert t.values["strain_mag"].shape == (2, 5, 3, 3)
+    js = tmp_path / "b.json"
+    L, th = 0.02, 1e-3
+    assert main(["beam", "--table", str(out), "--phi", "0.035", "--B", "0.1", "--gradB", "1.78",
+                 "--model", "eb", "--E-from-table", "--length-m", str(L), "--thickness-m",
+                 str(th), "--json", str(js)]) == 0
+    res = json.loads(js.read_text())["results"][0]
+    f = body_force_from_table(out, 0.035, 0.1, 1.78)
+    E = modulus_from_table(out, 0.035)
+    # E of both B points pooled: 10 realizations
+    assert np.isclose(E.mean, t.values["E_eff_Pa"].mean())
+    assert np.isclose(res["tip_m"], 1.5 * f.mean * L ** 4 / (E.mean * th ** 2), rtol=1e-9)
+    rel_f = (f.ci_high - f.mean) / f.mean
+    rel_E = (E.ci_high - E.ci_low) / (2 * E.mean)
+    assert np.isclose(res["ci_high_m"] / res["tip_m"] - 1, np.hypot(rel_f, rel_E), rtol=1e-9)
+
+
+def test_export_from_table(table, tmp_path, capsys):
+    pytest.importorskip("homogenize.macro._cli")
+    from homogenize.macro.exporters import parse_abaqus
+    from homogenize.tables import body_force_from_table
+    f = body_force_from_table(table, 0.035, 0.3, 1.78, arrangement="chains")
+    for bound, value in (("mean", f.mean), ("low", f.ci_low), ("high", f.ci_high)):
+        out = tmp_path / f"{bound}.inp"
+        assert main(["export", "--to", "abaqus", "--table", str(table), "--phi", "0.035",
+                     "--B", "0.3", "--gradB", "1.78", "--at", "arrangement=chains",
+                     "--bound", bound, "--out", str(out)]) == 0
+        spec = parse_abaqus(out.read_text())
+        assert np.allclose(spec["body_force_N_m3"], [0, 0, -value], rtol=1e-12)   # along -z
+        # mixture density (1 - phi) 1210 + phi 7870 kg/m^3; PDMS E, nu (no FEM in the table)
+        assert np.isclose(spec["density_kg_m3"], 0.965 * 1210 + 0.035 * 7870)
+        assert spec["E_Pa"] == 2e6 and spec["nu"] == 0.45
+    capsys.readouterr()
+    assert main(["export", "--to", "elmer", "--E-Pa", "2e6", "--nu", "0.45", "--out", "-"]) == 2
+    assert "--body-force-N-m3 is required" in capsys.readouterr().err

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from micro import _kernels as K
-from micro._bench_particles import rsa_bodies_reference
+from micro._bench_particles import relax_step_reference, rsa_bodies_reference
 from micro.particles import _place_bodies
 
 
@@ -120,17 +120,6 @@ def test_build_cells_matches_python_insertion():
     np.testing.assert_array_equal(nxt, nxt_ref)
 
 
-def _relax_reference(centers, radii, gap, push_scale, box):
-    """All-pairs numpy version of placement_relax_step."""
-    d = centers[:, None, :] - centers[None, :, :]
-    d -= box * np.rint(d / box)
-    dist = np.sqrt(np.sum(d * d, axis=2))
-    lim = radii[:, None] + radii[None, :] + gap
-    over = (dist < lim) & ~np.eye(len(radii), dtype=bool)
-    f = np.where(over, 0.5 * (lim * push_scale - dist) / np.where(over, dist, 1.0), 0.0)
-    return (f[:, :, None] * d).sum(axis=1), int(over.sum() // 2)
-
-
 @pytest.mark.parametrize("ncell", [1, 2, 4])
 def test_relax_step_matches_numpy(ncell):
     rng = np.random.default_rng(ncell + 10)
@@ -144,7 +133,7 @@ def test_relax_step_matches_numpy(ncell):
     K.placement_build_cells(centers, box, ncell, head, nxt)
     disp = np.empty((n, 3))
     count = K.placement_relax_step(centers, radii, gap, 1.01, box, ncell, head, nxt, disp)
-    ref, ref_count = _relax_reference(centers, radii, gap, 1.01, box)
+    ref, ref_count = relax_step_reference(centers, radii, gap, 1.01, box)
     assert count == ref_count > 0
     # Same terms summed in a different order: agreement to rounding.
     np.testing.assert_allclose(disp, ref, rtol=1e-12, atol=1e-15 * rmax)

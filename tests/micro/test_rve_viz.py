@@ -26,11 +26,21 @@ def test_mesh_spheres_match_particles(rve):
     assert mesh.volume < rve.particle_volumes_m3.sum()
 
 
-@pytest.mark.parametrize("suffix", ["ply", "glb"])
-def test_export_reloads(tmp_path, rve, suffix):
-    p = export_mesh(rve, tmp_path / f"r.{suffix}")
+def test_export_reloads(tmp_path, rve):
+    p = export_mesh(rve, tmp_path / "r.ply")
     back = trimesh.load(p, force="mesh")
     assert np.allclose(back.bounds, rve_mesh(rve).bounds, rtol=1e-6)
+    scene = trimesh.load(export_mesh(rve, tmp_path / "r.glb"))
+    geoms = list(scene.geometry.values())
+    mesh = [g for g in geoms if isinstance(g, trimesh.Trimesh)][0]
+    box = [g for g in geoms if isinstance(g, trimesh.path.Path3D)][0]
+    assert np.allclose(mesh.bounds, rve_mesh(rve).bounds, rtol=1e-6)
+    # The 12 edges of the periodic cube.
+    np.testing.assert_allclose(box.bounds, [[0, 0, 0], [rve.box_m] * 3], atol=1e-6 * rve.box_m)
+    # The file stores 12 segments (GL "LINES", vertex pairs), each one box edge long.
+    seg = np.asarray(box.vertices).reshape(12, 2, 3)
+    np.testing.assert_allclose(np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1), rve.box_m,
+                               rtol=1e-6)
 
 
 def test_picture_and_bad_names(tmp_path, rve):

@@ -72,3 +72,15 @@ def test_agrees_with_elastica_at_tip_over_length_0_3():
     assert nl.tip_m / lin == pytest.approx(v / eb, rel=0.005)
     assert nl.tip_horizontal_m == pytest.approx(h, rel=0.03)
     assert nl.solver == "newton" and nl.iterations <= 25
+
+
+def test_vectorised_assembly_equals_scikit_fem_forms():
+    # independent assembly of the same law: scikit-fem's own dof maps and quadrature loops
+    from homogenize.macro.fem import _skfem_neo_hookean
+    basis = vector_basis(_mesh(STRIP, (3, 1, 1)), 2)
+    lam, mu = MAT.lame_Pa
+    u = 2e-3 * np.random.default_rng(2).normal(size=basis.N)   # strains ~ 0.1: nonlinear
+    r1, K1 = _NeoHookeanAssembler(basis, lam, mu, np.zeros(3)).internal(u)
+    r0, K0 = _skfem_neo_hookean(basis, u, lam, mu)
+    assert np.abs(r1 - r0).max() < 1e-10 * np.abs(r0).max()   # round-off only
+    assert abs(K1 - K0).max() < 1e-10 * abs(K0).max()
