@@ -196,6 +196,17 @@ def _plot(path: Path, res: dict) -> None:
         fig.savefig(tmp, format="png", dpi=120)
 
 
+def _display_path(path) -> str:
+    """``path`` relative to the repository (or the working directory) when inside it."""
+    p = Path(path).resolve()
+    for base in (DEFAULT_STUDY.parent.parent, Path.cwd()):
+        try:
+            return str(p.relative_to(base))
+        except ValueError:
+            continue
+    return str(path)
+
+
 def _fmt_B(v):
     return "not reached in the table's range" if v is None else f"{v:.3g} T"
 
@@ -205,7 +216,7 @@ def _summary(res: dict, study) -> str:
     lvl = f"{100 * res['confidence']:g} %"
     lines = [
         "# The chain: random RVEs -> body force -> the seed paper's cantilever", "",
-        f"Study `{study.path}` ({study.name}): {study.n_points} grid points x "
+        f"Study `{_display_path(study.path)}` ({study.name}): {study.n_points} grid points x "
         f"{study.realizations} random RVEs of {study.n_particles} particles, seed {study.seed}, "
         f"evaluator `{study.evaluator}`, FEM {'on' if study.fem else 'off'}; fixed axes "
         f"{res['fixed_axes'] or 'none'}. Table: `{Path(res['table']).name}` "

@@ -67,7 +67,26 @@ def _cmd_batch(args) -> int:
         print(f"mapsim batch: {exc}", file=sys.stderr)
         return 1
     print(f"wrote {out} ({study.n_points} grid points x {study.realizations} realizations)")
+    _print_force_summary(out)
     return 0
+
+
+def _print_force_summary(path, max_rows: int = 40) -> None:
+    """f_eff (z) per grid point with its interval: a first look at the table."""
+    from .tables import read_table
+    t = read_table(path)
+    if "f_eff_N_m3" not in t.values or len(t.points) > max_rows:
+        return
+    vals = t.component_values("f_eff_N_m3", "z")
+    from ._stats import summarize
+    varying = [a for a, v in t.axes.items() if len(v) > 1]
+    lvl = f"{100 * t.confidence:g} %"
+    print(f"{'point':>5}  {'  '.join(f'{a:>14}' for a in varying)}  {'f_eff_z [N/m^3]':>15}  "
+          f"{lvl} interval")
+    for i, point in enumerate(t.points):
+        s = summarize(vals[i], t.confidence)
+        cols = "  ".join(f"{point[a]!s:>14}" for a in varying)
+        print(f"{i:>5}  {cols}  {s['mean']:15.6g}  [{s['ci_low']:.6g}, {s['ci_high']:.6g}]")
 
 
 def _cmd_rve_size(args) -> int:
@@ -150,11 +169,22 @@ def _cmd_chain(args) -> int:
     return 0
 
 
+def _own_defaults(formatter):
+    """The formatter, except that a help text stating its own default gets no second one."""
+    class Formatter(formatter):
+        def _get_help_string(self, action):
+            if "(default" in (action.help or ""):
+                return action.help
+            return super()._get_help_string(action)
+    return Formatter
+
+
 def register(sub, formatter):
+    formatter = _own_defaults(formatter)
     p = sub.add_parser("batch", formatter_class=formatter, description=_BATCH_DOC,
                        help="run a study of random RVEs on Dask -> effective-parameter table")
     p.add_argument("study", help="study file (TOML)")
-    p.add_argument("--out", required=True, help="table file to write (HDF5)")
+    p.add_argument("--out", required=True, help="table file to write (HDF5) (default: none, required)")
     _add_cluster_options(p)
     p.add_argument("--retries", type=int, default=2,
                    help="resubmissions of a realization whose task raised")
@@ -196,7 +226,7 @@ def register(sub, formatter):
     p.add_argument("--permutations", type=int, default=9999,
                    help="resamples of the permutation test (exact test if all splits fit)")
     p.add_argument("--seed", type=int, default=0, help="seed of the permutation resampling")
-    p.add_argument("--json", default=None, help="also write the result to this JSON file")
+    p.add_argument("--json", default=None, help="also write the result to this JSON file (default: none)")
     p.set_defaults(func=_cmd_compare)
 
     p = sub.add_parser("chain", formatter_class=formatter,
@@ -209,7 +239,7 @@ def register(sub, formatter):
                    help="study file (default: examples/default_study.toml)")
     p.add_argument("--out", default="results/chain", help="output directory")
     p.add_argument("--keep-parts", action="store_true",
-                   help="keep the per-realization parts after the table is written")
+                   help="keep the per-realization parts after the table is written (default: delete them)")
     p.add_argument("--thickness", type=float, default=1e-3,
                    help="assumed strip thickness [m] (the paper gives none; the length follows "
                         "from its premise, 43.79 kN/m^3 -> 4 mm)")
@@ -221,6 +251,7 @@ def register(sub, formatter):
 # --------------------------------------------------------------------------- mapsim beam --table
 def add_beam_table_options(p) -> None:
     """Options of ``mapsim beam`` that take the body force from a batch table."""
+    p.formatter_class = _own_defaults(p.formatter_class)
     g = p.add_argument_group(
         "body force from a table (mapsim batch)",
         "With --table, the body force and its confidence interval are interpolated from the "
@@ -228,14 +259,14 @@ def add_beam_table_options(p) -> None:
         "propagated to the tip deflection of every model.")
     g.add_argument("--table", default=None, help="effective-parameter table (HDF5) "
                                                  "(default: none, use --body-force-N-m3)")
-    g.add_argument("--phi", type=float, default=None, help="particle volume fraction [-]")
+    g.add_argument("--phi", type=float, default=None, help="particle volume fraction [-] (default: none, required with --table)")
     g.add_argument("--B", dest="B_T", type=float, default=None,
-                   help="applied flux density at the strip [T]")
+                   help="applied flux density at the strip [T] (default: none, required with --table)")
     g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=None,
-                   help="field gradient d|B|/dz [T/m]")
+                   help="field gradient d|B|/dz [T/m] (default: none, required with --table)")
     g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
                    help="values of other grid axes with several values, e.g. "
-                        "arrangement=chains")
+                        "arrangement=chains (default: none)")
     g.add_argument("--E-from-table", action="store_true",
                    help="use the table's E_eff (FEM) and its interval instead of --E-Pa")
 
@@ -340,6 +371,7 @@ def add_export_table_options(p) -> None:
     The material/force options of ``export`` stop being required: without --table they are
     checked by :func:`wrap_export` instead.
     """
+    p.formatter_class = _own_defaults(p.formatter_class)
     for action in p._actions:                      # argparse has no public way to relax this
         if action.dest in dict(_EXPORT_NEEDS):
             action.required = False
@@ -350,12 +382,12 @@ def add_export_table_options(p) -> None:
         "density defaults to the mixture (1 - phi) 1210 + phi 7870 kg/m^3.")
     g.add_argument("--table", default=None, help="effective-parameter table (HDF5) "
                                                  "(default: none, give the numbers)")
-    g.add_argument("--phi", type=float, default=None, help="particle volume fraction [-]")
-    g.add_argument("--B", dest="B_T", type=float, default=None, help="applied flux density [T]")
+    g.add_argument("--phi", type=float, default=None, help="particle volume fraction [-] (default: none, required with --table)")
+    g.add_argument("--B", dest="B_T", type=float, default=None, help="applied flux density [T] (default: none, required with --table)")
     g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=None,
-                   help="field gradient d|B|/dz [T/m]")
+                   help="field gradient d|B|/dz [T/m] (default: none, required with --table)")
     g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
-                   help="values of other grid axes with several values")
+                   help="values of other grid axes with several values (default: none)")
     g.add_argument("--bound", default="mean", choices=("mean", "low", "high"),
                    help="export the mean force or an end of its confidence interval (run the "
                         "macro model at both ends to propagate the interval)")

@@ -51,12 +51,12 @@ _B_SAT_T = 0.3                       # field scale of the synthetic magnetizatio
 _REL_SD_100 = 0.05                   # relative sd of f_eff at 100 particles
 
 
-def get_evaluator(name: str):
-    """The evaluator of a study's ``evaluator`` key."""
+def get_evaluator(name: str, **options):
+    """The evaluator of a study's ``evaluator`` key (``options``: its ``[synthetic]`` table)."""
     if name == "rve":
         return RVEEvaluator()
     if name == "synthetic":
-        return SyntheticEvaluator()
+        return SyntheticEvaluator(**options)
     raise InputError(f"unknown evaluator {name!r}; allowed: rve, synthetic")
 
 

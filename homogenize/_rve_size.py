@@ -139,22 +139,36 @@ def _write_markdown(path: Path, res: dict) -> None:
 
 
 def _plot(path: Path, res: dict) -> None:
-    import matplotlib
     from matplotlib.figure import Figure
-    del matplotlib
+    from matplotlib.ticker import NullFormatter
+    from scipy import stats
     fig = Figure(figsize=(6.0, 4.2), layout="constrained")
     ax = fig.add_subplot()
+    pts = [row["point"] for row in res["points"]]
+    varying = [a for a in pts[0] if len({p[a] for p in pts}) > 1]
+    R = res["realizations_per_size"]
+    # 95 % interval of a sample variance of R normal realizations (chi-square)
+    lo_f = (R - 1) / stats.chi2.ppf(0.975, R - 1)
+    hi_f = (R - 1) / stats.chi2.ppf(0.025, R - 1)
     for row in res["points"]:
         V = np.array([s["volume_m3"] for s in row["sizes"]])
         var = np.array([s["sd"] ** 2 for s in row["sizes"]])
-        label = ", ".join(f"{k}={v}" for k, v in row["point"].items() if k != "gradB_T_per_m")
-        line, = ax.loglog(V, var, "o", label=f"{label}: alpha={row['alpha']:.2f}")
+        label = ", ".join(f"{a}={row['point'][a]}" for a in varying)
+        label = (label + ": " if label else "") + f"alpha = {row['alpha']:.2f} +/- {row['alpha_se']:.2f}"
+        bars = ax.errorbar(V, var, yerr=[var * (1 - lo_f), var * (hi_f - 1)], fmt="o",
+                           capsize=3, label=label)
         Vf = np.geomspace(V.min(), V.max(), 50)
-        ax.loglog(Vf, row["variance_ref"] * (row["V_ref_m3"] / Vf) ** row["alpha"], "-",
-                  color=line.get_color())
+        ax.plot(Vf, row["variance_ref"] * (row["V_ref_m3"] / Vf) ** row["alpha"], "-",
+                color=bars[0].get_color())
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("RVE volume V [m$^3$]")
     ax.set_ylabel(f"variance of {res['quantity']} ({res['component']}) [({res['unit']})$^2$]")
-    ax.set_title("Variance across realizations vs RVE volume (Kanit et al. 2003)", fontsize=9)
-    ax.legend(fontsize=7)
+    fixed = ", ".join(f"{a}={v}" for a, v in pts[0].items() if a not in varying)
+    import textwrap
+    ax.set_title(f"Variance across {R} realizations vs RVE volume (Kanit et al. 2003)\n"
+                 + "\n".join(textwrap.wrap(fixed, 90)), fontsize=8)
+    ax.legend(fontsize=7, title="fit var ~ V$^{-alpha}$; bars: 95 % interval", title_fontsize=7)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=120)

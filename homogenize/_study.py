@@ -24,6 +24,8 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
     [magnetics]  # fixed keywords of micro.dipoles.solve (tol, accuracy, method, ...)
     [cell]       # fixed keywords of homogenize.cell.homogenize_rve (matrix_E_Pa, ...)
 
+    [synthetic]  # evaluator = "synthetic" only: work_seconds = CPU seconds per realization
+
     [rve_size]   # for `mapsim rve-size`
     n_particles = [25, 50, 100, 200]
     realizations = 16
@@ -65,7 +67,7 @@ _STUDY_KEYS = {
     "name": str, "seed": int, "realizations": int, "n_particles": int, "evaluator": str,
     "fem": bool, "voxels": int, "confidence": float, "description": str,
 }
-_TABLES = ("study", "grid", "rve", "law", "magnetics", "cell", "rve_size")
+_TABLES = ("study", "grid", "rve", "law", "magnetics", "cell", "rve_size", "synthetic")
 _RVE_SIZE_KEYS = {"n_particles": list, "realizations": int, "quantity": str, "component": str,
                   "target_rel_precision": float}
 EVALUATORS = ("rve", "synthetic")
@@ -115,6 +117,7 @@ class Study:
     magnetics: dict = field(default_factory=dict)
     cell: dict = field(default_factory=dict)
     rve_size: RveSizeSpec | None = None
+    synthetic: dict = field(default_factory=dict)   # options of the synthetic evaluator
 
     @property
     def axis_names(self) -> tuple:
@@ -156,7 +159,7 @@ class Study:
                 "evaluator": self.evaluator, "fem": self.fem, "voxels": self.voxels,
                 "confidence": self.confidence, "axes": {a: list(v) for a, v in self.axes},
                 "rve": self.rve, "law": self.law, "magnetics": self.magnetics,
-                "cell": self.cell, "study_file_text": self.text}
+                "cell": self.cell, "synthetic": self.synthetic, "study_file_text": self.text}
 
 
 @dataclass(frozen=True)
@@ -345,10 +348,25 @@ def parse_study(text: str, path: str = "<study>") -> Study:
                                quantity=r.get("quantity", "f_eff_N_m3"), component=comp,
                                target_rel_precision=prec)
 
+    synth = _synthetic_options(doc, path, evaluator)
     study = Study(path=str(path), text=text, name=s.get("name", Path(path).stem), seed=s["seed"],
                   realizations=s["realizations"], n_particles=n_particles, evaluator=evaluator,
                   fem=s.get("fem", False), voxels=voxels, confidence=confidence,
-                  axes=tuple(axes), rve_size=rve_size, **tables)
+                  axes=tuple(axes), rve_size=rve_size, synthetic=synth, **tables)
     from . import _evaluate
     _evaluate.get_evaluator(evaluator).check(study)
     return study
+
+
+def _synthetic_options(doc: dict, path: str, evaluator: str) -> dict:
+    """The ``[synthetic]`` table: ``work_seconds`` of CPU per realization (benchmarks, demos)."""
+    syn = doc.get("synthetic", {})
+    if syn and evaluator != "synthetic":
+        raise InputError(f"{path}: [synthetic] is given but [study] evaluator = {evaluator!r}")
+    for k, v in syn.items():
+        if k != "work_seconds":
+            raise InputError(f"{path}: [synthetic] unknown key '{k}'; allowed: work_seconds")
+        v = _coerce(f"{path}: [synthetic] work_seconds", v, float)
+        if not 0 <= v <= 3600:
+            raise InputError(f"{path}: [synthetic] work_seconds must be in [0, 3600] s, got {v:g}")
+    return {k: float(v) for k, v in syn.items()}

@@ -82,7 +82,8 @@ class CellResult:
     stress_mag_Pa : (3, 3) macroscopic magnetic stress at zero mean strain (None without forces)
     stress_mag_elastic_Pa, stress_mag_moment_Pa : its two parts (mean FE stress, force moment)
     strain_mag : (3, 3) strain of a stress-free sample, ``-C_eff^-1 stress_mag``
-    n_dof, voxels, h_m, phi_voxel : mesh size
+    n_dof, voxels, h_m : mesh size
+    phi_voxel : particle volume fraction of the stiffness field (voxels with fraction >= 0.5)
     iterations, residuals : per load case, CG iterations and final relative residual
     timings_s : seconds per stage
     """
@@ -435,7 +436,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
         C_eff_Pa=C, E_eff_Pa=E_eff, nu_eff=nu_eff, K_eff_Pa=K_eff, G_eff_Pa=G_eff,
         anisotropy_index=AU, f_eff_N_m3=f_eff, stress_mag_Pa=stress,
         stress_mag_elastic_Pa=stress_el, stress_mag_moment_Pa=stress_mo, strain_mag=strain,
-        n_dof=mesh.n_dof, voxels=mesh.n, h_m=mesh.h_m, phi_voxel=mesh.phi_voxel,
+        n_dof=mesh.n_dof, voxels=mesh.n, h_m=mesh.h_m,
+        phi_voxel=float((mesh.fraction >= 0.5).mean()),
         n_particles=mesh.n_particles, n_unresolved=int((~mesh.resolved).sum()),
         iterations=iters, residuals=resid, residual_history=hist, timings_s=timings,
         settings=settings, mesh=mesh, fields=fields)

@@ -162,10 +162,9 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
     if not isinstance(study, Study):
         study = load_study(study)
     out = Path(out)
-    evaluator = evaluator or get_evaluator(study.evaluator)
+    evaluator = evaluator or get_evaluator(study.evaluator, **study.synthetic)
     started = _utcnow()
-    parts = parts_dir_for(out)
-    parts.mkdir(parents=True, exist_ok=True)
+    parts = parts_dir_for(out)          # created with the first stored result
     tasks = study.tasks()
     keys = [t.key(evaluator.id) for t in tasks]
     todo = [(t, k) for t, k in zip(tasks, keys)
@@ -174,11 +173,11 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
     failures = []
     if todo:
         from tqdm import tqdm
-        bar = tqdm(total=len(tasks), initial=n_done, desc=f"batch {study.name}", unit="RVE",
-                   file=sys.stderr, disable=not progress, dynamic_ncols=True)
         ctx = contextlib.nullcontext(client) if client is not None else \
             _dask_client(scheduler, workers, processes)
-        with bar, ctx as cl:
+        with ctx as cl, tqdm(total=len(tasks), initial=n_done, desc=f"batch {study.name}",
+                             unit="RVE", file=sys.stderr, disable=not progress,
+                             dynamic_ncols=True) as bar:
             from dask.distributed import as_completed
             by_key = {}
             futures = []
@@ -190,9 +189,10 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
             stored = 0
             for fut in as_completed(futures):
                 t, k = by_key[fut.key]
-                if fut.status == "error":
-                    exc = fut.exception()
-                    failures.append((t, f"{type(exc).__name__}: {exc}"))
+                if fut.status != "finished":          # error (after retries) or cancelled
+                    exc = fut.exception() if fut.status == "error" else None
+                    msg = f"{type(exc).__name__}: {exc}" if exc is not None else fut.status
+                    failures.append((t, msg))
                 else:
                     _write_part(_part_path(parts, t, k), t, k, fut.result())
                     stored += 1

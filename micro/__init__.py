@@ -10,3 +10,9 @@ from .particles import (CoreShell, Histogram, LogNormal, Monodisperse, default_d
 __all__ = ["InputError"]
 __all__ += ["RVE", "generate_rve", "describe", "LogNormal", "Histogram", "Monodisperse",
             "CoreShell", "default_distribution"]
+from .magnetization import get_law
+from .dipoles import (ConvergenceError, DipoleSum, MagneticState, applied_gradient,
+                      dipole_field_direct, dipole_pair_interactions, solve)
+
+__all__ += ["get_law", "solve", "MagneticState", "ConvergenceError", "DipoleSum",
+            "applied_gradient", "dipole_field_direct", "dipole_pair_interactions"]

@@ -237,9 +237,10 @@ def ewald_cell_index(p, ncell):
     return min(max(c, 0), ncell - 1)
 
 
-def _ewald_real_impl(pos, mom, order, cell_start, ncell, noff, alpha, rc, want_force,
+def _ewald_real_impl(pos, mom, targets, order, cell_start, ncell, noff, alpha, rc, want_force,
                      out_h, out_f, out_vir):
-    """Real-space Ewald part for every particle i over all j and images within rc.
+    """Real-space Ewald part for the particles i = targets[t] over all j and images within rc
+    (results in row t of the outputs).
 
     ``order``/``cell_start``: particles sorted by cell (cell c holds order[cell_start[c]:
     cell_start[c+1]]), ``ncell`` cells per edge; ``noff`` >= rc * ncell neighbour cells are
@@ -247,9 +248,9 @@ def _ewald_real_impl(pos, mom, order, cell_start, ncell, noff, alpha, rc, want_f
     ``out_h`` (N,3): field sum B2 (m_j.r) r - B1 m_j. With ``want_force``: ``out_f`` (N,3)
     force on i and ``out_vir`` (N,9) half of sum_j r (x) F (row-major), without mu0/(4 pi).
     """
-    n = pos.shape[0]
     rc2 = rc * rc
-    for i in nb.prange(n):
+    for ti in nb.prange(targets.shape[0]):
+        i = targets[ti]
         xi, yi, zi = pos[i, 0], pos[i, 1], pos[i, 2]
         mix, miy, miz = mom[i, 0], mom[i, 1], mom[i, 2]
         cx = ewald_cell_index(xi, ncell)
@@ -291,12 +292,12 @@ def _ewald_real_impl(pos, mom, order, cell_start, ncell, noff, alpha, rc, want_f
                                 for b in range(3):
                                     v[3 * b + a] += 0.5 * d[b] * pa
         for a in range(3):
-            out_h[i, a] = h[a]
+            out_h[ti, a] = h[a]
         if want_force:
             for a in range(3):
-                out_f[i, a] = f[a]
+                out_f[ti, a] = f[a]
             for q in range(9):
-                out_vir[i, q] = v[q]
+                out_vir[ti, q] = v[q]
 
 
 ewald_real = nb.njit(cache=True, parallel=True)(_ewald_real_impl)

@@ -119,7 +119,8 @@ def dipole_pair_interactions(centers_m, moments_Am2):
     order = np.arange(n, dtype=np.int64)
     start = np.array([0, n], dtype=np.int64)
     # one cell, no neighbour offsets: only the n = 0 image; all pairs closer than rc = 0.5 box
-    K.ewald_real(pos, np.ascontiguousarray(m), order, start, 1, 0, 0.0, 0.5, True, h, f, v)
+    K.ewald_real(pos, np.ascontiguousarray(m), order, order, start, 1, 0, 0.0, 0.5, True, h, f,
+                 v)
     H = h / (4 * math.pi * box ** 3)
     F = MU0 * f / (4 * math.pi * box ** 4)
     return H, F, MU0 * np.cross(m, H)

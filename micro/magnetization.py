@@ -210,7 +210,9 @@ class LangevinLaw(MagnetizationLaw):
         x = self._x(H_abs_A_m, m_sat_Am2)
         small = np.abs(x) < 1e-3
         xs = np.where(small, 1.0, x)
-        dl = np.where(small, 1.0 / 3.0 - x ** 2 / 15.0, 1.0 / xs ** 2 - 1.0 / np.sinh(np.minimum(xs, 700)) ** 2)
+        e = np.exp(-2.0 * np.abs(xs))
+        csch2 = 4.0 * e / (1.0 - e) ** 2            # 1/sinh^2, no overflow for large x
+        dl = np.where(small, 1.0 / 3.0 - x ** 2 / 15.0, 1.0 / xs ** 2 - csch2)
         return np.asarray(m_sat_Am2) * dl * MU0 * np.asarray(m_sat_Am2) / (_KB * self.T_K)
 
     def coenergy_J(self, H_abs_A_m, m_sat_Am2, volume_m3):

@@ -1,2 +1,23 @@
-"""Measured data, the seed model, causes and their extensions, and ``diagnose``."""
-__all__: list[str] = []
+"""Measured data, the seed model, causes and their extensions, and ``diagnose``.
+
+* :func:`load_experiment` -- read and validate an experiment (TOML + CSV, see
+  ``shared/spec/experiments.md``); :func:`write_experiment` writes one.
+* :func:`seed_predict` -- the seed model of each kind.
+* :data:`CAUSES`, :class:`ModelSpec`, :func:`predict` -- the causes' vocabulary and the seed
+  model composed with any set of extensions.
+* :func:`diagnose` -- cross-validated forward selection of causes; ``Diagnosis.as_dict()`` is
+  the spec's JSON; :func:`write_report` its Markdown + PNG report.
+* :func:`generate` -- seeded synthetic experiments with hidden causes; :func:`run_study`.
+"""
+from .causes import CAUSES, DESCRIPTIONS, ModelSpec, applicable, predict
+from .diagnose import Diagnosis, diagnose
+from .io import Experiment, Matrix, Particles, Setup, load_experiment, write_experiment
+from .report import write_report
+from .seed_model import seed_body_force_N_m3, seed_predict
+from .study import run_study, summarize
+from .synthetic import CASES, SyntheticCase, generate, write_case
+
+__all__ = ["CAUSES", "DESCRIPTIONS", "ModelSpec", "applicable", "predict", "Diagnosis",
+           "diagnose", "Experiment", "Matrix", "Particles", "Setup", "load_experiment",
+           "write_experiment", "write_report", "seed_body_force_N_m3", "seed_predict",
+           "run_study", "summarize", "CASES", "SyntheticCase", "generate", "write_case"]

@@ -13,13 +13,15 @@ _DIAGNOSE_DOC = """\
 Compare a measured experiment (TOML + CSV, see shared/spec/experiments.md) with the seed
 model, name what it gets wrong from the causes' vocabulary, extend the model and measure the
 gain. Criterion: a cause is accepted only if it lowers the cross-validated RMSE (folds of whole
-specimens when there are >= 3) by >= 10 %% AND a one-sided Wilcoxon signed-rank test on the
-paired held-out squared errors gives p < 0.01; repeated until nothing more helps.
+specimens when there are >= 3) by >= 10 % AND a one-sided Wilcoxon signed-rank test on the
+paired held-out squared errors gives p < 0.01 (the passing candidate with the lowest error is
+accepted; if none passes, pairs of the three best are tried together); repeated until nothing
+more helps.
 Exit code 0 when the analysis ran (whatever it found), 2 for unusable input."""
 
 _STUDY_DOC = """\
 Run diagnose on N synthetic experiments with hidden causes (seeded; truths built independently
-of the diagnosis model, 1-3 %% noise) and report the confusion matrix, the false-cause rate and
+of the diagnosis model, 1-3 % noise) and report the confusion matrix, the false-cause rate and
 the median gain (study.json, confusion.csv, confusion.png, manifest.json in --out)."""
 
 
@@ -70,9 +72,11 @@ def _study(args) -> int:
     write_study(records, summary, args.out, config)
     if args.json:
         write_json(args.json, {"summary": summary, "cases": records})
+    def f(v, spec):
+        return "n/a" if v is None else format(v, spec)
     print(f"{summary['n_used']} cases used ({summary['n_unavailable']} with an unavailable "
-          f"cause): exact recovery {summary['exact_recovery_rate']:.1%}, false-cause rate "
-          f"{summary['false_cause_rate']:.1%}, median gain {summary['median_gain']:.3g}")
+          f"cause): exact recovery {f(summary['exact_recovery_rate'], '.1%')}, false-cause rate "
+          f"{f(summary['false_cause_rate'], '.1%')}, median gain {f(summary['median_gain'], '.3g')}")
     return 0
 
 

@@ -15,9 +15,10 @@ field_dependent_magnetization   particle magnetization ``M_p(H_loc)`` from
                                 ``micro.magnetization`` -- linear-capped, Froehlich-Kennelly or
                                 Langevin, chosen by cross-validation (``chi0``: initial
                                 susceptibility of a particle)
-dipolar_interaction             mean-field local field of randomly placed dipoles,
-                                ``H_loc = H_int + M/3`` (the Lorentz cavity field, the isotropic
-                                limit of ``micro.dipoles``), and the magnetic stress
+dipolar_interaction             local field of randomly dispersed interacting dipoles,
+                                ``H_loc = H_int + c(phi) M``, with c(phi) tabulated from random
+                                RVEs solved by ``micro.dipoles`` (0.35-0.40; the Lorentz
+                                cavity's 1/3 is its mean-field limit), and the magnetic stress
                                 ``sigma = kappa mu0 M^2`` that strains the specimen
                                 (magnetostriction: ``kappa``)
 oxide_shell                     Fe core + Fe3O4 shell per particle (``micro.particles.CoreShell``
@@ -72,7 +73,7 @@ DESCRIPTIONS = {
 #: Physical forms among which cross-validation chooses (None: a single form).
 VARIANTS = {"field_dependent_magnetization": P.LAWS, "hyperelasticity": P.HYPERELASTIC_FORMS}
 
-#: Local-field factor of dipoles placed at random without order: the Lorentz cavity, 1/3.
+#: Mean-field (Lorentz cavity) local-field factor, the reference the RVE table is checked against.
 LORENTZ_FACTOR = 1.0 / 3.0
 
 _KINDS_OF = {
@@ -155,6 +156,8 @@ def _probe(cause, exp):
     if cause in ("field_dependent_magnetization", "hysteresis", "dipolar_interaction",
                  "demagnetization") and exp.kind != "tensile":
         P.particle_magnetization_A_per_m("frohlich-kennelly", np.array([1.0]), 1.0, 1.0)
+    if cause == "dipolar_interaction":
+        P.local_field_factor(0.1)
     if cause == "oxide_shell":
         P.core_shell_moment_ratio(np.array([20e-9]), 1e-9, 25e-9, 7870.0, 178.0)
     if cause == "filler_stiffening":
@@ -229,7 +232,7 @@ def composite_magnetization_A_per_m(spec: ModelSpec, exp: Experiment, p: dict) -
         # saturated particles: neither the local nor the internal field changes |M|
         return Mmax * np.sign(H_a)
     N = P.cylinder_demag_factor(c["aspect_ratio"]) if spec.has("demagnetization") else 0.0
-    cL = LORENTZ_FACTOR if spec.has("dipolar_interaction") else 0.0
+    cL = P.local_field_factor(c["phi"]) if spec.has("dipolar_interaction") else 0.0
     shift = 0.0
     if spec.has("hysteresis"):
         shift = np.where(exp.down, 1.0, -1.0) * p["H_c_A_per_m"]
@@ -242,15 +245,27 @@ def composite_magnetization_A_per_m(spec: ModelSpec, exp: Experiment, p: dict) -
 
     if np.all(feedback == 0.0):
         return g(0.0)
-    # M - g(H_a + feedback M) is increasing where the mean field is stable and changes sign
-    # on [-Mmax, Mmax] (|g| <= Mmax): vectorised bisection to 2^-48 of the bracket.
-    lo, hi = -Mmax.copy(), Mmax.copy()
-    for _ in range(48):
-        mid = 0.5 * (lo + hi)
-        pos = mid - g(mid) > 0
-        hi = np.where(pos, mid, hi)
-        lo = np.where(pos, lo, mid)
-    return 0.5 * (lo + hi)
+    # F(M) = M - g(H_a + feedback M) is increasing where the mean field is stable and changes
+    # sign on [-Mmax, Mmax] (|g| <= Mmax): vectorised Illinois (regula falsi) iteration on that
+    # bracket, to |F| <= 1e-13 Mmax (far below the 1e-8 steps of the fit's finite differences).
+    def F(M):
+        return M - g(M)
+
+    a, b = -Mmax.copy(), Mmax.copy()
+    Fa, Fb = F(a), F(b)
+    tol = 1e-13 * np.maximum(Mmax, 1e-300)
+    x = np.where(np.abs(Fa) < np.abs(Fb), a, b)
+    for _ in range(200):
+        den = Fb - Fa
+        x = np.where(den != 0, (a * Fb - b * Fa) / np.where(den != 0, den, 1.0), 0.5 * (a + b))
+        Fx = F(x)
+        if np.all(np.abs(Fx) <= tol):
+            break
+        same = np.sign(Fx) == np.sign(Fb)
+        # Illinois: when the new point replaces the same end again, halve the other end's F
+        a, Fa = np.where(same, a, b), np.where(same, 0.5 * Fa, Fb)
+        b, Fb = x, Fx
+    return x
 
 
 def predict(spec: ModelSpec, exp: Experiment, p: dict) -> np.ndarray:

@@ -78,6 +78,7 @@ class Diagnosis:
     rounds: list                       # per round: list of Candidate tried
     skipped: dict                      # cause -> why it was not tried
     folds: list | None
+    round_bases: list = field(default_factory=list)   # model each round started from
 
     @property
     def gain(self) -> float:
@@ -349,7 +350,7 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
         ok, why = applicable(cause, exp)
         if not ok and "not a cause for kind" not in why:
             skipped[cause] = why
-    steps, rounds = [], []
+    steps, rounds, round_bases = [], [], []
     bar = None
     if progress:
         from tqdm import tqdm
@@ -375,6 +376,7 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
             best.variants = variants
             tried.append(best)
         rounds.append(tried)
+        round_bases.append(current.spec.label())
         e_cur = current.cv_pred - exp.y
         # the candidate with the lowest cv_rmse among those that pass the criterion
         passing = []
@@ -442,7 +444,7 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
         remaining = [c for c in remaining if c not in (a.cause, b.cause)]
     if bar is not None:
         bar.close()
-    return Diagnosis(exp, baseline, current, steps, rounds, skipped, folds)
+    return Diagnosis(exp, baseline, current, steps, rounds, skipped, folds, round_bases)
 
 
 def _passes(current: Candidate, cand: Candidate, p: float, min_gain: float, alpha: float) -> bool:

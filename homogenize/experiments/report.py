@@ -123,7 +123,7 @@ def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Pat
     _plot_residuals(d, out / "residuals.png")
     unit = UNITS[exp.kind]
     lines = [f"# Diagnosis: {exp.title or exp.kind}", ""]
-    src = f"`{exp.toml_path}`" if exp.toml_path else "in-memory experiment"
+    src = f"`{Path(exp.toml_path).name}`" if exp.toml_path else "in-memory experiment"
     n_spec = int(exp.groups.max()) + 1
     lines += [f"Experiment {src}: kind **{exp.kind}**, {exp.n_rows} rows, {n_spec} specimen(s); "
               f"measured column `{exp.measured_name}` [{unit}].", ""]
@@ -141,6 +141,10 @@ def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Pat
             f"**{c}** ({DESCRIPTIONS[c]})" for c in res["causes"]) + ".", "",
             f"Held-out RMSE: seed {res['baseline']['cv_rmse']:.4g} {unit} -> extended "
             f"{res['final']['cv_rmse']:.4g} {unit}; gain **{res['gain']:.3g}**.", ""]
+    elif d.folds is None:
+        lines += ["With this few rows no cause can be tested: the table of candidates below only "
+                  "shows how the parameter-free extensions would move the a priori prediction "
+                  f"(seed model: error {res['baseline']['cv_rmse']:.4g} {unit}).", ""]
     else:
         lines += ["No extension lowers the held-out error significantly: the seed model explains "
                   f"these data within what they can tell (held-out RMSE "
@@ -156,8 +160,8 @@ def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Pat
                   _params_table(s["params"]), ""]
     lines += ["## Candidates tried", ""]
     for r, tried in enumerate(d.rounds):
-        base = d.baseline if r == 0 else None
-        lines += [f"Round {r + 1} (on top of {'the seed model' if base else res['steps'][r - 1]['cause']}):", "",
+        base = d.round_bases[r] if r < len(d.round_bases) else "?"
+        lines += [f"Round {r + 1} (on top of: {base}):", "",
                   "| cause | cv_rmse | forms tried |", "|---|---|---|"]
         for c in sorted(tried, key=lambda c: c.cv_rmse):
             forms = ", ".join(f"{k}: {v:.3g}" for k, v in c.variants.items()) or "-"

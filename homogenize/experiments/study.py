@@ -38,7 +38,17 @@ def run_study(n: int, seed: int = 0, progress: bool = True) -> list[dict]:
         case = generate(hidden, kind, seed=s)
         unavailable = sorted(c for c in case.expected
                              if applicable(c, case.experiment)[1].startswith("unavailable"))
-        d = diagnose(case.experiment).as_dict()
+        try:
+            d = diagnose(case.experiment).as_dict()
+        except Exception as exc:        # recorded and counted, never hidden: see summary
+            print(f"diagnose-study: case seed {s} ({kind}, {hidden}) failed: {exc!r}",
+                  file=sys.stderr)
+            records.append({"seed": s, "kind": kind, "hidden": list(hidden),
+                            "expected": sorted(case.expected), "error": repr(exc),
+                            "unavailable": unavailable})
+            if bar is not None:
+                bar.update(1)
+            continue
         found = d["causes"]
         records.append({"seed": s, "kind": kind, "hidden": list(hidden),
                         "expected": sorted(case.expected), "found": found,
@@ -57,6 +67,8 @@ def run_study(n: int, seed: int = 0, progress: bool = True) -> list[dict]:
 
 def summarize(records: list[dict]) -> dict:
     """Confusion matrix, false-cause rate, exact-recovery rate, median gain."""
+    errors = [r for r in records if "error" in r]
+    records = [r for r in records if "error" not in r]
     usable = [r for r in records if not r["unavailable"]]
     idx = {c: i for i, c in enumerate(LABELS)}
     conf = np.zeros((len(LABELS), len(LABELS)), dtype=int)
@@ -72,7 +84,8 @@ def summarize(records: list[dict]) -> dict:
             per_cause[c] = {"cases": len(rs), "recovered": sum(c in r["found"] for r in rs)}
     gains = [r["gain"] for r in with_cause]
     return {
-        "n_cases": len(records),
+        "n_cases": len(records) + len(errors),
+        "n_errors": len(errors),
         "n_unavailable": len(records) - len(usable),
         "unavailable_causes": sorted({c for r in records for c in r["unavailable"]}),
         "n_used": len(usable),

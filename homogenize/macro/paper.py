@@ -196,6 +196,17 @@ def _beam_study(sp: SeedParameters, width_m, thickness_m, levels, bar):
     c2 = _tip(strip, mat, f0, 2, 2)
     tick("coarse mesh P1/P2")
 
+    # which locking? the P1/P2 ratio on one mesh versus nu: shear locking alone at nu = 0,
+    # growing with the volumetric constraint as nu -> 1/2
+    kl = levels["locking"]
+    locking = []
+    for nu in (0.0, 0.3, 0.45, 0.49):
+        m_nu = Material(sp.E_Pa, nu, sp.pdms_density_kg_m3)
+        t1 = _tip(strip, m_nu, f0, kl, 1).tip_m
+        t2 = _tip(strip, m_nu, f0, kl, 2).tip_m
+        locking.append({"nu": nu, "tip_P1_m": t1, "tip_P2_m": t2, "P1_over_P2_force": t2 / t1})
+    tick("locking versus nu")
+
     # large deformation at the inferred geometry, on the level-kn mesh, corrected by the same
     # mesh's linear discretisation factor (tip_conv / linear tip on that mesh)
     kn = levels["nl"]
@@ -253,6 +264,8 @@ def _beam_study(sp: SeedParameters, width_m, thickness_m, levels, bar):
         "paper_gap_elmer_over_abaqus": paper_gap,
         "gap_scan_thin_family": [{**g, "ratio_to_converged": float(q)}
                                  for g, q in zip(gap_rows, ratios)],
+        "locking_vs_nu": {"divisions": list(_divisions(kl, L_star, thickness_m)),
+                          "rows": locking},
         "two_layer_mesh": {"divisions": list(c1.divisions), "P1_N_m3": f0 * target / c1.tip_m,
                            "P2_N_m3": f0 * target / c2.tip_m, "n_dof_P1": c1.n_dof,
                            "n_dof_P2": c2.n_dof},
@@ -320,6 +333,7 @@ def _channel_study(sp: SeedParameters, cfg, bar):
 
 FULL = {
     "beam": {"p2": (1, 2, 3, 4, 5), "p1": (1, 2, 3, 4, 6, 8), "search": (3, 4), "nl": 3,
+             "locking": 4,
              "gap": (6, 7, 8, 9, 10, 11, 12, 14)},
     "channel": {"a_m": (0.5e-3, 1e-3, 2e-3, 5e-3, 10e-3), "c_m": (0.25e-3, 0.5e-3, 1e-3, 2e-3),
                 "b_m": 50e-6, "d_m": 20e-3, "nc": 2, "ref_a_m": 5e-3, "ref_c_m": 0.5e-3,
@@ -327,7 +341,7 @@ FULL = {
                 "d_sweep_m": (5e-3, 10e-3, 20e-3, 40e-3)},
 }
 QUICK = {
-    "beam": {"p2": (1, 2, 3), "p1": (1, 2, 3, 4), "search": (1, 2), "nl": 2,
+    "beam": {"p2": (1, 2, 3), "p1": (1, 2, 3, 4), "search": (1, 2), "nl": 2, "locking": 2,
              "gap": (3, 4)},
     "channel": {"a_m": (1e-3, 5e-3), "c_m": (0.5e-3, 1e-3), "b_m": 50e-6, "d_m": 10e-3,
                 "nc": 1, "ref_a_m": 5e-3, "ref_c_m": 0.5e-3, "b_sweep_m": (25e-6, 100e-6),
@@ -513,6 +527,8 @@ def _summary(res: dict, figures) -> str:
         f"| {r['a_m'] * 1e3:g} | {r['c_m'] * 1e3:g} | {r['max_deflection_m'] * 1e6:.4g} | "
         f"{r['plate_formula_m'] * 1e6:.4g} | {100 * r['area_reduction']:.3g} | "
         f"{'yes' if r['closes'] else 'no'} |" for r in ch["table"])
+    lock = ", ".join(f"{r['P1_over_P2_force']:.2f} at nu = {r['nu']:g}"
+                     for r in f["locking_vs_nu"]["rows"])
     quick = ("\n> **Quick run** (reduced meshes and sweeps, for tests): numbers are indicative "
              "only.\n" if res["quick"] else "")
     return f"""# The seed paper reproduced and examined
@@ -569,9 +585,10 @@ P1 converges with order {ms['P1_observed_order']:.2f}.
 
 Force needed for 4 mm. On the same mesh, linear tetrahedra need
 {f['gap_P1_over_P2']:.2f} x the force of quadratic ones on the {cm['layers_through_thickness']}-layer
-mesh (the paper: 50/40 = 1.25). Linear tetrahedra at nu = 0.45 lock: their constant strain cannot
-represent bending (shear locking) and their volumetric constraint is stiff when lambda = 9 mu
-(volumetric locking). The gap is thus reproduced by *the same mesh with linear 4-node tetrahedra in one code (as
+mesh (the paper: 50/40 = 1.25). Linear tetrahedra lock: their constant strain cannot represent
+bending (shear locking), and near incompressibility (lambda = 9 mu at nu = 0.45) adds
+volumetric locking. On the mesh {f['locking_vs_nu']['divisions']} the P1/P2 force ratio is
+{lock}: most of the gap is shear locking, the volumetric part grows as nu -> 1/2. The gap is thus reproduced by *the same mesh with linear 4-node tetrahedra in one code (as
 Elmer runs on a first-order mesh) and quadratic 10-node tetrahedra in the other (as Abaqus
 C3D10)*; quadratic elements are within {100 * abs(f['P2_coarse'] / f['converged'] - 1):.1f} % of
 the converged force on that mesh, so Abaqus' 40 kN/m^3 is the trustworthy number. A gap of

@@ -105,6 +105,10 @@ def test_scalar_axis_and_defaults(tmp_path):
     (GOOD + "\n[rve_size]\nn_particles = [10]\n", ["[rve_size]", "two sizes"]),
     (GOOD + "\n[rve_size]\nn_particles = [10, -20]\n", ["[rve_size]", "-20"]),
     (GOOD + "\n[rve_size]\nn_particles = [10, 20]\nfoo = 1\n", ["[rve_size]", "foo"]),
+    (GOOD + "\n[synthetic]\nwork_seconds = -1\n", ["[synthetic] work_seconds", "-1"]),
+    (GOOD + "\n[synthetic]\nsleep = 1\n", ["[synthetic]", "sleep"]),
+    (GOOD.replace('evaluator = "synthetic"', 'evaluator = "rve"') + "\n[synthetic]\n"
+     "work_seconds = 1\n", ["[synthetic]", "rve"]),
 ])
 def test_bad_study_gives_one_clear_message(text, words):
     with pytest.raises(InputError) as exc:

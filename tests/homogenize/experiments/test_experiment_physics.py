@@ -123,6 +123,9 @@ def test_core_shell_ratio_against_hand_formula():
     mpv = lambda rr: (s_c * 7870 * (rr - t) ** 3 + 92.0 * 5170 * (rr ** 3 - (rr - t) ** 3)) / rr ** 3
     np.testing.assert_allclose(ratio, mpv(r) / mpv(r0), rtol=1e-12)
     assert ratio[1] == pytest.approx(1.0, rel=1e-14) and ratio[0] < 1 < ratio[2]
+    # a particle thinner than the shell is all Fe3O4: 92 A m^2/kg x 5170 kg/m^3 per volume
+    tiny = P.core_shell_moment_ratio(np.array([2e-9]), t, r0, 7870.0, 178.0)
+    assert tiny[0] == pytest.approx(92.0 * 5170 / mpv(r0), rel=1e-12)
 
 
 def test_composite_density():
@@ -140,4 +143,4 @@ def test_stiffening_dilute_einstein_limit():
     slope = (P.stiffening_ratio(phi, 0.4999, 2e6) - 1.0) / phi
     assert slope == pytest.approx(2.5, rel=2e-3)
     r = P.stiffening_ratio(np.linspace(0, 0.4, 9), 0.45, 2e6)
-    assert r[0] == 1.0 and np.all(np.diff(r) > 0)
+    assert r[0] == pytest.approx(1.0, abs=1e-14) and np.all(np.diff(r) > 0)

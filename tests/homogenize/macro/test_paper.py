@@ -55,6 +55,9 @@ def test_paper_numbers_are_physical(quick):
     # linear tets lock: more force for the same deflection; quadratic ones nearly converged
     assert f["P1_coarse"] > 1.2 * f["P2_coarse"]
     assert f["P2_coarse"] == pytest.approx(f["converged"], rel=0.05)
+    # shear locking alone at nu = 0; volumetric locking adds to it as nu -> 1/2
+    lock = {r["nu"]: r["P1_over_P2_force"] for r in f["locking_vs_nu"]["rows"]}
+    assert 1 < lock[0.0] < lock[0.45] < lock[0.49]
     # large deformation reduces the tip like the elastica does (quick mesh: 1 %)
     nl = res["nonlinear"]
     assert res["tip_nonlinear_m"] < res["tip_linear_m"]
