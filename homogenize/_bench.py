@@ -16,6 +16,7 @@ _PROVIDERS = (
     "micro._bench_particles",
     "micro._bench_dipoles",
     "homogenize._bench_cell",
+    "homogenize.macro._bench",
     "homogenize._bench_tables",
 )
 
