@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from micro._validate import InputError, check_choice, check_finite, check_positive, check_range
+from micro._validate import InputError, check_finite, check_positive, check_range
 
 from . import _assembly as asm
 from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,

@@ -4,7 +4,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from homogenize.cell import (Material, anisotropy_index, bulk_shear, eshelby_dilute,
+from homogenize.cell import (Material, bulk_shear, eshelby_dilute,
                              hashin_shtrikman_bounds, homogenize_mesh, homogenize_rve,
                              isotropic_stiffness_voigt, mori_tanaka)
 from homogenize.mesh import voxelize
