@@ -124,15 +124,8 @@ def _pattern(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return indptr, cols.ravel().astype(idx_dtype), (rows, order)
 
 
-def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float) -> sp.bsr_matrix:
-    """Global periodic stiffness matrix, 3 x 3 BSR, DOF ``3 p + c``.
-
-    lam, mu : ndarray, shape (n, n, n) -- Lame parameters per voxel [Pa], indexed [k, j, i]
-    h : float -- voxel edge [m]
-    """
-    n = lam.shape[0]
-    if n < 3:
-        raise ValueError("the periodic 27-point stencil needs n >= 3")
+def _stencil_blocks(h: float) -> np.ndarray:
+    """(16, 27, 3, 3): blocks K[a, a + d] of the unit-lambda (first 8) and unit-mu element matrix."""
     Kl, Km = reference_matrices(h)
     tab = _stencil_tables()
     G = np.zeros((16, 27, 3, 3))
@@ -142,6 +135,40 @@ def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float) -> sp.bsr_matrix:
             if b >= 0:
                 G[a, s] = Kl[3 * a:3 * a + 3, 3 * b:3 * b + 3]
                 G[8 + a, s] = Km[3 * a:3 * a + 3, 3 * b:3 * b + 3]
+    return G
+
+
+def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float, *, method: str = "numba"
+                 ) -> sp.bsr_matrix:
+    """Global periodic stiffness matrix, 3 x 3 BSR with sorted indices, DOF ``3 p + c``.
+
+    lam, mu : ndarray, shape (n, n, n) -- Lame parameters per voxel [Pa], indexed [k, j, i]
+    h : float -- voxel edge [m]
+    method : {"numba", "blas"} -- "numba": one parallel pass writing every row's 27 blocks in
+        sorted column order (:func:`homogenize._kernels.voxel_stencil_blocks`); "blas": the
+        reference path, one dense product ``(N, 16) @ (16, 243)`` then a reordering of the rows
+        that wrap. Both give the same matrix up to the summation order (round-off).
+    """
+    n = lam.shape[0]
+    if n < 3:
+        raise ValueError("the periodic 27-point stencil needs n >= 3")
+    if method not in ("numba", "blas"):
+        raise ValueError(f"method must be 'numba' or 'blas', got {method!r}")
+    G = _stencil_blocks(h)
+    if method == "numba":
+        from ._kernels import voxel_stencil_blocks
+        idx_dtype = np.int32 if 27 * n ** 3 < 2 ** 31 else np.int64
+        indices = np.empty(27 * n ** 3, dtype=np.int64)
+        data = np.empty((27 * n ** 3, 3, 3))
+        voxel_stencil_blocks(n, np.ascontiguousarray(lam, dtype=np.float64).ravel(),
+                             np.ascontiguousarray(mu, dtype=np.float64).ravel(),
+                             _stencil_tables(), np.ascontiguousarray(G[:8]),
+                             np.ascontiguousarray(G[8:]), indices, data)
+        indptr = np.arange(0, 27 * n ** 3 + 1, 27, dtype=idx_dtype)
+        A = sp.bsr_matrix((data, indices.astype(idx_dtype), indptr),
+                          shape=(3 * n ** 3, 3 * n ** 3))
+        A.has_sorted_indices = True
+        return A
     X = np.concatenate([node_coefficients(lam), node_coefficients(mu)], axis=1)
     data = (X @ G.reshape(16, 243)).reshape(n ** 3, 27, 3, 3)
     del X

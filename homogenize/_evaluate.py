@@ -51,10 +51,10 @@ _B_SAT_T = 0.3                       # field scale of the synthetic magnetizatio
 _REL_SD_100 = 0.05                   # relative sd of f_eff at 100 particles
 
 
-def get_evaluator(name: str, **options):
+def get_evaluator(name: str, *, fem: bool = False, **options):
     """The evaluator of a study's ``evaluator`` key (``options``: its ``[synthetic]`` table)."""
     if name == "rve":
-        return RVEEvaluator()
+        return RVEEvaluator(fem=fem)
     if name == "synthetic":
         return SyntheticEvaluator(**options)
     raise InputError(f"unknown evaluator {name!r}; allowed: rve, synthetic")
@@ -193,18 +193,18 @@ _DISTRIBUTIONS = ("lognormal", "monodisperse")
 
 
 _SOURCE_MODULES = ("micro.rve", "micro.particles", "micro.magnetization", "micro.dipoles",
-                   "micro._ewald", "micro._kernels", "homogenize.mesh", "homogenize.cell",
-                   "homogenize._assembly", "homogenize._evaluate")
-_SOURCE_HASH: list = []
+                   "micro._ewald", "micro._kernels", "homogenize._evaluate")
+_FEM_MODULES = ("homogenize.mesh", "homogenize.cell", "homogenize._assembly")
+_SOURCE_HASH: dict = {}
 
 
-def _source_hash() -> str:
-    """sha256 (12 hex digits) of the source files of the evaluation chain."""
-    if not _SOURCE_HASH:
+def _source_hash(fem: bool = False) -> str:
+    """sha256 (12 hex digits) of the source files of the evaluation chain (+ FEM modules)."""
+    if fem not in _SOURCE_HASH:
         import hashlib
         import importlib.util
         h = hashlib.sha256()
-        for name in _SOURCE_MODULES:
+        for name in _SOURCE_MODULES + (_FEM_MODULES if fem else ()):
             try:
                 spec = importlib.util.find_spec(name)
             except ModuleNotFoundError:
@@ -213,8 +213,8 @@ def _source_hash() -> str:
             h.update(name.encode())
             if origin and Path(origin).is_file():
                 h.update(Path(origin).read_bytes())
-        _SOURCE_HASH.append(h.hexdigest()[:12])
-    return _SOURCE_HASH[0]
+        _SOURCE_HASH[fem] = h.hexdigest()[:12]
+    return _SOURCE_HASH[fem]
 
 
 def _signature_keys(func) -> set:
@@ -254,11 +254,13 @@ class RVEEvaluator:
     ``[cell]`` to :func:`homogenize.cell.homogenize_rve`.
     """
 
+    fem: bool = False     # the FEM modules' source enters the id only when they run
+
     @property
     def id(self) -> str:
         """``rve-1-<hash of the physics source code>``: stored results of an older code are
         never mixed with new ones (a changed solver recomputes everything)."""
-        return f"rve-1-{_source_hash()}"
+        return f"rve-1{'-fem' if self.fem else ''}-{_source_hash(self.fem)}"
 
     def check(self, study) -> None:
         names = dict(study.axes)

@@ -162,7 +162,7 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
     if not isinstance(study, Study):
         study = load_study(study)
     out = Path(out)
-    evaluator = evaluator or get_evaluator(study.evaluator, **study.synthetic)
+    evaluator = evaluator or get_evaluator(study.evaluator, fem=study.fem, **study.synthetic)
     started = _utcnow()
     parts = parts_dir_for(out)          # created with the first stored result
     tasks = study.tasks()

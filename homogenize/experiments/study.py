@@ -133,8 +133,8 @@ def _plot_confusion(conf, lab, summary, path):
     ax.set_ylabel("cause hidden in the data (with its prerequisites)")
     fr = summary["false_cause_rate"]
     g = summary["median_gain"]
-    ax.set_title(f"{summary['n_used']} synthetic cases: exact {summary['exact_recovery_rate']:.0%}, "
-                 f"false causes {fr:.0%}, median gain {g:.3g}" if fr is not None and g is not None
+    ax.set_title(f"{summary['n_used']} synthetic cases: exact {summary['exact_recovery_rate']:.1%}, "
+                 f"false causes {fr:.1%}, median gain {g:.3g}" if fr is not None and g is not None
                  else "diagnose-study", fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
