@@ -16,6 +16,7 @@ venv: $(STAMP)
 
 run: $(STAMP)
 	$(BIN)/mapsim paper --out results/paper --json results/paper/paper.json
+	$(BIN)/mapsim chain --out results/chain
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
