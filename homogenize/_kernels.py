@@ -43,12 +43,14 @@ def bsr_residual(indptr, indices, data, x, b, out):
     C = data.shape[2]
     for p in nb.prange(nb_rows):
         for r in range(R):
-            acc = b[p, r]
-            for s in range(indptr[p], indptr[p + 1]):
-                q = indices[s]
+            out[p, r] = b[p, r]
+        for s in range(indptr[p], indptr[p + 1]):
+            q = indices[s]
+            for r in range(R):
+                acc = 0.0
                 for c in range(C):
-                    acc -= data[s, r, c] * x[q, c]
-            out[p, r] = acc
+                    acc += data[s, r, c] * x[q, c]
+                out[p, r] -= acc
 
 
 @nb.njit(cache=True, parallel=True)

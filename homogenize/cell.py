@@ -214,8 +214,8 @@ class _CellSolver:
             # the coarse correction, so the V-cycle stays symmetric (needed by CG)
             self.ml = pyamg.smoothed_aggregation_solver(
                 K, B=B, symmetry="hermitian", max_coarse=300, coarse_solver="splu",
-                presmoother=("block_gauss_seidel", {"sweep": "forward"}),
-                postsmoother=("block_gauss_seidel", {"sweep": "backward"}))
+                presmoother=("block_gauss_seidel", {"sweep": "symmetric"}),
+                postsmoother=("block_gauss_seidel", {"sweep": "symmetric"}))
             if len(self.ml.levels) > 1:
                 self.M = _VCycle(self.ml, self.n)
                 self.matvec = self.M.fine_matvec
@@ -427,12 +427,16 @@ class _VCycle:
     def __matmul__(self, b):
         x = np.zeros_like(b)
         nc = len(self.colours)
-        self._smooth(x, b, range(nc))
+        # symmetric multicolour Gauss-Seidel (colours forward, then backward) before and after
+        # the coarse correction: self-adjoint smoother, so the V-cycle is symmetric positive
+        # definite, as CG requires
+        sym = list(range(nc)) + list(range(nc - 1, -1, -1))
+        self._smooth(x, b, sym)
         cb = self.R(self.A.residual(x, b))
         cx = np.zeros_like(cb)
         self._coarse(1, cx, cb)
         x += self.P(cx)
-        self._smooth(x, b, range(nc - 1, -1, -1))
+        self._smooth(x, b, sym)
         return x
 
 

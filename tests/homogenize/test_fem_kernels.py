@@ -1,0 +1,76 @@
+"""numba kernels of homogenize against plain numpy/scipy references, and the fast cell solver
+against the reference path (BLAS assembly, pyamg's own V-cycle, scipy products)."""
+import numpy as np
+import scipy.sparse as sp
+
+from homogenize import _assembly as A
+from homogenize import _kernels as K
+from homogenize.cell import _grid_colours
+
+
+def _random_bsr(rows, cols, R, C, seed):
+    rng = np.random.default_rng(seed)
+    M = sp.random(rows * R, cols * C, density=0.3, random_state=rng, format="csr")
+    return M.tobsr(blocksize=(R, C))
+
+
+def test_bsr_matvec_and_residual_equal_scipy():
+    rng = np.random.default_rng(1)
+    for R, C in ((3, 3), (3, 6), (6, 3)):
+        M = _random_bsr(7, 5, R, C, seed=R + C)
+        x = rng.normal(size=M.shape[1])
+        b = rng.normal(size=M.shape[0])
+        y = np.empty(M.shape[0])
+        K.bsr_matvec(M.indptr, M.indices, M.data, x.reshape(-1, C), y.reshape(-1, R))
+        # same products summed in another order: round-off only
+        assert np.allclose(y, M @ x, rtol=1e-13, atol=1e-13 * np.abs(M @ x).max())
+        out = np.empty(M.shape[0])
+        K.bsr_residual(M.indptr, M.indices, M.data, x.reshape(-1, C), b.reshape(-1, R),
+                       out.reshape(-1, R))
+        assert np.allclose(out, b - M @ x, rtol=1e-13, atol=1e-13 * np.abs(b - M @ x).max())
+
+
+def test_voxel_stencil_kernel_equals_blas_assembly():
+    rng = np.random.default_rng(0)
+    for n in (3, 4, 5):                       # n = 3: every neighbour wraps; odd and even n
+        ph = rng.random((n, n, n)) < 0.3
+        lam, mu = np.where(ph, 1.2e11, 6.2e6), np.where(ph, 8.2e10, 6.9e5)
+        Kn = A.assemble_bsr(lam, mu, 1e-8, method="numba")
+        Kb = A.assemble_bsr(lam, mu, 1e-8, method="blas")
+        assert np.array_equal(Kn.indices, Kb.indices) and np.array_equal(Kn.indptr, Kb.indptr)
+        # same element blocks, summed in a different order: relative round-off
+        assert np.abs(Kn.data - Kb.data).max() <= 1e-14 * np.abs(Kb.data).max()
+
+
+def test_colour_sweep_equals_sequential_block_gauss_seidel():
+    """A multicolour sweep IS a sequential block Gauss-Seidel sweep in colour order, because the
+    nodes of one colour share no voxel (checked here for odd and even n)."""
+    rng = np.random.default_rng(3)
+    for n in (4, 5):
+        ph = rng.random((n, n, n)) < 0.3
+        M = A.assemble_bsr(np.where(ph, 50.0, 1.0), np.where(ph, 30.0, 1.0), 1.0)
+        M = (M + 1e-3 * sp.identity(M.shape[0])).tobsr(blocksize=(3, 3))   # SPD (periodic K is singular)
+        M.sort_indices()
+        colours = _grid_colours(n)
+        assert sum(c.size for c in colours) == n ** 3
+        Md = M.tocsr()
+        for c in colours:                       # no coupling inside a colour
+            sub = Md[np.repeat(3 * c, 3) + np.tile(np.arange(3), c.size)][:, np.repeat(3 * c, 3)
+                                                                           + np.tile(np.arange(3), c.size)]
+            assert abs(sub - sp.block_diag([Md[3 * p:3 * p + 3, 3 * p:3 * p + 3] for p in c])).max() == 0
+        b = rng.normal(size=M.shape[0])
+        x = rng.normal(size=M.shape[0])
+        rows = np.repeat(np.arange(n ** 3), np.diff(M.indptr))
+        dinv = np.ascontiguousarray(np.linalg.inv(M.data[M.indices == rows]))
+        xk = x.copy()
+        for c in colours:
+            K.bsr3_gauss_seidel_color(M.indptr, M.indices, M.data, dinv, c, xk.reshape(-1, 3),
+                                      b.reshape(-1, 3))
+        # plain numpy sequential block sweep in the same node order
+        D = Md.toarray()
+        xr = x.copy()
+        for p in np.concatenate(colours):
+            s = slice(3 * p, 3 * p + 3)
+            r = b[s] - D[s] @ xr + D[s, s] @ xr[s]
+            xr[s] = np.linalg.solve(D[s, s], r)
+        assert np.allclose(xk, xr, rtol=1e-12, atol=1e-12 * np.abs(xr).max())
