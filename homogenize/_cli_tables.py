@@ -406,10 +406,8 @@ def wrap_export(func):
 
 
 def export_from_table(args) -> int:
-    from pathlib import Path
-
+    from homogenize.macro._cli import write_snippet
     from homogenize.macro.exporters import ExportSpec, export_text
-    from micro._io import atomic_write_text
 
     from .tables import body_force_from_table, interpolate, modulus_from_table, read_table
     for name, v in (("--phi", args.phi), ("--B", args.B_T), ("--gradB", args.gradB_T_per_m)):
@@ -450,12 +448,4 @@ def export_from_table(args) -> int:
             f"{c} E = {E:.6g} Pa ({'given' if args.E_Pa is not None else 'table E_eff' if E_est else 'PDMS'}), "
             f"nu = {nu:.4g}, density = {rho:.6g} kg/m^3"]
     text = "\n".join(head) + "\n" + export_text(spec, args.to)
-    if args.out == "-":
-        sys.stdout.write(text)
-    else:
-        out = Path(args.out)
-        if out.is_dir():
-            raise InputError(f"--out {out} is a directory; give a file name")
-        atomic_write_text(out, text)
-        print(f"wrote {args.to} snippet to {out}")
-    return 0
+    return write_snippet(text, args.out, args.to)

@@ -24,22 +24,26 @@ def _paper(args) -> int:
 
 
 def _export(args) -> int:
-    from pathlib import Path
-
     from homogenize.macro.exporters import ExportSpec, export_text
-    from micro._io import atomic_write_text
     spec = ExportSpec(args.body_force_N_m3, args.E_Pa, args.nu, args.density_kg_m3,
                       direction=args.direction, gravity_m_s2=args.gravity_m_s2, name=args.name,
                       elset=args.elset, index=args.index)
-    text = export_text(spec, args.to)
-    if args.out == "-":
+    return write_snippet(export_text(spec, args.to), args.out, args.to)
+
+
+def write_snippet(text: str, out: str, to: str) -> int:
+    """Write an exported snippet to ``out`` (``-`` = stdout) atomically; return exit code 0."""
+    from pathlib import Path
+
+    from micro._io import atomic_write_text
+    if out == "-":
         sys.stdout.write(text)
-    else:
-        out = Path(args.out)
-        if out.is_dir():
-            raise InputError(f"--out {out} is a directory; give a file name")
-        atomic_write_text(out, text)
-        print(f"wrote {args.to} snippet to {out}")
+        return 0
+    path = Path(out)
+    if path.is_dir():
+        raise InputError(f"--out {path} is a directory; give a file name")
+    atomic_write_text(path, text)
+    print(f"wrote {to} snippet to {path}")
     return 0
 
 
