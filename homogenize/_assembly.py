@@ -156,7 +156,9 @@ def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float, *, method: str = "nu
         raise ValueError(f"method must be 'numba' or 'blas', got {method!r}")
     G = _stencil_blocks(h)
     if method == "numba":
-        from ._kernels import voxel_stencil_blocks
+        from . import _kernels as kn
+        voxel_stencil_blocks = (kn.voxel_stencil_blocks if n ** 3 >= kn.PARALLEL_MIN_ROWS
+                                else kn.voxel_stencil_blocks_serial)
         idx_dtype = np.int32 if 27 * n ** 3 < 2 ** 31 else np.int64
         indices = np.empty(27 * n ** 3, dtype=np.int64)
         data = np.empty((27 * n ** 3, 3, 3))

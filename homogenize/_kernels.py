@@ -7,15 +7,36 @@ shapes and allocate.
 
 Determinism: every parallel loop writes disjoint outputs and each output is a sequential sum in a
 fixed order, so results do not depend on the number of threads.
+
+Each kernel is written once as a plain function and compiled twice: ``name`` (parallel over
+``prange``) and ``name_serial`` (``prange`` runs as ``range``). Launching a parallel region costs
+tens of microseconds -- far more on a loaded machine, where a thread may wait for a time slice --
+so wrappers use the parallel variant only for large loops (:data:`PARALLEL_MIN_ROWS`).
 """
 from __future__ import annotations
+
+import types
 
 import numba as nb
 import numpy as np
 
+PARALLEL_MIN_ROWS = 50_000
 
-@nb.njit(cache=True, parallel=True)
-def bsr_matvec(indptr, indices, data, x, y):
+
+def _both(f):
+    """Compile ``f`` as a parallel and a serial kernel (same source).
+
+    The serial one is compiled from a renamed copy of the function: numba's on-disk cache is keyed
+    by the function's qualified name, not by the ``parallel`` flag, so the two variants would
+    otherwise load each other's machine code.
+    """
+    g = types.FunctionType(f.__code__, f.__globals__, f.__name__ + "_serial", f.__defaults__,
+                           f.__closure__)
+    g.__qualname__ = f.__qualname__ + "_serial"
+    return nb.njit(cache=True, parallel=True)(f), nb.njit(cache=True)(g)
+
+
+def _bsr_matvec(indptr, indices, data, x, y):
     """y = A x for a block-sparse row matrix: data (nnzb, R, C), x (ncolblocks, C), y (nrowblocks, R).
 
     Parallel over block rows (disjoint writes); scipy's bsr_matvec is single-threaded.
@@ -35,8 +56,7 @@ def bsr_matvec(indptr, indices, data, x, y):
                 y[p, r] += acc
 
 
-@nb.njit(cache=True, parallel=True)
-def bsr_residual(indptr, indices, data, x, b, out):
+def _bsr_residual(indptr, indices, data, x, b, out):
     """out = b - A x (same layout as :func:`bsr_matvec`)."""
     nb_rows = indptr.shape[0] - 1
     R = data.shape[1]
@@ -53,8 +73,7 @@ def bsr_residual(indptr, indices, data, x, b, out):
                 out[p, r] -= acc
 
 
-@nb.njit(cache=True, parallel=True)
-def bsr3_gauss_seidel_color(indptr, indices, data, dinv, rows, x, b):
+def _bsr3_gauss_seidel_color(indptr, indices, data, dinv, rows, x, b):
     """One block Gauss-Seidel update of the block rows ``rows`` (3 x 3 blocks), in place in x.
 
     ``dinv`` (nrows, 3, 3) holds the inverse diagonal blocks. The rows of one colour must not be
@@ -76,8 +95,7 @@ def bsr3_gauss_seidel_color(indptr, indices, data, dinv, rows, x, b):
         x[p, 2] = dinv[p, 2, 0] * r0 + dinv[p, 2, 1] * r1 + dinv[p, 2, 2] * r2
 
 
-@nb.njit(cache=True, parallel=True)
-def voxel_stencil_blocks(n, lam, mu, tab, Gl, Gm, indices, data):
+def _voxel_stencil_blocks(n, lam, mu, tab, Gl, Gm, indices, data):
     """Rows of the periodic voxel stiffness matrix in sorted BSR order.
 
     lam, mu (n^3,) per voxel (flat index i + n (j + n k)); tab (8, 27) neighbour corner of corner
@@ -114,3 +132,9 @@ def voxel_stencil_blocks(n, lam, mu, tab, Gl, Gm, indices, data):
                     for c in range(9):
                         data[out, c // 3, c % 3] += la * Gl[a, s, c // 3, c % 3] + \
                             ma * Gm[a, s, c // 3, c % 3]
+
+
+bsr_matvec, bsr_matvec_serial = _both(_bsr_matvec)
+bsr_residual, bsr_residual_serial = _both(_bsr_residual)
+bsr3_gauss_seidel_color, bsr3_gauss_seidel_color_serial = _both(_bsr3_gauss_seidel_color)
+voxel_stencil_blocks, voxel_stencil_blocks_serial = _both(_voxel_stencil_blocks)

@@ -342,10 +342,12 @@ class _BSROp:
     """y = A x with the parallel numba kernel (scipy's BSR product runs on one core)."""
 
     def __init__(self, A):
-        from ._kernels import bsr_matvec
-        self._k = bsr_matvec
+        from . import _kernels as kn
         self.indptr, self.indices, self.data, (self.R, self.C) = _bsr_parts(A)
         self.shape = A.shape
+        par = self.indptr.size - 1 >= kn.PARALLEL_MIN_ROWS
+        self._k = kn.bsr_matvec if par else kn.bsr_matvec_serial
+        self._res = kn.bsr_residual if par else kn.bsr_residual_serial
 
     def __call__(self, x):
         y = np.empty(self.shape[0])
@@ -353,9 +355,8 @@ class _BSROp:
         return y
 
     def residual(self, x, b):
-        from ._kernels import bsr_residual
         out = np.empty(self.shape[0])
-        bsr_residual(self.indptr, self.indices, self.data, x.reshape(-1, self.C),
+        self._res(self.indptr, self.indices, self.data, x.reshape(-1, self.C),
                      b.reshape(-1, self.R), out.reshape(-1, self.R))
         return out
 
@@ -386,7 +387,7 @@ class _VCycle:
     """
 
     def __init__(self, ml, n):
-        from ._kernels import bsr3_gauss_seidel_color
+        from . import _kernels as kn
         self.ml = ml
         lv0 = ml.levels[0]
         A = lv0.A
@@ -398,7 +399,8 @@ class _VCycle:
         diag = data[ind == rows]
         self.dinv = np.ascontiguousarray(np.linalg.inv(diag))
         self.colours = _grid_colours(n)
-        self._gs = bsr3_gauss_seidel_color
+        par = min(c.size for c in self.colours) >= kn.PARALLEL_MIN_ROWS // 2
+        self._gs = kn.bsr3_gauss_seidel_color if par else kn.bsr3_gauss_seidel_color_serial
         self.shape = A.shape
 
     def fine_matvec(self, x):

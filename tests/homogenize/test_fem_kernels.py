@@ -20,14 +20,16 @@ def test_bsr_matvec_and_residual_equal_scipy():
         M = _random_bsr(7, 5, R, C, seed=R + C)
         x = rng.normal(size=M.shape[1])
         b = rng.normal(size=M.shape[0])
-        y = np.empty(M.shape[0])
-        K.bsr_matvec(M.indptr, M.indices, M.data, x.reshape(-1, C), y.reshape(-1, R))
-        # same products summed in another order: round-off only
-        assert np.allclose(y, M @ x, rtol=1e-13, atol=1e-13 * np.abs(M @ x).max())
-        out = np.empty(M.shape[0])
-        K.bsr_residual(M.indptr, M.indices, M.data, x.reshape(-1, C), b.reshape(-1, R),
-                       out.reshape(-1, R))
-        assert np.allclose(out, b - M @ x, rtol=1e-13, atol=1e-13 * np.abs(b - M @ x).max())
+        for mv, res in ((K.bsr_matvec, K.bsr_residual),
+                        (K.bsr_matvec_serial, K.bsr_residual_serial)):
+            y = np.empty(M.shape[0])
+            mv(M.indptr, M.indices, M.data, x.reshape(-1, C), y.reshape(-1, R))
+            # same products summed in another order: round-off only
+            assert np.allclose(y, M @ x, rtol=1e-13, atol=1e-13 * np.abs(M @ x).max())
+            out = np.empty(M.shape[0])
+            res(M.indptr, M.indices, M.data, x.reshape(-1, C), b.reshape(-1, R),
+                out.reshape(-1, R))
+            assert np.allclose(out, b - M @ x, rtol=1e-13, atol=1e-13 * np.abs(b - M @ x).max())
 
 
 def test_voxel_stencil_kernel_equals_blas_assembly():
@@ -37,6 +39,11 @@ def test_voxel_stencil_kernel_equals_blas_assembly():
         lam, mu = np.where(ph, 1.2e11, 6.2e6), np.where(ph, 8.2e10, 6.9e5)
         Kn = A.assemble_bsr(lam, mu, 1e-8, method="numba")
         Kb = A.assemble_bsr(lam, mu, 1e-8, method="blas")
+        idx, dat = np.empty_like(Kn.indices, dtype=np.int64), np.empty_like(Kn.data)
+        G = A._stencil_blocks(1e-8)
+        K.voxel_stencil_blocks(n, lam.ravel(), mu.ravel(), A._stencil_tables(),
+                               np.ascontiguousarray(G[:8]), np.ascontiguousarray(G[8:]), idx, dat)
+        assert np.array_equal(dat, Kn.data)  # parallel variant == serial one used at this size
         assert np.array_equal(Kn.indices, Kb.indices) and np.array_equal(Kn.indptr, Kb.indptr)
         # same element blocks, summed in a different order: relative round-off
         assert np.abs(Kn.data - Kb.data).max() <= 1e-14 * np.abs(Kb.data).max()
@@ -62,10 +69,13 @@ def test_colour_sweep_equals_sequential_block_gauss_seidel():
         x = rng.normal(size=M.shape[0])
         rows = np.repeat(np.arange(n ** 3), np.diff(M.indptr))
         dinv = np.ascontiguousarray(np.linalg.inv(M.data[M.indices == rows]))
-        xk = x.copy()
+        xk, xs = x.copy(), x.copy()
         for c in colours:
             K.bsr3_gauss_seidel_color(M.indptr, M.indices, M.data, dinv, c, xk.reshape(-1, 3),
                                       b.reshape(-1, 3))
+            K.bsr3_gauss_seidel_color_serial(M.indptr, M.indices, M.data, dinv, c,
+                                             xs.reshape(-1, 3), b.reshape(-1, 3))
+        assert np.array_equal(xk, xs)       # thread-count independent, bit for bit
         # plain numpy sequential block sweep in the same node order
         D = Md.toarray()
         xr = x.copy()
