@@ -41,14 +41,18 @@ def run(quick: bool = False, only: str | None = None) -> list[dict]:
     return records
 
 
+def _fmt(value, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
 def _cmd(args) -> int:
     records = run(quick=args.quick, only=args.only)
-    for r in records:
-        ratio = r.get("ratio")
-        print(f"{r['name']:<48s} n={r.get('n')!s:<10} {r.get('seconds', float('nan')):9.4f} s "
-              f"vs {r.get('reference')}: ratio {ratio if ratio is None else f'{ratio:.3g}'}")
-    if args.json:
+    if args.json:   # written first: the figures must survive any trouble in printing them
         write_json(args.json, {"records": records, "manifest": manifest({"quick": args.quick})})
+    for r in records:
+        print(f"{r['name']:<48s} n={r.get('n')!s:<10} {_fmt(r.get('seconds'), '9.4f')} s "
+              f"vs {r.get('reference')}: ratio {_fmt(r.get('ratio'), '.3g')}"
+              + (f" ({r['note']})" if r.get("note") else ""))
     return 0
 
 
