@@ -264,3 +264,40 @@ def rigid_body_modes(n: int, h: float) -> np.ndarray:
     B[:, 0, 4], B[:, 2, 4] = x[:, 2], -x[:, 0]
     B[:, 0, 5], B[:, 1, 5] = -x[:, 1], x[:, 0]
     return B.reshape(3 * n ** 3, 6)
+
+
+def skfem_reference(lam, mu, h, sri):
+    """Generic ``skfem.asm`` of the same operator: the independent reference for the voxel kernel.
+
+    Returns ``(P, K, mesh)``: the stiffness ``K`` on the (n+1)^3 grid and the 0/1 matrix ``P``
+    folding it onto the periodic nodes (``P.T @ K @ P`` is the periodic matrix). Slow on purpose:
+    used only by tests and benchmarks.
+    """
+    from skfem import Basis, BilinearForm, ElementHex1, ElementVector, MeshHex
+    from skfem.helpers import ddot, sym_grad, trace
+
+    n = lam.shape[0]
+    x = np.linspace(0.0, n * h, n + 1)
+    m = MeshHex.init_tensor(x, x, x)
+    e = ElementVector(ElementHex1())
+    b = Basis(m, e)
+    bl = Basis(m, e, quadrature=(np.full((3, 1), 0.5), np.ones(1))) if sri else b
+    idx = np.floor(m.p[:, m.t].mean(axis=1) / h).astype(int)
+    le, me = lam[idx[2], idx[1], idx[0]], mu[idx[2], idx[1], idx[0]]
+
+    @BilinearForm
+    def fl(u, v, w):
+        return w["c"] * trace(sym_grad(u)) * trace(sym_grad(v))
+
+    @BilinearForm
+    def fm(u, v, w):
+        return 2.0 * w["c"] * ddot(sym_grad(u), sym_grad(v))
+
+    K = fl.assemble(bl, c=np.repeat(le[:, None], bl.X.shape[-1], 1)) + \
+        fm.assemble(b, c=np.repeat(me[:, None], b.X.shape[-1], 1))
+    ijk = np.rint(m.p / h).astype(int) % n
+    pn = ijk[0] + n * (ijk[1] + n * ijk[2])
+    rows = b.nodal_dofs.T.ravel()
+    P = sp.csr_matrix((np.ones(rows.size), (rows, (3 * pn[:, None] + np.arange(3)).ravel())),
+                      shape=(b.N, 3 * n ** 3))
+    return P, K, m

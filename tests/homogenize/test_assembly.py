@@ -1,41 +1,8 @@
 """Voxel assembly against scikit-fem's generic assembly (independent method) and basic identities."""
 import numpy as np
 import pytest
-import scipy.sparse as sp
 
 from homogenize import _assembly as A
-
-
-def _skfem_periodic(lam, mu, h, sri):
-    """Generic skfem assembly on the (n+1)^3 grid, folded onto the periodic nodes."""
-    from skfem import Basis, BilinearForm, ElementHex1, ElementVector, MeshHex
-    from skfem.helpers import ddot, sym_grad, trace
-
-    n = lam.shape[0]
-    x = np.linspace(0.0, n * h, n + 1)
-    m = MeshHex.init_tensor(x, x, x)
-    e = ElementVector(ElementHex1())
-    b = Basis(m, e)
-    bl = Basis(m, e, quadrature=(np.full((3, 1), 0.5), np.ones(1))) if sri else b
-    idx = np.floor(m.p[:, m.t].mean(axis=1) / h).astype(int)
-    le, me = lam[idx[2], idx[1], idx[0]], mu[idx[2], idx[1], idx[0]]
-
-    @BilinearForm
-    def fl(u, v, w):
-        return w["c"] * trace(sym_grad(u)) * trace(sym_grad(v))
-
-    @BilinearForm
-    def fm(u, v, w):
-        return 2.0 * w["c"] * ddot(sym_grad(u), sym_grad(v))
-
-    K = fl.assemble(bl, c=np.repeat(le[:, None], bl.X.shape[-1], 1)) + \
-        fm.assemble(b, c=np.repeat(me[:, None], b.X.shape[-1], 1))
-    ijk = np.rint(m.p / h).astype(int) % n
-    pn = ijk[0] + n * (ijk[1] + n * ijk[2])
-    rows = b.nodal_dofs.T.ravel()
-    P = sp.csr_matrix((np.ones(rows.size), (rows, (3 * pn[:, None] + np.arange(3)).ravel())),
-                      shape=(b.N, 3 * n ** 3))
-    return P, K, m
 
 
 @pytest.mark.parametrize("sri", [True, False])
@@ -45,7 +12,7 @@ def test_voxel_matrix_equals_skfem(sri, monkeypatch):
     n, h = 4, 0.3
     lam, mu = rng.uniform(1, 3, (n, n, n)), rng.uniform(1, 2, (n, n, n))
     K = A.assemble_bsr(lam, mu, h).toarray()
-    P, Ks, m = _skfem_periodic(lam, mu, h, sri)
+    P, Ks, m = A.skfem_reference(lam, mu, h, sri)
     Kref = (P.T @ Ks @ P).toarray()
     # same matrix up to floating-point round-off (sums of ~64 terms of O(1))
     assert np.abs(K - Kref).max() <= 1e-13 * np.abs(Kref).max()
