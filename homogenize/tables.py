@@ -410,15 +410,9 @@ def _same(grid_value, text: str) -> bool:
 
 def read_table(path) -> Table:
     """Load a table written by :func:`run_batch`."""
-    import h5py
+    from micro._io import open_hdf5
     path = Path(path)
-    if not path.exists():
-        raise InputError(f"table {path} does not exist")
-    try:
-        h = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(f"table {path} is not an HDF5 file: {exc}") from None
-    with h:
+    with open_hdf5(path, "table") as h:
         if h.attrs.get("format") != FORMAT:
             raise InputError(f"{path} is not a mapsim table (format attribute "
                              f"{h.attrs.get('format')!r})")

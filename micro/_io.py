@@ -12,7 +12,8 @@ import tempfile
 from importlib import metadata
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_text", "write_json", "manifest", "git_revision"]
+__all__ = ["atomic_path", "atomic_write_text", "write_json", "manifest", "git_revision",
+           "open_hdf5"]
 
 _PACKAGES = ("mapsim", "numpy", "scipy", "numba", "scikit-fem", "h5py", "trimesh", "pyamg",
              "dask", "distributed", "matplotlib", "meshio")
@@ -45,6 +46,23 @@ def atomic_write_text(path, text: str) -> None:
     """Write ``text`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+def open_hdf5(path, what: str):
+    """Open an existing HDF5 file for reading; ``what`` names it in the one-line error.
+
+    A missing file or one that is not HDF5 raises :class:`micro.InputError`, never a traceback.
+    """
+    import h5py
+
+    from ._validate import InputError
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{what} {path} does not exist")
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(f"{what} {path} is not a readable HDF5 file ({exc})") from None
 
 
 def _default(o):

@@ -226,16 +226,10 @@ class RVE:
     @classmethod
     def load(cls, path) -> "RVE":
         """Read an RVE written by :meth:`save`; a missing or malformed file raises InputError."""
-        import h5py
+        from ._io import open_hdf5
 
         path = Path(path)
-        if not path.is_file():
-            raise InputError(f"RVE file {path} does not exist")
-        try:
-            f = h5py.File(path, "r")
-        except OSError as exc:
-            raise InputError(f"RVE file {path} is not a readable HDF5 file ({exc})") from None
-        with f:
+        with open_hdf5(path, "RVE file") as f:
             if f.attrs.get("format") != "mapsim-rve":
                 raise InputError(f"RVE file {path} is not a mapsim RVE "
                                  f"(attribute 'format' missing)")
