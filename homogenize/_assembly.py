@@ -81,6 +81,11 @@ def reference_matrices(h: float, sri: bool | None = None) -> tuple[np.ndarray, n
     return Kl * h, Km * h
 
 
+# per axis, the offsets (-1, 0, 1) sorted by the wrapped neighbour index: coordinate 0 (its -1
+# neighbour wraps to n - 1), inside, coordinate n - 1 (its +1 neighbour wraps to 0)
+_AXIS_ORDER = np.array([[0, 1, -1], [-1, 0, 1], [1, -1, 0]], dtype=np.int64)
+
+
 @functools.lru_cache(maxsize=4)
 def _stencil_tables() -> np.ndarray:
     """(8, 27) table: neighbour corner b = a + d, or -1 if outside the voxel."""
@@ -160,14 +165,14 @@ def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float, *, method: str = "nu
         voxel_stencil_blocks = (kn.voxel_stencil_blocks if n ** 3 >= kn.PARALLEL_MIN_ROWS
                                 else kn.voxel_stencil_blocks_serial)
         idx_dtype = np.int32 if 27 * n ** 3 < 2 ** 31 else np.int64
-        indices = np.empty(27 * n ** 3, dtype=np.int64)
+        indices = np.empty(27 * n ** 3, dtype=idx_dtype)
         data = np.empty((27 * n ** 3, 3, 3))
         voxel_stencil_blocks(n, np.ascontiguousarray(lam, dtype=np.float64).ravel(),
                              np.ascontiguousarray(mu, dtype=np.float64).ravel(),
-                             _stencil_tables(), np.ascontiguousarray(G[:8]),
+                             _stencil_tables(), _AXIS_ORDER, np.ascontiguousarray(G[:8]),
                              np.ascontiguousarray(G[8:]), indices, data)
         indptr = np.arange(0, 27 * n ** 3 + 1, 27, dtype=idx_dtype)
-        A = sp.bsr_matrix((data, indices.astype(idx_dtype), indptr),
+        A = sp.bsr_matrix((data, indices, indptr),
                           shape=(3 * n ** 3, 3 * n ** 3))
         A.has_sorted_indices = True
         return A

@@ -36,71 +36,103 @@ def _both(f):
     return nb.njit(cache=True, parallel=True)(f), nb.njit(cache=True)(g)
 
 
-def _bsr_matvec(indptr, indices, data, x, y):
-    """y = A x for a block-sparse row matrix: data (nnzb, R, C), x (ncolblocks, C), y (nrowblocks, R).
+def _bsr_matmat(indptr, indices, data, x, y):
+    """y = A x for a block-sparse row matrix and k right-hand sides at once.
 
-    Parallel over block rows (disjoint writes); scipy's bsr_matvec is single-threaded.
+    data (nnzb, R, C); x (ncolblocks, C, k); y (nrowblocks, R, k). Each matrix block is read once
+    for all k columns (the products are memory-bound: k columns cost far less than k products).
+    Parallel over block rows (disjoint writes); scipy's BSR product runs on one core.
     """
     nb_rows = indptr.shape[0] - 1
     R = data.shape[1]
     C = data.shape[2]
+    k = x.shape[2]
     for p in nb.prange(nb_rows):
         for r in range(R):
-            y[p, r] = 0.0
+            for m in range(k):
+                y[p, r, m] = 0.0
         for s in range(indptr[p], indptr[p + 1]):
             q = indices[s]
             for r in range(R):
-                acc = 0.0
                 for c in range(C):
-                    acc += data[s, r, c] * x[q, c]
-                y[p, r] += acc
+                    a = data[s, r, c]
+                    for m in range(k):
+                        y[p, r, m] += a * x[q, c, m]
 
 
 def _bsr_residual(indptr, indices, data, x, b, out):
-    """out = b - A x (same layout as :func:`bsr_matvec`)."""
+    """out = b - A x (same layout as :func:`bsr_matmat`)."""
     nb_rows = indptr.shape[0] - 1
     R = data.shape[1]
     C = data.shape[2]
+    k = x.shape[2]
     for p in nb.prange(nb_rows):
         for r in range(R):
-            out[p, r] = b[p, r]
+            for m in range(k):
+                out[p, r, m] = b[p, r, m]
         for s in range(indptr[p], indptr[p + 1]):
             q = indices[s]
             for r in range(R):
-                acc = 0.0
                 for c in range(C):
-                    acc += data[s, r, c] * x[q, c]
-                out[p, r] -= acc
+                    a = data[s, r, c]
+                    for m in range(k):
+                        out[p, r, m] -= a * x[q, c, m]
 
 
-def _bsr3_gauss_seidel_color(indptr, indices, data, dinv, rows, x, b):
-    """One block Gauss-Seidel update of the block rows ``rows`` (3 x 3 blocks), in place in x.
+def _bsr_gauss_seidel_colour(indptr, indices, data, dinv, rows, x, b, tmp):
+    """One block Gauss-Seidel update of the block rows ``rows``, in place in x (k columns).
 
-    ``dinv`` (nrows, 3, 3) holds the inverse diagonal blocks. The rows of one colour must not be
-    coupled to each other, so they are updated in parallel exactly as a sequential sweep would.
+    ``dinv`` (nrows, R, R) holds the inverse diagonal blocks; ``tmp`` (nrows, R, k) is scratch
+    (row p writes only tmp[p]). The rows of one colour must not be coupled to each other, so they
+    are updated in parallel exactly as a sequential sweep in any order would.
     """
+    R = data.shape[1]
+    k = x.shape[2]
     for t in nb.prange(rows.shape[0]):
         p = rows[t]
-        r0 = b[p, 0]
-        r1 = b[p, 1]
-        r2 = b[p, 2]
+        for r in range(R):
+            for m in range(k):
+                tmp[p, r, m] = b[p, r, m]
         for s in range(indptr[p], indptr[p + 1]):
             q = indices[s]
             if q != p:
-                r0 -= data[s, 0, 0] * x[q, 0] + data[s, 0, 1] * x[q, 1] + data[s, 0, 2] * x[q, 2]
-                r1 -= data[s, 1, 0] * x[q, 0] + data[s, 1, 1] * x[q, 1] + data[s, 1, 2] * x[q, 2]
-                r2 -= data[s, 2, 0] * x[q, 0] + data[s, 2, 1] * x[q, 1] + data[s, 2, 2] * x[q, 2]
-        x[p, 0] = dinv[p, 0, 0] * r0 + dinv[p, 0, 1] * r1 + dinv[p, 0, 2] * r2
-        x[p, 1] = dinv[p, 1, 0] * r0 + dinv[p, 1, 1] * r1 + dinv[p, 1, 2] * r2
-        x[p, 2] = dinv[p, 2, 0] * r0 + dinv[p, 2, 1] * r1 + dinv[p, 2, 2] * r2
+                for r in range(R):
+                    for c in range(R):
+                        a = data[s, r, c]
+                        for m in range(k):
+                            tmp[p, r, m] -= a * x[q, c, m]
+        for r in range(R):
+            for m in range(k):
+                acc = 0.0
+                for c in range(R):
+                    acc += dinv[p, r, c] * tmp[p, c, m]
+                x[p, r, m] = acc
 
 
-def _voxel_stencil_blocks(n, lam, mu, tab, Gl, Gm, indices, data):
+def _greedy_colouring(indptr, indices, colour, mark):
+    """Greedy colouring of the block graph: rows in order, each the smallest colour none of its
+    coupled rows has. ``colour`` (nrows,) out; ``mark`` (nrows + 1,) scratch, filled with -1."""
+    n = indptr.shape[0] - 1
+    for p in range(n):
+        for s in range(indptr[p], indptr[p + 1]):
+            q = indices[s]
+            if q < p:
+                mark[colour[q]] = p
+        c = 0
+        while mark[c] == p:
+            c += 1
+        colour[p] = c
+
+
+def _voxel_stencil_blocks(n, lam, mu, tab, axis_order, Gl, Gm, indices, data):
     """Rows of the periodic voxel stiffness matrix in sorted BSR order.
 
     lam, mu (n^3,) per voxel (flat index i + n (j + n k)); tab (8, 27) neighbour corner of corner
-    a at offset slot s (-1: outside); Gl, Gm (8, 27, 3, 3) element blocks K[a, a + d] for unit
-    lambda / mu. Writes indices (27 n^3,) and data (27 n^3, 3, 3).
+    a at offset slot s (-1: outside); axis_order (3, 3): the offsets (-1, 0, 1) of one axis in
+    increasing order of the wrapped neighbour index, row 0 for coordinate 0, row 1 inside, row 2
+    for coordinate n - 1 (z-major flat indices then sort as z, y, x: no per-row sort needed);
+    Gl, Gm (8, 27, 3, 3) element blocks K[a, a + d] for unit lambda / mu. Writes indices
+    (27 n^3,) and data (27 n^3, 3, 3).
     Block of node p at offset slot s = sum_a lam(voxel with corner a at p) Gl[a, s] + mu Gm[a, s].
     """
     N = n * n * n
@@ -108,33 +140,37 @@ def _voxel_stencil_blocks(n, lam, mu, tab, Gl, Gm, indices, data):
         i = p % n
         j = (p // n) % n
         k = p // (n * n)
-        cols = np.empty(27, dtype=np.int64)
-        for s in range(27):
-            dx = s % 3 - 1
-            dy = (s // 3) % 3 - 1
-            dz = s // 9 - 1
-            cols[s] = (i + dx) % n + n * (((j + dy) % n) + n * ((k + dz) % n))
-        order = np.argsort(cols)
-        for r in range(27):
-            s = order[r]
-            out = 27 * p + r
-            indices[out] = cols[s]
-            for c in range(9):
-                data[out, c // 3, c % 3] = 0.0
-            for a in range(8):
-                if tab[a, s] >= 0:
-                    ax = a & 1
-                    ay = (a >> 1) & 1
-                    az = (a >> 2) & 1
-                    v = (i - ax) % n + n * (((j - ay) % n) + n * ((k - az) % n))
-                    la = lam[v]
-                    ma = mu[v]
-                    for c in range(9):
-                        data[out, c // 3, c % 3] += la * Gl[a, s, c // 3, c % 3] + \
-                            ma * Gm[a, s, c // 3, c % 3]
+        ri = 0 if i == 0 else (2 if i == n - 1 else 1)
+        rj = 0 if j == 0 else (2 if j == n - 1 else 1)
+        rk = 0 if k == 0 else (2 if k == n - 1 else 1)
+        out = 27 * p
+        for oz in range(3):
+            dz = axis_order[rk, oz]
+            for oy in range(3):
+                dy = axis_order[rj, oy]
+                for ox in range(3):
+                    dx = axis_order[ri, ox]
+                    s = (dx + 1) + 3 * (dy + 1) + 9 * (dz + 1)
+                    indices[out] = (i + dx) % n + n * (((j + dy) % n) + n * ((k + dz) % n))
+                    for r in range(3):
+                        for c in range(3):
+                            data[out, r, c] = 0.0
+                    for a in range(8):
+                        if tab[a, s] >= 0:
+                            ax = a & 1
+                            ay = (a >> 1) & 1
+                            az = (a >> 2) & 1
+                            v = (i - ax) % n + n * (((j - ay) % n) + n * ((k - az) % n))
+                            la = lam[v]
+                            ma = mu[v]
+                            for r in range(3):
+                                for c in range(3):
+                                    data[out, r, c] += la * Gl[a, s, r, c] + ma * Gm[a, s, r, c]
+                    out += 1
 
 
-bsr_matvec, bsr_matvec_serial = _both(_bsr_matvec)
+bsr_matmat, bsr_matmat_serial = _both(_bsr_matmat)
 bsr_residual, bsr_residual_serial = _both(_bsr_residual)
-bsr3_gauss_seidel_color, bsr3_gauss_seidel_color_serial = _both(_bsr3_gauss_seidel_color)
+bsr_gauss_seidel_colour, bsr_gauss_seidel_colour_serial = _both(_bsr_gauss_seidel_colour)
+greedy_colouring = nb.njit(cache=True)(_greedy_colouring)
 voxel_stencil_blocks, voxel_stencil_blocks_serial = _both(_voxel_stencil_blocks)

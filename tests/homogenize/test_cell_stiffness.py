@@ -43,8 +43,9 @@ def test_random_dispersion_within_hashin_shtrikman_and_nearly_isotropic(dispersi
     rve, r = dispersion_result
     C = r.C_eff_Pa
     assert np.all(np.linalg.eigvalsh(C) > 0)
-    # symmetry of the raw stress-average C is a solver check: tol 1e-8 on the residual
-    assert r.settings["C_asymmetry_rel"] < 1e-6
+    # the plain mean-stress C differs from the variational one by the (linear) solution error:
+    # at the default tol 1e-6 on the residual it is ~1e-5 (a solver check, not an accuracy limit)
+    assert r.settings["C_linear_error_rel"] < 1e-3
     Km, Gm = bulk_shear(2e6, 0.45)
     Kp, Gp = bulk_shear(211e9, 0.29)
     hs = hashin_shtrikman_bounds(r.phi_voxel, Km, Gm, Kp, Gp)

@@ -5,7 +5,7 @@ import scipy.sparse as sp
 
 from homogenize import _assembly as A
 from homogenize import _kernels as K
-from homogenize.cell import _grid_colours
+from homogenize._amg import BSROp, greedy_colours, grid_colours
 
 
 def _random_bsr(rows, cols, R, C, seed):
@@ -14,22 +14,41 @@ def _random_bsr(rows, cols, R, C, seed):
     return M.tobsr(blocksize=(R, C))
 
 
-def test_bsr_matvec_and_residual_equal_scipy():
+def test_bsr_products_and_residual_equal_scipy_for_many_columns():
     rng = np.random.default_rng(1)
     for R, C in ((3, 3), (3, 6), (6, 3)):
         M = _random_bsr(7, 5, R, C, seed=R + C)
+        for k in (1, 4):
+            x = rng.normal(size=(M.shape[1], k))
+            b = rng.normal(size=(M.shape[0], k))
+            for mm, res in ((K.bsr_matmat, K.bsr_residual),
+                            (K.bsr_matmat_serial, K.bsr_residual_serial)):
+                y = np.empty((M.shape[0], k))
+                mm(M.indptr, M.indices, M.data, x.reshape(-1, C, k), y.reshape(-1, R, k))
+                # same products summed in another order: round-off only
+                assert np.allclose(y, M @ x, rtol=1e-13, atol=1e-13 * np.abs(M @ x).max())
+                out = np.empty((M.shape[0], k))
+                res(M.indptr, M.indices, M.data, x.reshape(-1, C, k), b.reshape(-1, R, k),
+                    out.reshape(-1, R, k))
+                assert np.allclose(out, b - M @ x, rtol=1e-13, atol=1e-13 * np.abs(b - M @ x).max())
+        op = BSROp(M)           # the wrapper: 1-D and 2-D inputs
         x = rng.normal(size=M.shape[1])
-        b = rng.normal(size=M.shape[0])
-        for mv, res in ((K.bsr_matvec, K.bsr_residual),
-                        (K.bsr_matvec_serial, K.bsr_residual_serial)):
-            y = np.empty(M.shape[0])
-            mv(M.indptr, M.indices, M.data, x.reshape(-1, C), y.reshape(-1, R))
-            # same products summed in another order: round-off only
-            assert np.allclose(y, M @ x, rtol=1e-13, atol=1e-13 * np.abs(M @ x).max())
-            out = np.empty(M.shape[0])
-            res(M.indptr, M.indices, M.data, x.reshape(-1, C), b.reshape(-1, R),
-                out.reshape(-1, R))
-            assert np.allclose(out, b - M @ x, rtol=1e-13, atol=1e-13 * np.abs(b - M @ x).max())
+        assert np.allclose(op @ x, M @ x, rtol=1e-13, atol=1e-13 * np.abs(M @ x).max())
+        assert np.allclose(op.residual(x, M @ x), 0.0, atol=1e-13 * np.abs(M @ x).max())
+
+
+def test_greedy_colouring_is_proper():
+    M = _random_bsr(40, 40, 6, 6, seed=2)
+    M = (M + M.T).tobsr(blocksize=(6, 6))
+    M.sort_indices()
+    colours = greedy_colours(BSROp(M))
+    colour = np.empty(40, dtype=int)
+    for c, rows in enumerate(colours):
+        colour[rows] = c
+    assert sorted(np.concatenate(colours)) == list(range(40))
+    rows = np.repeat(np.arange(40), np.diff(M.indptr))
+    off = rows != M.indices
+    assert np.all(colour[rows[off]] != colour[M.indices[off]])       # coupled rows differ
 
 
 def test_voxel_stencil_kernel_equals_blas_assembly():
@@ -39,9 +58,9 @@ def test_voxel_stencil_kernel_equals_blas_assembly():
         lam, mu = np.where(ph, 1.2e11, 6.2e6), np.where(ph, 8.2e10, 6.9e5)
         Kn = A.assemble_bsr(lam, mu, 1e-8, method="numba")
         Kb = A.assemble_bsr(lam, mu, 1e-8, method="blas")
-        idx, dat = np.empty_like(Kn.indices, dtype=np.int64), np.empty_like(Kn.data)
+        idx, dat = np.empty_like(Kn.indices), np.empty_like(Kn.data)
         G = A._stencil_blocks(1e-8)
-        K.voxel_stencil_blocks(n, lam.ravel(), mu.ravel(), A._stencil_tables(),
+        K.voxel_stencil_blocks(n, lam.ravel(), mu.ravel(), A._stencil_tables(), A._AXIS_ORDER,
                                np.ascontiguousarray(G[:8]), np.ascontiguousarray(G[8:]), idx, dat)
         assert np.array_equal(dat, Kn.data)  # parallel variant == serial one used at this size
         assert np.array_equal(Kn.indices, Kb.indices) and np.array_equal(Kn.indptr, Kb.indptr)
@@ -58,25 +77,27 @@ def test_colour_sweep_equals_sequential_block_gauss_seidel():
         M = A.assemble_bsr(np.where(ph, 50.0, 1.0), np.where(ph, 30.0, 1.0), 1.0)
         M = (M + 1e-3 * sp.identity(M.shape[0])).tobsr(blocksize=(3, 3))   # SPD (periodic K is singular)
         M.sort_indices()
-        colours = _grid_colours(n)
+        colours = grid_colours(n)
         assert sum(c.size for c in colours) == n ** 3
         Md = M.tocsr()
         for c in colours:                       # no coupling inside a colour
             sub = Md[np.repeat(3 * c, 3) + np.tile(np.arange(3), c.size)][:, np.repeat(3 * c, 3)
                                                                            + np.tile(np.arange(3), c.size)]
             assert abs(sub - sp.block_diag([Md[3 * p:3 * p + 3, 3 * p:3 * p + 3] for p in c])).max() == 0
-        b = rng.normal(size=M.shape[0])
-        x = rng.normal(size=M.shape[0])
+        k = 3
+        b = rng.normal(size=(M.shape[0], k))
+        x = rng.normal(size=(M.shape[0], k))
         rows = np.repeat(np.arange(n ** 3), np.diff(M.indptr))
         dinv = np.ascontiguousarray(np.linalg.inv(M.data[M.indices == rows]))
         xk, xs = x.copy(), x.copy()
+        tmp = np.empty((n ** 3, 3, k))
         for c in colours:
-            K.bsr3_gauss_seidel_color(M.indptr, M.indices, M.data, dinv, c, xk.reshape(-1, 3),
-                                      b.reshape(-1, 3))
-            K.bsr3_gauss_seidel_color_serial(M.indptr, M.indices, M.data, dinv, c,
-                                             xs.reshape(-1, 3), b.reshape(-1, 3))
+            K.bsr_gauss_seidel_colour(M.indptr, M.indices, M.data, dinv, c, xk.reshape(-1, 3, k),
+                                      b.reshape(-1, 3, k), tmp)
+            K.bsr_gauss_seidel_colour_serial(M.indptr, M.indices, M.data, dinv, c,
+                                             xs.reshape(-1, 3, k), b.reshape(-1, 3, k), tmp)
         assert np.array_equal(xk, xs)       # thread-count independent, bit for bit
-        # plain numpy sequential block sweep in the same node order
+        # plain numpy sequential block sweep in the same node order, column by column
         D = Md.toarray()
         xr = x.copy()
         for p in np.concatenate(colours):
