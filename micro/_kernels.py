@@ -184,33 +184,53 @@ import math  # noqa: E402  (dipole kernels use math.erfc/exp/sqrt)
 
 def _dipole_field_direct_impl(src, mom, obs, out):
     """Bare dipole field of every source at every observer, ``src, mom (3, Ns)``, ``obs, out
-    (3, No)`` (structure of arrays so the inner loop vectorises); coincident points skipped."""
+    (3, No)`` (structure of arrays); coincident points skipped.
+
+    Vectorisation without fastmath: observers are taken in blocks of 256 copied into local
+    buffers, and the innermost loop runs over the observers of a block with one source held in
+    registers. Each lane owns one observer's accumulator, so no cross-lane reduction (which
+    would need reassociation) is required, and the local buffers cannot alias the arguments,
+    so LLVM emits packed IEEE vsubpd/vmulpd/vdivpd/vsqrtpd without runtime alias checks (with
+    the accumulators in ``out`` directly it did not vectorise: 1.3e8 vs 5.8e8 pairs/s). The sum
+    over sources runs in the same order for every observer whatever the block/thread layout:
+    results are bitwise independent of the number of threads.
+    """
     ns = src.shape[1]
     no = obs.shape[1]
     blk = 256
     nblk = (no + blk - 1) // blk
     for b in nb.prange(nblk):
         i0 = b * blk
-        i1 = min(i0 + blk, no)
-        for i in range(i0, i1):
-            out[0, i] = 0.0
-            out[1, i] = 0.0
-            out[2, i] = 0.0
+        nbk = min(blk, no - i0)
+        bx = np.empty(blk)
+        by = np.empty(blk)
+        bz = np.empty(blk)
+        ax = np.zeros(blk)
+        ay = np.zeros(blk)
+        az = np.zeros(blk)
+        for i in range(nbk):
+            bx[i] = obs[0, i0 + i]
+            by[i] = obs[1, i0 + i]
+            bz[i] = obs[2, i0 + i]
         for j in range(ns):
             sx, sy, sz = src[0, j], src[1, j], src[2, j]
             mx, my, mz = mom[0, j], mom[1, j], mom[2, j]
-            for i in range(i0, i1):
-                dx = obs[0, i] - sx
-                dy = obs[1, i] - sy
-                dz = obs[2, i] - sz
+            for i in range(nbk):
+                dx = bx[i] - sx
+                dy = by[i] - sy
+                dz = bz[i] - sz
                 r2 = dx * dx + dy * dy + dz * dz
                 ok = r2 > 0.0
                 ir2 = 1.0 / (r2 if ok else 1.0)
                 ir3 = ir2 * math.sqrt(ir2) if ok else 0.0
                 t = 3.0 * (mx * dx + my * dy + mz * dz) * ir2
-                out[0, i] += (t * dx - mx) * ir3
-                out[1, i] += (t * dy - my) * ir3
-                out[2, i] += (t * dz - mz) * ir3
+                ax[i] += (t * dx - mx) * ir3
+                ay[i] += (t * dy - my) * ir3
+                az[i] += (t * dz - mz) * ir3
+        for i in range(nbk):
+            out[0, i0 + i] = ax[i]
+            out[1, i0 + i] = ay[i]
+            out[2, i0 + i] = az[i]
 
 
 dipole_field_direct = nb.njit(cache=True)(_dipole_field_direct_impl)

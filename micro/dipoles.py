@@ -44,6 +44,7 @@ from ._validate import InputError, check_choice, check_finite, check_positive, c
 from .magnetization import LAW_NAMES, MagnetizationLaw, get_law
 
 __all__ = ["MagneticState", "ConvergenceError", "solve", "applied_gradient", "DipoleSum",
+           "langevin_coupling", "LANGEVIN_LAMBDA_MAX",
            "dipole_field_direct", "dipole_pair_interactions", "add_cli_arguments", "cli_summary",
            "RHO_FE_KG_M3", "SIGMA_S_FE_AM2_KG", "C_POWDER_SEED"]
 
@@ -52,6 +53,7 @@ SIGMA_S_FE_AM2_KG = 178.0      # seed paper, specific saturation moment
 C_POWDER_SEED = 0.035          # seed paper, powder concentration (vol fraction of powder)
 _METHODS = ("anderson", "fixed-point", "newton-krylov")
 _SUMMATIONS = ("auto", "ewald", "pme")
+_STALL_ITERATIONS = 40         # Anderson gives up after this many iterations without progress
 _PME_ABOVE_N = 3000            # "auto": plain Ewald below, PME above (both O(N^1.5)/O(N log N))
 
 
@@ -294,16 +296,103 @@ class MagneticState:
         return float(np.linalg.norm(self.force_dd_N.sum(axis=0))) / tot if tot > 0 else 0.0
 
 
-def _anderson(g, x0, tol, max_iter, depth=8):
+def _law_jacobian(law, H_A_m, m_sat, vol):
+    """``dm/dH`` (N, 3, 3) [m^3] of moments ``|m|(h) H/h``: ``(|m|/h) (I - u u) + |m|'(h) u u``
+    (the initial slope at h = 0)."""
+    h = np.sqrt(np.einsum("ij,ij->i", H_A_m, H_A_m))
+    hs = np.where(h > 0, h, 1.0)
+    mag = law.magnitude(h, m_sat, vol)
+    slope = law.slope(h, m_sat, vol)
+    chord = np.where(h > 0, mag / hs, law.slope(np.zeros_like(h), m_sat, vol))
+    u = np.where(h[:, None] > 0, H_A_m / hs[:, None], 0.0)
+    uu = u[:, :, None] * u[:, None, :]
+    return chord[:, None, None] * (np.eye(3) - uu) + slope[:, None, None] * uu
+
+
+class _NearFieldPreconditioner:
+    """Approximate inverse of ``I - J`` (J: Jacobian of the fixed-point map) from near pairs.
+
+    The slow modes of the fixed-point iteration ``x = g(x)`` are those of strongly coupled
+    neighbours (chains, clusters, contacts), whose field ``~ m / (4 pi d^3)`` is a sizeable
+    fraction of the applied one. ``P = I - D T_near`` keeps the bare dipole coupling ``T_near``
+    of pairs closer than ``factor (r_i + r_j)`` (minimum image) and the per-particle law
+    Jacobian ``D = dm/dH`` (``(|m|/h) (I - u u) + |m|'(h) u u``); an incomplete LU of P is
+    applied to the residual. The preconditioned map ``x + P^-1 (g(x) - x)`` has the same fixed
+    point as g (P only changes the path), and its Jacobian ``P^-1 D T_far`` is much smaller.
+    """
+
+    factor = 1.25            # pairs with gaps below a quarter of the contact distance
+
+    def __init__(self, centers_m, box_m, radii_m, law, m_sat, vol):
+        from scipy.spatial import cKDTree
+        n = centers_m.shape[0]
+        self.law, self.m_sat, self.vol = law, m_sat, vol
+        self.n = n
+        self.T = None
+        cut = self.factor * 2.0 * float(radii_m.max())
+        if n < 2 or cut >= 0.5 * box_m:        # tiny box: leave it to Anderson alone
+            return
+        tree = cKDTree(np.mod(centers_m, box_m), boxsize=box_m * (1 + 1e-12))
+        pr = tree.query_pairs(cut, output_type="ndarray")
+        if pr.shape[0] == 0:
+            return
+        i, j = pr[:, 0], pr[:, 1]
+        d = centers_m[i] - centers_m[j]
+        d -= box_m * np.rint(d / box_m)
+        r = np.sqrt(np.einsum("ij,ij->i", d, d))
+        keep = (r < self.factor * (radii_m[i] + radii_m[j])) & (r > 0)
+        if not keep.any():
+            return
+        i, j, d, r = i[keep], j[keep], d[keep], r[keep]
+        u = d / r[:, None]
+        blk = (3.0 * u[:, :, None] * u[:, None, :] - np.eye(3)) / (4 * math.pi * r[:, None, None]
+                                                                     ** 3)
+        rows = np.broadcast_to(3 * np.r_[i, j][:, None, None] + np.arange(3)[None, :, None],
+                               (2 * len(i), 3, 3))
+        cols = np.broadcast_to(3 * np.r_[j, i][:, None, None] + np.arange(3)[None, None, :],
+                               (2 * len(i), 3, 3))
+        import scipy.sparse as sp
+        self.T = sp.csr_matrix((np.concatenate([blk, blk]).ravel(),
+                                (rows.ravel(), cols.ravel())), shape=(3 * n, 3 * n))
+        self.n_pairs = len(i)
+        self.lu = None
+
+    @property
+    def active(self) -> bool:
+        return self.T is not None
+
+    def update(self, H_A_m):
+        """Factorise ``P = I - D(H) T_near`` at the local fields ``H_A_m`` (N, 3)."""
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spla
+        D = _law_jacobian(self.law, H_A_m, self.m_sat, self.vol)
+        n = self.n
+        Dm = sp.bsr_matrix((D, np.arange(n), np.arange(n + 1)), shape=(3 * n, 3 * n))
+        P = (sp.identity(3 * n, format="csr") - Dm.tocsr() @ self.T).tocsc()
+        # incomplete LU: bounded memory whatever the connectivity of the near-pair graph
+        # (a complete LU fills in badly for dense random packings); P is only a preconditioner
+        self.lu = spla.spilu(P, drop_tol=1e-5, fill_factor=10)
+
+    def solve(self, f):
+        return self.lu.solve(f)
+
+
+def _anderson(g, x0, tol, max_iter, depth=8, precond=None, refresh=None):
     """Anderson acceleration (type II, Walker & Ni 2011) of the fixed point x = g(x).
 
-    Returns ``(x, g(x) history length, residual history, converged)``; the residual is
+    With ``precond`` (a callable r -> P^-1 r) Anderson accelerates the preconditioned map
+    ``x + P^-1 (g(x) - x)``; ``refresh(it)`` may rebuild the preconditioner after evaluation
+    ``it`` and returns True if it did (the history of the old map is then dropped). The
+    convergence test always uses the true residual.
+
+    Returns ``(x, number of g evaluations, residual history, converged)``; the residual is
     ``|g(x) - x| / |g(x)|``.
     """
     x = x0
     hist = []
     dG, dF = [], []
     g_prev = f_prev = None
+    best, best_it, best_x, best_g = math.inf, 0, None, None
     for it in range(max_iter):
         gx = g(x)
         f = gx - x
@@ -311,6 +400,20 @@ def _anderson(g, x0, tol, max_iter, depth=8):
         hist.append(res)
         if res <= tol:
             return gx, it + 1, hist, True
+        if res < best:
+            best, best_it, best_x, best_g = res, it, x, gx
+        elif it - best_it >= _STALL_ITERATIONS:
+            return x, it + 1, hist, False            # no progress: not going to converge
+        restart = res > 1e3 * best                   # extrapolation ran away: restart
+        if restart:
+            x, gx = best_x, best_g
+            f = gx - x
+        if (refresh is not None and refresh(it)) or restart:
+            dG, dF = [], []
+            g_prev = f_prev = None
+        if precond is not None:
+            f = precond(f)
+            gx = x + f
         if f_prev is not None:
             dG.append(gx - g_prev)
             dF.append(f - f_prev)
@@ -340,8 +443,9 @@ def _fixed_point(g, x0, tol, max_iter, damping=1.0):
     return x, max_iter, hist, False
 
 
-def _newton_krylov(g, x0, tol, max_iter):
+def _newton_krylov(g, x0, tol, max_iter, precond=None):
     from scipy.optimize import NoConvergence, newton_krylov
+    from scipy.sparse.linalg import LinearOperator
     hist = []
 
     def resid(x):
@@ -351,10 +455,13 @@ def _newton_krylov(g, x0, tol, max_iter):
     def cb(x, f):
         hist.append(float(np.linalg.norm(f) / max(np.linalg.norm(x + f), 1e-300)))
 
+    # the Jacobian of g(x) - x is -(I - J) ~ -P: its approximate inverse is -P^-1
+    inner_M = None if precond is None else LinearOperator(
+        (x0.size, x0.size), matvec=lambda v: -precond(v), dtype=float)
     scale = max(float(np.abs(x0).max()), 1e-300)
     try:
         x = newton_krylov(resid, x0, f_tol=tol * scale * 1e-1, maxiter=max_iter, callback=cb,
-                          method="lgmres", line_search=None)
+                          method="lgmres", line_search=None, inner_M=inner_M)
         ok = True
     except NoConvergence as exc:
         x = exc.args[0]
@@ -363,6 +470,60 @@ def _newton_krylov(g, x0, tol, max_iter):
     res = float(np.linalg.norm(gx - x) / max(np.linalg.norm(gx), 1e-300))
     hist.append(res)
     return gx, len(hist), hist, ok and res <= tol
+
+
+LANGEVIN_LAMBDA_MAX = 1.5
+
+
+def langevin_coupling(centers_m, box_m, m_sat_Am2, T_K):
+    """Dipolar coupling parameter of each particle with its nearest neighbour (or own image).
+
+    ``lambda_i = mu0 m_i m_j / (4 pi r_ij^3 k_B T)`` [-]: the ratio of the largest dipolar
+    pair energy to the thermal energy. Returns ``(lambda (N,), nearest index (N,))``.
+    """
+    from scipy.constants import k as KB
+    from scipy.spatial import cKDTree
+    n = centers_m.shape[0]
+    lam_img = MU0 * m_sat_Am2 ** 2 / (4 * math.pi * box_m ** 3 * KB * T_K)
+    if n < 2:
+        return lam_img, np.zeros(n, dtype=np.int64)
+    tree = cKDTree(np.mod(centers_m, box_m), boxsize=box_m * (1 + 1e-12))
+    d, j = tree.query(np.mod(centers_m, box_m), k=2)
+    d, j = np.maximum(d[:, 1], 1e-300), j[:, 1]
+    lam = MU0 * m_sat_Am2 * m_sat_Am2[j] / (4 * math.pi * d ** 3 * KB * T_K)
+    return np.maximum(lam, lam_img), j
+
+
+def _check_langevin_coupling(c, box, m_sat, T_K):
+    """The Langevin law describes independent superparamagnetic particles; refuse strongly
+    coupled ones with one message naming the physics.
+
+    In the local-field (mean-field) model each particle follows ``m_s L(mu0 m_s H_loc / kT)``.
+    Linearised at zero field its susceptibility is ``mu0 m_s^2 / (3 kT)``, so a pair on the
+    field axis feeds back ``2 lambda / 3`` of its moment: at ``lambda >= 3/2`` the equations
+    give the pair a spontaneous moment (a mean-field artefact: a thermal pair has none), the
+    fixed point is no longer unique, and at weak fields no method converges. Such particles are
+    in fact thermally blocked or chained (Fe: blocked above ~8 nm radius, Neel time
+    ``tau0 exp(K V / kT)`` with K = 4.8e4 J/m^3 beyond 100 s), i.e. hysteretic, not Langevin.
+    """
+    lam, j = langevin_coupling(c, box, m_sat, T_K)
+    i = int(np.argmax(lam))
+    if lam[i] < LANGEVIN_LAMBDA_MAX:
+        return
+    from scipy.constants import k as KB
+    # moment at which lambda = 3/2 for this pair distance (m_i m_j -> m^2)
+    ratio = math.sqrt(LANGEVIN_LAMBDA_MAX / lam[i])
+    dist = float((MU0 * m_sat[i] * m_sat[j[i]] / (4 * math.pi * lam[i] * KB * T_K)) ** (1 / 3))
+    raise InputError(
+        f"law 'langevin' is not valid for these particles: the dipolar coupling parameter "
+        f"lambda = mu0 m_i m_j / (4 pi r^3 k_B T) reaches {lam[i]:.3g} (median "
+        f"{float(np.median(lam)):.3g}) between nearest neighbours at T = {T_K:g} K "
+        f"(particle {i}: m_sat = {m_sat[i]:.3g} A m^2, neighbour at {dist:.3g} m); it must stay below {LANGEVIN_LAMBDA_MAX:g}, where the local-field Langevin "
+        f"equations of a near pair turn spontaneously magnetised and lose their unique "
+        f"solution. Particles this strongly coupled are not independent superparamagnets (Fe "
+        f"is thermally blocked above ~8 nm radius: Neel time >> 100 s): use law "
+        f"'frohlich-kennelly' or 'linear', or moments below {ratio * m_sat[i]:.3g} A m^2 at "
+        f"this spacing (e.g. smaller or oxide cores), or a higher T_K.")
 
 
 def _rve_arrays(rve):
@@ -377,7 +538,8 @@ def _rve_arrays(rve):
 
 
 def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None, tol=1e-8,
-          accuracy=1e-6, method="anderson", summation="auto", max_iter=500,
+          accuracy=1e-6, method="anderson", summation="auto", max_iter=500, damping=1.0,
+          precondition=True,
           rho_kg_m3=RHO_FE_KG_M3, sigma_s_Am2_kg=SIGMA_S_FE_AM2_KG, c_powder=C_POWDER_SEED,
           initial_moments_Am2=None, **law_params) -> MagneticState:
     """Self-consistent moments, forces and effective quantities of an RVE in an applied field.
@@ -393,7 +555,12 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
     demag_factor : float in [0, 1] or None -- specimen demagnetizing factor; None = metallic
     tol : float -- relative residual of the moments at convergence (default 1e-8)
     accuracy : float -- relative accuracy of the periodic field sums (default 1e-6)
-    method : {"anderson", "fixed-point", "newton-krylov"}
+    method : {"anderson", "fixed-point", "newton-krylov"} -- Anderson (default) and
+        Newton-Krylov use the near-field preconditioner (``precondition``); the fixed point
+        ``m <- (1 - damping) m + damping g(m)`` is the plain reference
+    damping : float in (0, 2) -- relaxation of the fixed-point method (default 1)
+    precondition : bool -- precondition Anderson / Newton-Krylov with the exact coupling of
+        near pairs (gap < 1/4 of the contact distance, incomplete LU; default True)
     summation : {"auto", "ewald", "pme"} -- periodic sum; auto: PME above 3000 particles
     rho_kg_m3, sigma_s_Am2_kg : density [kg/m^3] and specific saturation moment [A m^2/kg] of
         the reference saturated material in phi_eff (defaults: the seed paper's Fe)
@@ -417,7 +584,10 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
     check_range("c_powder", c_powder, 0.0, 1.0, lo_open=True)
     if int(max_iter) < 1:
         raise InputError(f"max_iter must be >= 1, got {max_iter}")
+    check_range("damping", damping, 0.0, 2.0, lo_open=True, hi_open=True)
     B, G = applied_gradient(B_T, gradB_T_per_m)
+    if law_obj.name == "langevin":
+        _check_langevin_coupling(c, box, m_sat, law_obj.T_K)
     if summation == "auto":
         summation = "pme" if n > _PME_ABOVE_N else "ewald"
     dsum = DipoleSum(box, c, accuracy=accuracy, summation=summation, demag_factor=demag_factor)
@@ -425,9 +595,12 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
     H_app = (B[None, :] + (c - xc) @ G.T) / MU0           # (N, 3)
     m_scale = float(np.mean(m_sat)) if np.mean(m_sat) > 0 else 1.0
 
+    last_H = [H_app]
+
     def g(x):
         mom = x.reshape(n, 3) * m_scale
         H = H_app + dsum.field_A_m(mom)
+        last_H[0] = H
         return law_obj.moment(H, m_sat, vol).ravel() / m_scale
 
     if initial_moments_Am2 is not None:
@@ -440,18 +613,39 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
         # moments along their *local* field are a frustrated spin problem (several or no fixed
         # points once neighbour fields exceed the applied one), not a magnetization law.
         x, its, hist, ok = x0, 0, [0.0], True
-    elif method == "anderson":
-        x, its, hist, ok = _anderson(g, x0, tol, int(max_iter))
     elif method == "fixed-point":
-        x, its, hist, ok = _fixed_point(g, x0, tol, int(max_iter))
+        x, its, hist, ok = _fixed_point(g, x0, tol, int(max_iter), float(damping))
     else:
-        x, its, hist, ok = _newton_krylov(g, x0, tol, int(max_iter))
+        pc = _NearFieldPreconditioner(c, box, np.asarray(rve.radii_m, dtype=float), law_obj,
+                                      m_sat, vol) if precondition else None
+        if pc is not None and not pc.active:
+            pc = None
+        if pc is not None:
+            pc.update(H_app)
+
+        def refresh(it):
+            # nonlinear laws: the Jacobian at the first self-consistent field is much closer
+            # to the converged one than at the applied field; later changes are small
+            if it == 0 and law_obj.name != "linear":
+                pc.update(last_H[0])
+                return True
+            return False
+
+        if method == "anderson":
+            x, its, hist, ok = _anderson(g, x0, tol, int(max_iter),
+                                         precond=None if pc is None else pc.solve,
+                                         refresh=None if pc is None else refresh)
+        else:
+            x, its, hist, ok = _newton_krylov(g, x0, tol, int(max_iter),
+                                              precond=None if pc is None else pc.solve)
     if not ok:
         tail = ", ".join(f"{r:.2e}" for r in hist[-5:])
         raise ConvergenceError(
             f"magnetic moments did not converge with method {method!r}: relative residual "
             f"{hist[-1]:.3e} > tol {tol:g} after {its} iterations ({time.perf_counter() - t0:.1f}"
-            f" s; last residuals {tail}); try method='anderson', a larger max_iter or tol",
+            f" s; last residuals {tail}); try "
+            + ("method='anderson', " if method != "anderson" else "")
+            + "a larger max_iter or tol",
             hist)
     mom = x.reshape(n, 3) * m_scale
     H_dd, F_dd, energy, sigma = dsum.interactions(mom)

@@ -33,6 +33,29 @@ def test_direct_field_serial_and_parallel():
         np.testing.assert_allclose(out.T, ref, rtol=1e-11, atol=1e-11 * np.abs(ref).max())
 
 
+def test_direct_field_bitwise_independent_of_threads():
+    """Each observer sums its sources in the same order whatever the blocks and threads: the
+    serial, 1-thread and all-thread results are identical, not just close (600 observers: three
+    blocks, the last one partial)."""
+    import numba
+    src = np.ascontiguousarray(RNG.normal(size=(3, 211)))
+    mom = np.ascontiguousarray(RNG.normal(size=(3, 211)))
+    obs = np.ascontiguousarray(RNG.normal(size=(3, 600)))
+    outs = []
+    before = numba.get_num_threads()
+    try:
+        for fn, nt in ((K.dipole_field_direct, 1), (K.dipole_field_direct_par, 1),
+                       (K.dipole_field_direct_par, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(nt)
+            out = np.empty((3, 600))
+            fn(src, mom, obs, out)
+            outs.append(out)
+    finally:
+        numba.set_num_threads(before)
+    for o in outs[1:]:
+        np.testing.assert_array_equal(o, outs[0])
+
+
 def test_b123_against_closed_forms():
     a = 3.7
     for r in (0.01, 0.2, 0.9):
