@@ -132,7 +132,7 @@ class BlockVCycle:
 
     ``sweeps`` Gauss-Seidel passes over the colours before (forward) and after (backward) the
     coarse correction on every level but the coarsest, which is solved exactly (dense Cholesky up
-    to 6000 unknowns, sparse LU beyond).
+    to 4000 unknowns, sparse LU beyond).
     ``fine_colours``: colour classes of the finest level (default: greedy).
     """
 
@@ -141,7 +141,7 @@ class BlockVCycle:
         self.levels = [_Level(lv[i].A, fine_colours if i == 0 else None, lv[i].P)
                        for i in range(len(lv) - 1)]
         Ac = lv[-1].A
-        if Ac.shape[0] <= 6000:
+        if Ac.shape[0] <= 4000:
             # the coarsest matrix of smoothed aggregation is nearly dense: dense Cholesky (LAPACK,
             # multithreaded) beats sparse LU, and one solve handles all columns
             from scipy.linalg import cho_factor, cho_solve
