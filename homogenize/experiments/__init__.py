@@ -8,6 +8,9 @@
 * :func:`diagnose` -- cross-validated forward selection of causes; ``Diagnosis.as_dict()`` is
   the spec's JSON; :func:`write_report` its Markdown + PNG report.
 * :func:`generate` -- seeded synthetic experiments with hidden causes; :func:`run_study`.
+* :mod:`~homogenize.experiments.tables` -- the precomputed RVE physics the extensions
+  interpolate in (FEM filler stiffness, dipolar virial stress), re-made by
+  ``mapsim diagnose-tables``.
 """
 from .causes import CAUSES, DESCRIPTIONS, ModelSpec, applicable, predict
 from .diagnose import Diagnosis, diagnose

@@ -80,6 +80,39 @@ def _study(args) -> int:
     return 0
 
 
+_TABLES_DOC = """\
+Re-make the RVE tables the diagnosis interpolates in (homogenize/experiments/data/, each with a
+.provenance.json): filler_stiffness.csv (E_eff / E_matrix and nu_eff of random RVEs of Fe
+spheres in PDMS by the voxel FEM, several seeds per phi), filler_stiffness_resolution.json
+(its discretization check), dipolar_stress.csv (magnetic virial stress of random RVEs from
+micro.dipoles over phi and field) and dipolar_cell_stress.csv (the share of it that stiff
+particles pass on to the matrix, homogenize.cell's stress_mag, 32^3 voxels). On 2 cores:
+stiffness ~3-8 min at 24^3 voxels, resolution ~3 min, stress < 1 min, cell-stress ~5-10 min."""
+
+
+def _tables(args) -> int:
+    from . import tables as T
+    argv = ["mapsim", "diagnose-tables", "--only", args.only]
+    if args.only in ("stiffness", "all"):
+        argv += ["--voxels", str(args.voxels)]
+    if args.voxels < 8:
+        raise InputError(f"--voxels must be >= 8 (voxels per RVE edge), got {args.voxels}")
+    if args.only in ("stiffness", "all"):
+        out = T.build_stiffness_table(voxels=args.voxels, progress=not args.quiet, argv=argv)
+        print(f"wrote {out}")
+    if args.only in ("resolution", "all"):
+        out = T.DATA_DIR / "filler_stiffness_resolution.json"
+        T.stiffness_resolution_study(path=out, argv=argv)
+        print(f"wrote {out}")
+    if args.only in ("stress", "all"):
+        out = T.build_stress_table(progress=not args.quiet, argv=argv)
+        print(f"wrote {out}")
+    if args.only in ("cell-stress", "all"):
+        out = T.build_cell_stress_table(progress=not args.quiet, argv=argv)
+        print(f"wrote {out}")
+    return 0
+
+
 def register(sub, formatter):
     p = sub.add_parser("diagnose", formatter_class=formatter, description=_DIAGNOSE_DOC,
                        help="name what the seed model gets wrong in measured data, and the gain")
@@ -103,3 +136,13 @@ def register(sub, formatter):
     q.add_argument("--json", default=None, help="also write the study JSON to this file")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
     q.set_defaults(func=_study)
+
+    t = sub.add_parser("diagnose-tables", formatter_class=formatter, description=_TABLES_DOC,
+                       help="re-make the RVE tables (FEM stiffness, dipolar stress) of diagnose")
+    t.add_argument("--only", choices=("all", "stiffness", "resolution", "stress", "cell-stress"), default="all",
+                   help="which table to re-make; 'resolution' is the stiffness table's "
+                        "discretization check (one sphere at 12-40 voxels) (default: all)")
+    t.add_argument("--voxels", type=int, default=24,
+                   help="voxels per RVE edge of the stiffness table (-, default 24)")
+    t.add_argument("--quiet", action="store_true", help="no progress bar")
+    t.set_defaults(func=_tables)

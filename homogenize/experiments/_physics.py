@@ -13,7 +13,7 @@ Adapters (the physics lives elsewhere in the project; nothing is re-implemented)
 
 * beams -- ``homogenize.macro.closed_form`` (Euler-Bernoulli compliance, elastica table),
 * magnetization laws -- ``micro.magnetization.get_law``,
-* filler stiffening -- the closed forms of ``homogenize.cell``,
+* filler stiffening -- the voxel-FEM table of ``homogenize.cell`` (module ``tables``),
 * core-shell moments -- ``micro.particles``.
 
 An adapter whose module has not landed raises :class:`Unavailable`; the diagnosis then leaves
@@ -31,7 +31,7 @@ import numpy as np
 from scipy import integrate, special
 from scipy.constants import mu_0
 
-__all__ = ["local_field_factor", "dipolar_local_field_point", "Unavailable", "cylinder_demag_factor", "uniaxial_stress_Pa", "HYPERELASTIC_FORMS",
+__all__ = ["local_field_factor", "dipolar_local_field_point", "Unavailable", "cylinder_demag_factor", "shape_stress_coefficient", "uniaxial_stress_Pa", "HYPERELASTIC_FORMS",
            "eb_compliance_m4_N", "elastica_ratio", "LAWS", "particle_magnetization_A_per_m",
            "stiffening_ratio", "core_shell_moment_ratio", "composite_density_kg_m3", "mu_0",
            "elastica_table_path"]
@@ -92,6 +92,28 @@ def cylinder_demag_factor(aspect_ratio):
         raise InputError(f"aspect_ratio must be finite and > 0, got {aspect_ratio!r}")
     out = np.array([_demag_scalar(float(x)) for x in a.ravel()]).reshape(a.shape)
     return float(out) if out.ndim == 0 else out
+
+
+def shape_stress_coefficient(aspect_ratio):
+    """Axial magnetic (Maxwell) stress of the specimen's shape over ``mu0 M^2`` [-].
+
+    A cylinder magnetized along its axis with fixed M stores the demagnetizing energy
+    ``(1/2) mu0 N M^2 V``. Stretching it axially by eps at constant volume raises its aspect
+    ratio by ``(3/2) a eps``, so the energy falls at the rate ``(3/4) a N'(a) mu0 M^2 V``: the
+    specimen is pulled along the field by the stress ``-(3/4) a dN/da mu0 M^2`` (positive:
+    elongation). ``N`` is :func:`cylinder_demag_factor`; its derivative by a central
+    difference of relative step 1e-4 (N is integrated to ~1e-12: error ~1e-8).
+
+    For a sphere (not a cylinder) the same formula gives 1/5 (``N = 1/3 - (4/15) e`` for a
+    spheroid of axis ratio 1 + e), exactly the mean-field (Lorentz) stress of the particles'
+    own interactions: a spherical specimen of randomly dispersed particles does not strain in
+    the mean-field, affine picture. Long rod: ``1 / (pi a)``.
+    """
+    a = np.asarray(aspect_ratio, dtype=float)
+    d = 1e-4
+    dN = (cylinder_demag_factor(a * (1 + d)) - cylinder_demag_factor(a * (1 - d))) / (2 * d * a)
+    out = -0.75 * a * dN
+    return float(out) if np.ndim(out) == 0 else out
 
 
 # ------------------------------------------------------------------------------------------
@@ -158,7 +180,7 @@ def eb_compliance_m4_N(length_m, width_m, thickness_m, E_Pa):
     return out
 
 
-_ELASTICA_ALPHA_MAX = 400.0
+_ELASTICA_ALPHA_MAX = 1.0e4          # delta / L = 0.994 there
 
 
 def elastica_table_path() -> Path:
@@ -178,7 +200,7 @@ def _elastica_table():
         arr = np.array([[float(x) for x in r] for r in rows[1:]])
         return np.log(arr[:, 0]), arr[:, 1] / (arr[:, 0] / 8.0)
     cf = _module("homogenize.macro.closed_form")
-    alpha = np.geomspace(1e-3, _ELASTICA_ALPHA_MAX, 161)
+    alpha = np.geomspace(1e-3, _ELASTICA_ALPHA_MAX, 201)
     # unit beam: L = w = 1, t = 1, E = 12  ->  EI = E w t^3 / 12 = 1, alpha = f w t L^3 / EI = f
     v, _ = cf.elastica_tip_deflection(alpha, 1.0, 1.0, 1.0, 12.0)
     from micro._io import atomic_write_text
@@ -198,21 +220,30 @@ def _elastica_table():
 def elastica_ratio(alpha):
     """Elastica tip deflection over the Euler-Bernoulli one at load ``alpha = q L^3 / EI``.
 
-    Interpolated (cubic in log alpha) in the stored table; 1 below the table, the table's last
-    value times ``alpha_max / alpha`` above it (the tip deflection saturates at ~L there).
+    Interpolated (cubic in log alpha) in the stored table (alpha in [1e-3, 1e4]); 1 below the
+    table (the correction is O(alpha^2) < 1e-7 there); above it the heavy-load asymptote
+    ``delta / L = 1 - (2 - sqrt 2) / sqrt(alpha) + c / alpha`` with ``c`` matched to the table's
+    last node (the neglected term is O(alpha^-3/2), < 1e-6 beyond 1e4).
     """
     la, ratio = _elastica_table()
     a = np.abs(np.asarray(alpha, dtype=float))
     out = np.ones_like(a)
-    pos = a > np.exp(la[0])
-    if np.any(pos):
-        x = np.log(np.minimum(a[pos], np.exp(la[-1])))
-        out[pos] = _interp_cubic(la, ratio, x)
-        big = a[pos] > np.exp(la[-1])
-        if np.any(big):
-            out[pos] = np.where(big, ratio[-1] * np.exp(la[-1]) / np.maximum(a[pos], 1e-300),
-                                out[pos])
+    a_max = math.exp(la[-1])
+    mid = (a > math.exp(la[0])) & (a <= a_max)
+    if np.any(mid):
+        out[mid] = _interp_cubic(la, ratio, np.log(a[mid]))
+    big = a > a_max
+    if np.any(big):
+        d_max = ratio[-1] * a_max / 8.0
+        c = (d_max - 1.0 + _HEAVY_LOAD / math.sqrt(a_max)) * a_max
+        d = 1.0 - _HEAVY_LOAD / np.sqrt(a[big]) + c / a[big]
+        out[big] = d / (a[big] / 8.0)
     return out
+
+
+#: delta / L = 1 - _HEAVY_LOAD / sqrt(alpha) + O(1 / alpha) for a heavy load (clamp boundary
+#: layer; see tests/homogenize/macro/test_closed_form.py)
+_HEAVY_LOAD = 2.0 - math.sqrt(2.0)
 
 
 @functools.lru_cache(maxsize=1)
@@ -359,10 +390,19 @@ def local_field_factor(phi):
 PARTICLE_E_PA, PARTICLE_NU = 211e9, 0.29
 
 
-def stiffening_ratio(phi, nu_matrix: float, E_matrix_Pa: float = 2e6):
-    """E_eff / E_matrix of iron spheres at volume fraction phi [-]: the Mori-Tanaka estimate of
-    ``homogenize.cell`` (the Hashin-Shtrikman bound on the matrix side for spheres), with
-    E_eff from the effective bulk and shear moduli."""
+def stiffening_ratio(phi, nu_matrix: float = 0.45, E_matrix_Pa: float = 2e6):
+    """E_eff / E_matrix of iron spheres at volume fraction phi [-]: the project's voxel-FEM
+    homogenization of random RVEs, tabulated (``tables.filler_stiffness_ratio``; Fe / PDMS
+    contrast 1e5, i.e. rigid spheres, matrix nu = 0.45). ``nu_matrix`` and ``E_matrix_Pa`` are
+    accepted for the adapter's signature; the ratio does not depend on E_matrix at this
+    contrast, and the table is for nu = 0.45 (see ``filler_stiffness_ratio``)."""
+    from .tables import filler_stiffness_ratio
+    return filler_stiffness_ratio(phi)
+
+
+def mori_tanaka_stiffening_ratio(phi, nu_matrix: float, E_matrix_Pa: float = 2e6):
+    """The Mori-Tanaka estimate of ``homogenize.cell`` for the same particles (the
+    Hashin-Shtrikman bound on the matrix side): a cross-check of the FEM table only."""
     cell = _module("homogenize.cell")
     Km, Gm = cell.bulk_shear(E_matrix_Pa, nu_matrix)
     Kp, Gp = cell.bulk_shear(PARTICLE_E_PA, PARTICLE_NU)

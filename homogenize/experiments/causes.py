@@ -18,14 +18,20 @@ field_dependent_magnetization   particle magnetization ``M_p(H_loc)`` from
 dipolar_interaction             local field of randomly dispersed interacting dipoles,
                                 ``H_loc = H_int + c(phi) M``, with c(phi) tabulated from random
                                 RVEs solved by ``micro.dipoles`` (0.35-0.40; the Lorentz
-                                cavity's 1/3 is its mean-field limit), and the magnetic stress
-                                ``sigma = kappa mu0 M^2`` that strains the specimen
-                                (magnetostriction: ``kappa``)
+                                cavity's 1/3 is its mean-field limit). Magnetostriction: axial
+                                strain ``(k_shape(a) - k_rve(phi, m) + kappa_extra) mu0 M^2 / E``
+                                with the PREDICTED specimen-shape (Maxwell) stress ``k_shape``
+                                of the cylinder and the RVE stress ``k_rve`` of random dipoles
+                                (virial table from ``micro.dipoles`` times the share the stiff
+                                particles pass on to the matrix, ``homogenize.cell``);
+                                ``kappa_extra`` (fitted) is the stress this affine dipole
+                                picture does not explain
 oxide_shell                     Fe core + Fe3O4 shell per particle (``micro.particles.CoreShell``
                                 calibrated to the powder's sigma_s at its nominal radius):
                                 smaller particles carry less moment (``shell_m``)
-filler_stiffening               effective modulus of iron spheres in the matrix: the
-                                Mori-Tanaka estimate of ``homogenize.cell`` (none)
+filler_stiffening               effective modulus of iron spheres in the matrix: the voxel-FEM
+                                homogenization (``homogenize.cell``) of random RVEs, tabulated
+                                against phi (none)
 geometric_nonlinearity          elastica instead of Euler-Bernoulli, from
                                 ``homogenize.macro.closed_form`` (none)
 hyperelasticity                 incompressible neo-Hookean (none), Mooney-Rivlin (``beta``) or
@@ -158,6 +164,9 @@ def _probe(cause, exp):
         P.particle_magnetization_A_per_m("frohlich-kennelly", np.array([1.0]), 1.0, 1.0)
     if cause == "dipolar_interaction":
         P.local_field_factor(0.1)
+        if exp.kind == "magnetostriction":
+            from .tables import microstructure_stress_coefficient
+            microstructure_stress_coefficient(0.1, 1.0)
     if cause == "oxide_shell":
         P.core_shell_moment_ratio(np.array([20e-9]), 1e-9, 25e-9, 7870.0, 178.0)
     if cause == "filler_stiffening":
@@ -176,7 +185,8 @@ def parameters(spec: ModelSpec, exp: Experiment) -> list[Param]:
         ps.append(Param("E_Pa", True, 1e2, 1e12, (exp.matrix.E_Pa,), amplitude=True))
     elif kind == "magnetostriction":
         if spec.has("dipolar_interaction"):
-            ps.append(Param("kappa", False, -1e3, 1e3, (1.0,), amplitude=True))
+            # stress beyond the predicted one, in units of mu0 M^2 (0: fully predicted)
+            ps.append(Param("kappa_extra", False, -1e3, 1e3, (0.0,)))
     else:
         ps.append(Param("scale", True, 1e-6, 1e3, (1.0,), amplitude=True))
     if spec.has("field_dependent_magnetization"):
@@ -268,6 +278,22 @@ def composite_magnetization_A_per_m(spec: ModelSpec, exp: Experiment, p: dict) -
     return x
 
 
+def predicted_stress_coefficients(exp: Experiment, M) -> tuple[np.ndarray, np.ndarray]:
+    """(k_shape, k_rve) per row: the specimen's Maxwell (shape) stress and the particles'
+    interaction (RVE virial) stress, both over ``mu0 M^2`` [-] (module doc)."""
+    c = exp.columns
+    from .tables import microstructure_stress_coefficient
+    m = np.clip(np.abs(M) / (c["phi"] * exp.particles.Ms_A_per_m), 0.0, 1.0)
+    return (np.asarray(P.shape_stress_coefficient(c["aspect_ratio"]), dtype=float),
+            np.asarray(microstructure_stress_coefficient(c["phi"], m), dtype=float))
+
+
+def magnetostriction_coefficient(spec: ModelSpec, exp: Experiment, M, p: dict) -> np.ndarray:
+    """kappa = k_shape - k_rve + kappa_extra per row: axial strain = kappa mu0 M^2 / E."""
+    k_shape, k_rve = predicted_stress_coefficients(exp, M)
+    return k_shape - k_rve + p.get("kappa_extra", 0.0)
+
+
 def predict(spec: ModelSpec, exp: Experiment, p: dict) -> np.ndarray:
     """Prediction of the measured column of ``exp`` [its SI unit] with parameters ``p``."""
     c = exp.columns
@@ -288,8 +314,8 @@ def predict(spec: ModelSpec, exp: Experiment, p: dict) -> np.ndarray:
     if spec.kind == "magnetostriction":
         if not spec.has("dipolar_interaction"):
             return np.zeros(exp.n_rows)
-        # axial magnetic stress kappa mu0 M^2 on a linear matrix of modulus E (small strain)
-        return p["kappa"] * P.mu_0 * M ** 2 / E
+        # axial magnetic stress kappa mu0 M^2 on an incompressible linear matrix (small strain)
+        return magnetostriction_coefficient(spec, exp, M, p) * P.mu_0 * M ** 2 / E
     # deflection
     f = M * c["gradB_T_per_m"]
     comp = P.eb_compliance_m4_N(c["length_m"], c["width_m"], c["thickness_m"], 1.0) / E

@@ -97,7 +97,8 @@ class Diagnosis:
                        "evidence": s["evidence"]} for s in self.steps],
             "candidates": [{"cause": c.cause, "cv_rmse": c.cv_rmse}
                            for c in sorted(first, key=lambda c: c.cv_rmse)],
-            "final": {"cv_rmse": self.final.cv_rmse, "params": _params_out(self.final)},
+            "final": {"cv_rmse": self.final.cv_rmse,
+                      "params": {**_params_out(self.final), **_predicted_out(self.exp, self.final)}},
             "gain": self.gain if self.steps else 1.0,
         }
 
@@ -113,8 +114,21 @@ def _params_out(c: Candidate) -> dict:
     if c.spec.hyper:
         out["hyperelastic_law"] = c.spec.hyper
     if c.spec.kind == "magnetostriction" and "scale" not in out:
-        out["scale"] = 1.0            # not identifiable in magnetostriction (absorbed in kappa)
+        out["scale"] = 1.0            # not identifiable in magnetostriction (absorbed in E)
     return out
+
+
+def _predicted_out(exp: Experiment, c: Candidate) -> dict:
+    """Predicted (not fitted) physics of the final model worth reporting next to the fitted
+    parameters: for magnetostriction, the row-mean shape and RVE stress coefficients."""
+    if c.spec.kind != "magnetostriction" or not c.spec.has("dipolar_interaction"):
+        return {}
+    from .causes import composite_magnetization_A_per_m, predicted_stress_coefficients
+    M = composite_magnetization_A_per_m(c.spec, exp, c.fit.params)
+    k_shape, k_rve = predicted_stress_coefficients(exp, M)
+    return {"kappa_shape_predicted": float(np.mean(k_shape)),
+            "kappa_rve_predicted": float(np.mean(k_rve)),
+            "kappa_predicted": float(np.mean(k_shape - k_rve))}
 
 
 # ------------------------------------------------------------------------------------------

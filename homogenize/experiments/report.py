@@ -173,6 +173,9 @@ def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Pat
         lines.append("")
     lines += ["## Final model", "", f"Held-out RMSE {res['final']['cv_rmse']:.4g} {unit}.", "",
               _params_table(res["final"]["params"]), ""]
+    if any(k.endswith("_predicted") for k in res["final"]["params"]):
+        lines += ["Entries ending in `_predicted` are not fitted: they are the project's physics "
+                  "at the final fit (row means), shown next to the fitted parameters.", ""]
     c0 = residual_correlations(exp, d.baseline.cv_pred - exp.y)
     c1 = residual_correlations(exp, d.final.cv_pred - exp.y)
     if c0:

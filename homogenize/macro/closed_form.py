@@ -13,7 +13,8 @@ body force ``f`` [N/m^3] perpendicular to its plane, i.e. a distributed line loa
 * Elastica: the inextensible Euler-Bernoulli beam at large rotation,
   ``EI theta'' = q (L - s) cos(theta)``, ``theta(0) = 0``, ``theta'(L) = 0``, with the tip
   position ``(x, y)(L) = int_0^L (cos theta, sin theta) ds``; solved as a two-point boundary
-  value problem with :func:`scipy.integrate.solve_bvp` and load continuation.
+  value problem with :func:`scipy.integrate.solve_bvp` and load continuation; an independent
+  shooting solver (:func:`elastica_shooting`) covers the same range of loads.
 """
 from __future__ import annotations
 
@@ -196,20 +197,73 @@ def elastica_tip_deflection(f_N_m3, length_m, width_m, thickness_m, E_Pa, nu=0.0
     return v, h
 
 
-def elastica_shooting(alpha: float) -> tuple[float, float]:
-    """Independent elastica solution by shooting on ``theta'(0)``, dimensionless.
+# Shooting from the free end. The physical unknown is the tip angle; with the load along -Y the
+# strip hangs ever closer to vertical, so the angle from the vertical, phi = theta + pi / 2 in
+# (0, pi / 2], is the natural variable. Near the tip phi obeys phi'' ~ alpha (1 - s) phi, whose
+# solution grows by ~exp(2 sqrt(alpha) / 3) from the tip to the clamp: the tip value is ~1e-29
+# at alpha = 1e4, far below the resolution of theta near -pi / 2. Hence psi = ln(phi) is
+# integrated, which (i) represents any tip angle, (ii) follows the growing mode, the stable
+# direction, from s = 1 down to s = 0, and (iii) makes the shot's outcome monotone in psi(1).
+_LOG_HALF_PI = float(np.log(0.5 * np.pi))
 
-    Returns ``(delta / L, shortening / L)`` for ``alpha = q L^3 / (EI)``; used to check the
-    boundary-value solver. ``theta'(0)`` lies in ``[-alpha/2, 0]`` (its linear value is
-    ``-alpha/2`` and large rotation only unloads the root moment).
+
+def _shooting_rhs(alpha):
+    # y = (psi, psi', X, D): phi'' = alpha (1 - s) sin(phi) with phi = exp(psi), i.e.
+    # psi'' = alpha (1 - s) sin(phi) / phi - psi'^2; X' = sin(phi) = cos(theta) (horizontal),
+    # D' = cos(phi) = -sin(theta) (along the load)
+    def f(s, y):
+        psi, dpsi = y[0], y[1]
+        phi = np.exp(psi)
+        sinc = np.sin(phi) / phi if phi > 1e-8 else 1.0 - phi * phi / 6.0
+        return [dpsi, alpha * (1.0 - s) * sinc - dpsi * dpsi, np.sin(phi), np.cos(phi)]
+    return f
+
+
+def elastica_shooting(alpha: float) -> tuple[float, float]:
+    """Independent elastica solution by shooting from the free end, dimensionless.
+
+    Returns ``(delta / L, shortening / L)`` for ``alpha = q L^3 / (EI)`` >= 0; used to check the
+    boundary-value solver and valid over the whole range of loads (tested to alpha = 1e6, where
+    ``delta / L -> 1 - (2 - sqrt 2) / sqrt(alpha)``, the strip hanging from a boundary layer of
+    length ~ L / sqrt(alpha) at the clamp).
+
+    Method: the free end has ``theta' = 0`` and an unknown angle ``phi_tip`` from the vertical.
+    Integrating ``phi'' = alpha (1 - s) sin(phi)`` from the tip towards the clamp (in
+    ``psi = ln phi``, DOP853, rtol 1e-12), ``phi`` increases monotonically; the clamp condition
+    ``phi(0) = pi / 2`` (horizontal) selects ``psi_tip``. The residual is the arc length at which
+    ``phi`` first reaches ``pi / 2`` (positive, the shot went vertical-to-horizontal too early)
+    or ``phi(0) - pi / 2`` (negative): continuous and increasing in ``psi_tip``, so the bracket
+    ``[psi_lo, ln(pi / 2)]`` holds exactly the physical root (overshooting shots, which loop
+    past the horizontal, are stopped at ``pi / 2`` and never offer spurious roots).
     """
     alpha = check_positive("alpha", alpha, "", allow_zero=True)
     if alpha == 0.0:
         return 0.0, 0.0
+    rhs = _shooting_rhs(alpha)
 
-    def run(k0):
-        return solve_ivp(_rhs(alpha), (0.0, 1.0), [0.0, k0, 0.0, 0.0], rtol=1e-11, atol=1e-13)
+    def horizontal(s, y):
+        return y[0] - _LOG_HALF_PI
+    horizontal.terminal = True
 
-    k0 = brentq(lambda k: run(k).y[1, -1], -alpha / 2.0 * (1 + 1e-9), 0.0, xtol=1e-14)
-    y = run(k0).y[:, -1]
-    return -y[3], 1.0 - y[2]
+    def run(psi_tip, stop):
+        return solve_ivp(rhs, (1.0, 0.0), [psi_tip, 0.0, 0.0, 0.0], method="DOP853",
+                         rtol=1e-12, atol=1e-14, events=horizontal if stop else None)
+
+    def residual(psi_tip):
+        sol = run(psi_tip, True)
+        if sol.t_events[0].size:
+            return float(sol.t_events[0][0])
+        return float(sol.y[0, -1]) - _LOG_HALF_PI
+
+    hi = _LOG_HALF_PI                 # horizontal tip: the root moment is positive, phi(0) > pi/2
+    step = 1.0
+    lo = hi - step
+    while residual(lo) > 0.0:         # ~ (2/3) sqrt(alpha) e-folds below: doubling finds it
+        step *= 2.0
+        lo = hi - step
+        if step > 1e5:                # alpha ~ 1e9: exp(psi) would underflow long before
+            raise RuntimeError(f"elastica_shooting: no bracket at alpha={alpha:g}")
+    psi_tip = brentq(residual, lo, hi, xtol=1e-14, rtol=4.0 * np.finfo(float).eps)
+    y = run(psi_tip, False).y[:, -1]
+    # integrated from s = 1 down to 0: the integrals over [0, 1] are minus the final states
+    return float(-y[3]), float(1.0 + y[2])

@@ -60,3 +60,9 @@ def test_diagnose_study_small(tmp_path):
     for f in ("confusion.csv", "confusion.png", "manifest.json"):
         assert (tmp_path / "st" / f).exists()
     assert main(["diagnose-study", "--n", "0", "--out", str(tmp_path / "x")]) == 2
+
+
+def test_diagnose_tables_refuses_bad_resolution(capsys):
+    # re-making the tables takes minutes (not run here); bad input is refused before any work
+    assert main(["diagnose-tables", "--only", "stiffness", "--voxels", "4"]) == 2
+    assert "--voxels" in capsys.readouterr().err

@@ -27,9 +27,16 @@ def test_diguet(ex):
     r = ex.diguet
     assert r["causes"] == ["dipolar_interaction", "field_dependent_magnetization"]
     assert r["gain"] > 6
-    # the final fit's strain scale kappa and law; values as committed in results/diagnose
     assert r["final"]["params"]["law"] == "langevin"
-    assert 0.15 < r["final"]["params"]["kappa"] < 0.3
+    # predicted (not fitted) stresses over mu0 M^2: the L/D = 0.8 cylinder's shape (Maxwell)
+    # stress 0.174 (cylinder demagnetizing factor) and the random RVE's stress ~0.17 (virial
+    # ~0.2 times the FEM share 0.86) nearly cancel; the data need a fitted extra ~0.22
+    # (values as committed in results/diagnose)
+    p = r["final"]["params"]
+    assert p["kappa_shape_predicted"] == pytest.approx(0.1741, abs=2e-4)
+    assert 0.15 < p["kappa_rve_predicted"] < 0.2
+    assert abs(p["kappa_predicted"]) < 0.05
+    assert 0.2 < p["kappa_extra"] < 0.3 and p["kappa_extra_sd"] < 0.03
 
 
 def test_rtv615(ex):

@@ -54,13 +54,42 @@ def test_elastica_small_load_is_euler_bernoulli():
     assert h == pytest.approx(short, rel=1e-3)
 
 
-@pytest.mark.parametrize("alpha", [0.5, 3.0, 12.0, 40.0])
-def test_elastica_bvp_agrees_with_shooting(alpha):
-    # two independent solvers of the same BVP; both at tolerances ~1e-9
-    v, h = cf.elastica_tip_deflection(alpha, 1.0, 1.0, 1.0, 12.0)  # EI = 1, q = alpha
-    vs, hs = cf.elastica_shooting(alpha)
-    assert v == pytest.approx(vs, rel=1e-7)
-    assert h == pytest.approx(hs, rel=1e-6)
+def test_elastica_bvp_agrees_with_shooting_over_the_whole_load_range():
+    # two independent solvers of the same BVP (collocation with continuation vs shooting from
+    # the free end in ln(angle from vertical)); both at tolerances ~1e-9 or better. alpha = 60
+    # and beyond broke the former shooting's bracket; 3000 has delta / L = 0.99.
+    a = np.array([0.5, 3.0, 12.0, 40.0, 60.0, 400.0, 3000.0])
+    v, h = cf.elastica_tip_deflection(a, 1.0, 1.0, 1.0, 12.0)  # EI = 1, q = alpha
+    for ai, vi, hi in zip(a, v, h):
+        vs, hs = cf.elastica_shooting(ai)
+        assert vi == pytest.approx(vs, rel=1e-7), ai
+        assert hi == pytest.approx(hs, rel=1e-6), ai
+
+
+def test_elastica_shooting_small_load_is_euler_bernoulli():
+    # delta / L = alpha / 8 (1 - c alpha^2 + ...): the relative correction must vanish at the
+    # rate alpha^2 (polyfit of log|1 - ratio| against log alpha), and be below 1e-6 at 1e-3
+    a = np.array([0.02, 0.04, 0.08, 0.16])
+    dev = np.array([1.0 - cf.elastica_shooting(x)[0] / (x / 8.0) for x in a])
+    assert np.all(dev > 0)                                   # large rotation stiffens
+    assert np.polyfit(np.log(a), np.log(dev), 1)[0] == pytest.approx(2.0, abs=0.02)
+    assert cf.elastica_shooting(1e-3)[0] == pytest.approx(1e-3 / 8.0, rel=1e-6)
+    assert cf.elastica_shooting(0.0) == (0.0, 0.0)
+
+
+def test_elastica_shooting_heavy_load_asymptote():
+    """alpha -> inf: the strip hangs vertically from a clamp boundary layer where
+    phi'' = alpha sin(phi) (phi from the vertical); its first integral phi' = -2 sqrt(alpha)
+    sin(phi / 2) gives int (1 - cos phi) ds = (2 - sqrt 2) / sqrt(alpha) and int sin phi ds =
+    sqrt(2 / alpha). The variation of the lever arm (1 - s) across the layer adds O(1 / alpha),
+    so the scaled errors must vanish as alpha^-1/2 (fitted rate, tolerance 0.05)."""
+    a = np.array([1e3, 1e4, 1e5])
+    res = np.array([cf.elastica_shooting(x) for x in a])
+    dv = (1.0 - res[:, 0]) * np.sqrt(a) - (2.0 - np.sqrt(2.0))
+    dh = (1.0 - res[:, 1]) * np.sqrt(a) - np.sqrt(2.0)
+    assert np.polyfit(np.log(a), np.log(np.abs(dv)), 1)[0] == pytest.approx(-0.5, abs=0.05)
+    assert np.polyfit(np.log(a), np.log(np.abs(dh)), 1)[0] == pytest.approx(-0.5, abs=0.05)
+    assert abs(dv[-1]) < 2e-3 and abs(dh[-1]) < 5e-3
 
 
 def test_elastica_limits():
