@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from micro._io import manifest, write_json
-from micro._validate import InputError, check_finite
+from micro._validate import InputError, check_finite, check_positive
 
 _DESCRIPTION = """\
 Periodic voxel FEM of an RVE (HDF5 written by `mapsim rve`): effective stiffness C_eff (6x6
@@ -98,7 +98,46 @@ def _cmd_phi_study(args) -> int:
     return 0
 
 
+def _cmd_dilute_study(args) -> int:
+    from ._cell_study import dilute_convergence_study, plot_dilute_convergence
+    try:
+        ns = [int(v) for v in args.voxels.split(",")]
+    except ValueError:
+        raise InputError(f"--voxels must be comma-separated integers, got {args.voxels!r}") from None
+    for n in ns:
+        if not 4 <= n <= 256:
+            raise InputError(f"--voxels values must be in [4, 256] (voxels per edge), got {n}")
+    if not 0.0 < args.phi <= 0.05:
+        raise InputError(f"--phi must be in (0, 0.05] (a dilute volume fraction), got {args.phi:g}")
+    check_positive("--particle-E", args.particle_E, "Pa")
+    study = dilute_convergence_study(ns, args.phi, particle_E_Pa=args.particle_E,
+                                     progress=not args.quiet)
+    study["manifest"] = manifest({"voxels": ns, "phi": args.phi, "particle_E_Pa": args.particle_E})
+    if args.png:
+        plot_dilute_convergence(args.png, study)
+    write_json(args.json, study)
+    if not args.quiet:
+        print(f"observed rate {study['observed_rate']:.2f}, finest error vs dilute "
+              f"{study['rows'][-1]['error_vs_dilute']:.3%}", file=sys.stderr)
+    return 0
+
+
 def register(sub, formatter):
+    d = sub.add_parser("cell-dilute-study", formatter_class=formatter,
+                       help="one dilute sphere refined: voxel FEM -> Eshelby, with the rate",
+                       description="Shear stiffening coefficient (G_eff/G_m - 1)/phi of one sphere "
+                                   "at dilute phi on refined voxel grids, against Eshelby's dilute "
+                                   "result and Mori-Tanaka; observed rate and Richardson limit.")
+    d.add_argument("--voxels", default="8,16,24,32,48,64",
+                   help="comma-separated voxels per cube edge (default 8,16,24,32,48,64)")
+    d.add_argument("--phi", type=float, default=0.01, help="particle volume fraction [1] (default 0.01)")
+    d.add_argument("--particle-E", dest="particle_E", type=float, default=20e6,
+                   help="particle Young's modulus [Pa] (default 20e6: contrast 10 to PDMS)")
+    d.add_argument("--json", required=True, type=Path, help="result JSON file")
+    d.add_argument("--png", type=Path, default=None, help="plot file (PNG)")
+    d.add_argument("--quiet", action="store_true", help="no progress bar")
+    d.set_defaults(func=_cmd_dilute_study)
+
     q = sub.add_parser("cell-phi-study", formatter_class=formatter,
                        help="E_eff vs phi: voxel FEM against dilute, Mori-Tanaka, Guth-Gold",
                        description="Simple cubic array of Fe spheres in PDMS: effective Young's "

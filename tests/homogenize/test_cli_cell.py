@@ -78,3 +78,14 @@ def test_phi_study_shows_where_estimates_part(tmp_path):
     assert abs(hi["E_fem_Pa"] / hi["E_guth_gold_Pa"] - 1) < 0.25
     assert hi["E_fem_Pa"] < hi["E_hs_upper_Pa"]
     assert (tmp_path / "phi.png").is_file()
+
+
+def test_dilute_study_cli_and_bad_input(tmp_path):
+    out = tmp_path / "d.json"
+    rc = main(["cell-dilute-study", "--voxels", "6,8,10", "--json", str(out),
+               "--png", str(tmp_path / "d.png"), "--quiet"])
+    assert rc == 0 and (tmp_path / "d.png").stat().st_size > 0
+    st = json.loads(out.read_text())
+    assert [r["voxels"] for r in st["rows"]] == [6, 8, 10] and "observed_rate" in st
+    assert main(["cell-dilute-study", "--voxels", "2,8", "--json", str(out), "--quiet"]) == 2
+    assert main(["cell-dilute-study", "--phi", "0.3", "--json", str(out), "--quiet"]) == 2
