@@ -395,6 +395,17 @@ def _ewald_subset_forces(box, c, m, accuracy, targets):
     return MU0 * (f / (4 * math.pi) - fs) / box ** 4
 
 
+def _pme_force_stages(ds, m):
+    """Seconds of the stages of one PME force evaluation (best of 2): real space with forces
+    and virial; reciprocal space (spread + forward FFT + k-space + 9-grid inverse FFT +
+    gather)."""
+    ps = ds._sum
+    mom = np.ascontiguousarray(m[ps.perm])
+    t_real, _ = _best(lambda: ps._real(mom, True))
+    t_rec, _ = _best(lambda: ps._pme_recip(mom, True))
+    return {"real_space": t_real, "reciprocal": t_rec}
+
+
 def _rec_lammps(quick):
     """LAMMPS pppm/dipole against our PME, forces of the same configuration (random
     non-overlapping RVE, phi = 0.05, the default size distribution, saturated moments in random
@@ -412,6 +423,8 @@ def _rec_lammps(quick):
         pme = DipoleSum(box, c, accuracy=1e-4, summation="pme")
         pme.interactions(m)
         t, (_, F, _, _) = _best(lambda: pme.interactions(m))
+        t_field, _ = _best(lambda: pme.field_A_m(m))
+        stages = _pme_force_stages(pme, m)
         if n <= 20000:
             sel = np.arange(n)
             ref = DipoleSum(box, c, accuracy=1e-8, summation="ewald").interactions(m)[1]
@@ -425,7 +438,8 @@ def _rec_lammps(quick):
                "reference": "LAMMPS pppm/dipole, same configuration and cutoff",
                "max_rel_error": err, "threads": _nb_threads(), "phi": 0.05,
                "error_measure": "rms relative force error against " + ref_note,
-               "our_accuracy_setting": 1e-4, "lammps": []}
+               "our_accuracy_setting": 1e-4, "our_field_seconds": t_field,
+               "our_force_stage_seconds": stages, "pme": pme.parameters, "lammps": []}
         try:
             chosen = None
             for st in settings:
@@ -467,5 +481,11 @@ def bench_records(quick: bool) -> list[dict]:
     recs = []
     for fn in (_rec_direct, _rec_pme, _rec_solve, _rec_lammps):
         print(f"[bench] dipoles: {fn.__name__[5:]} ...", file=sys.stderr, flush=True)
-        recs.extend(fn(quick))
+        before = os.getloadavg()
+        out = fn(quick)
+        after = os.getloadavg()
+        for r in out:            # the machine is shared: say how busy it was
+            r["loadavg_1_5_15_before"] = [round(x, 2) for x in before]
+            r["loadavg_1_5_15_after"] = [round(x, 2) for x in after]
+        recs.extend(out)
     return recs

@@ -175,10 +175,8 @@ class PeriodicSum:
             g[:, kk // 2, :] = 0.0
             g[:, :, -1] = 0.0
         self.g = g
-        self.kx, self.ky, self.kz = kx, ky, kz
         self.kv1 = np.ascontiguousarray(2 * np.pi * n1)
         self.kv3 = np.ascontiguousarray(2 * np.pi * n3)
-        self.k2g = k2
         # weights of the half-space (rfft) sum over full k-space
         wz = np.full(n3.shape, 2.0)
         wz[0] = 1.0
@@ -186,54 +184,58 @@ class PeriodicSum:
             wz[-1] = 1.0
         self.wz = wz
         self.gpos = np.ascontiguousarray(self.pos * kk)
+        # x-slabs of >= p grid planes for the race-free parallel spread (1 or an even number)
+        nslab = kk // p
+        nslab = 1 if nslab < 2 else nslab - nslab % 2
+        bounds = np.arange(nslab + 1) * kk // nslab
+        slab = np.searchsorted(bounds, np.floor(self.gpos[:, 0]), side="right") - 1
+        self.slab_order = np.argsort(slab, kind="stable").astype(np.int64)
+        self.slab_start = np.searchsorted(slab[self.slab_order], np.arange(nslab + 1)) \
+            .astype(np.int64)
+        nscr = max((nslab + 1) // 2, 64)       # spread: slab pairs; gather: 64 fixed chunks
+        self._work = np.empty((nscr, 3, p))
+        self._iwork = np.empty((nscr, 3, p), dtype=np.int64)
+        self._row = np.empty((nscr, 9))
+
+    def _pme_spread_fft(self, mom):
+        kk = self.grid
+        q = np.zeros((kk, kk, kk, 3))
+        K.pme_spread(self.gpos, mom, self.order, self.slab_order, self.slab_start, self._work,
+                     self._iwork, self._row, q)
+        return scipy.fft.rfftn(q, axes=(0, 1, 2), workers=-1, overwrite_x=True)
+
+    def _pme_back_gather(self, hg):
+        kk = self.grid
+        grid = scipy.fft.irfftn(hg, s=(kk, kk, kk), axes=(0, 1, 2), workers=-1,
+                                overwrite_x=True)
+        out = np.empty((self.n, grid.shape[3]))
+        K.pme_gather(self.gpos, np.ascontiguousarray(grid), self.order, self._work[:64],
+                     self._iwork[:64], self._row[:64], out)
+        return out
 
     def _pme_recip(self, mom, want_force):
+        """Reciprocal part by smooth PME: one forward transform of the gridded moments (3
+        real grids, component last), one k-space pass, one inverse transform of 3 field grids
+        (or, with forces, 3 field + 6 gradient grids: grad H is symmetric) and one gather."""
         kk = self.grid
-        q = np.zeros((3, kk, kk, kk))
-        K.pme_spread(self.gpos, mom, self.order, q)
-        qh = scipy.fft.rfftn(q, axes=(1, 2, 3), workers=-1)
-        kx, ky, kz = self.kx, self.ky, self.kz
+        qh = self._pme_spread_fft(mom)
         if not want_force:
             hg = np.empty_like(qh)
             K.pme_influence(qh, self.kv1, self.kv3, self.g, float(kk) ** 3, hg)
-            grid = scipy.fft.irfftn(hg, s=(kk, kk, kk), axes=(1, 2, 3), workers=-1,
-                                    overwrite_x=True)
-            out = np.empty((self.n, 3))
-            K.pme_gather(self.gpos, np.ascontiguousarray(grid), self.order, out)
-            return out, None, None, None
-        s = kx * qh[0] + ky * qh[1] + kz * qh[2]          # k . Q^
-        gs = -self.g * s * (kk ** 3)
-        hg = np.stack([kx * gs, ky * gs, kz * gs])
-        if want_force:
-            # gradient grids dH_a/dx_b = i k_b H_a, six independent components
-            ks = (kx, ky, kz)
-            comps = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
-            hg = np.concatenate([hg, np.stack([1j * ks[b] * ks[a] * gs for a, b in comps])])
-        grid = scipy.fft.irfftn(hg, s=(kk, kk, kk), axes=(1, 2, 3), workers=-1)
-        grid = np.ascontiguousarray(grid)
-        out = np.empty((self.n, grid.shape[0]))
-        K.pme_gather(self.gpos, grid, self.order, out)
+            return self._pme_back_gather(hg), None, None, None
+        hg = np.empty(qh.shape[:3] + (9,), dtype=np.complex128)
+        acc = np.empty((kk, 10))
+        K.pme_influence_grad(qh, self.kv1, self.kv3, self.g, self.wz, float(kk) ** 3,
+                             1.0 / (4 * self.alpha ** 2), hg, acc)
+        del qh
+        out = self._pme_back_gather(hg)
         h = np.ascontiguousarray(out[:, :3])
-        if not want_force:
-            return h, None, None, None
-        gr = out[:, 3:]
-        grad = np.empty((self.n, 3, 3))
-        for c, (a, b) in enumerate([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]):
-            grad[:, a, b] = gr[:, c]
-            grad[:, b, a] = gr[:, c]
+        gr = out[:, 3:]                                  # xx, yy, zz, xy, xz, yz
+        grad = gr[:, [0, 3, 4, 3, 1, 5, 4, 5, 2]].reshape(self.n, 3, 3)
         f = np.einsum("ia,iab->ib", mom, grad)          # F_b = m_a dH_a/dx_b (curl-free H)
-        # energy and strain derivative from the grid structure factor, |t|^2 ~ |b|^2 |Q^|^2
-        wgt = self.g * self.wz[None, None, :]
-        ss = np.abs(s) ** 2
-        u = 0.5 * float(np.sum(wgt * ss))
-        w = wgt * (1.0 / self.k2g + 1.0 / (4 * self.alpha ** 2)) * ss
-        ks = (kx, ky, kz)
-        p = np.empty((3, 3))
-        for a in range(3):
-            for b in range(3):
-                p[a, b] = np.sum(w * ks[a] * ks[b]) \
-                    - np.sum(wgt * np.real(np.conj(s) * ks[a] * qh[b]))
-        p -= np.eye(3) * u
+        tot = acc.sum(axis=0)
+        u = float(tot[0])
+        p = tot[1:].reshape(3, 3) - np.eye(3) * u
         return h, f, u, p
 
     # ------------------------------------------------------------------ public (box units)

@@ -276,9 +276,10 @@ def _ewald_real_impl(pos, mom, targets, order, cell_start, ncell, noff, alpha, r
         cx = ewald_cell_index(xi, ncell)
         cy = ewald_cell_index(yi, ncell)
         cz = ewald_cell_index(zi, ncell)
-        h = np.zeros(3)
-        f = np.zeros(3)
-        v = np.zeros(9)
+        # scalar accumulators (no per-particle heap arrays inside the parallel loop)
+        hx = hy = hz = 0.0
+        fx = fy = fz = 0.0
+        vxx = vxy = vxz = vyx = vyy = vyz = vzx = vzy = vzz = 0.0
         for ox in range(-noff, noff + 1):
             gx = cx + ox
             sx = gx // ncell
@@ -294,30 +295,54 @@ def _ewald_real_impl(pos, mom, targets, order, cell_start, ncell, noff, alpha, r
                     c = (gx * ncell + gy) * ncell + gz
                     for t in range(cell_start[c], cell_start[c + 1]):
                         j = order[t]
-                        d = (xi - pos[j, 0] - sx, yi - pos[j, 1] - sy, zi - pos[j, 2] - sz)
-                        r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+                        dx = xi - pos[j, 0] - sx
+                        dy = yi - pos[j, 1] - sy
+                        dz = zi - pos[j, 2] - sz
+                        r2 = dx * dx + dy * dy + dz * dz
                         if r2 >= rc2 or r2 == 0.0:
                             continue
                         b1, b2, b3 = ewald_b123(math.sqrt(r2), alpha)
-                        mjr = mom[j, 0] * d[0] + mom[j, 1] * d[1] + mom[j, 2] * d[2]
-                        for a in range(3):
-                            h[a] += b2 * mjr * d[a] - b1 * mom[j, a]
+                        mjx, mjy, mjz = mom[j, 0], mom[j, 1], mom[j, 2]
+                        mjr = mjx * dx + mjy * dy + mjz * dz
+                        hx += b2 * mjr * dx - b1 * mjx
+                        hy += b2 * mjr * dy - b1 * mjy
+                        hz += b2 * mjr * dz - b1 * mjz
                         if want_force:
-                            mir = mix * d[0] + miy * d[1] + miz * d[2]
-                            mm = mix * mom[j, 0] + miy * mom[j, 1] + miz * mom[j, 2]
+                            mir = mix * dx + miy * dy + miz * dz
+                            mm = mix * mjx + miy * mjy + miz * mjz
                             g = b2 * mm - b3 * mir * mjr
-                            for a in range(3):
-                                pa = g * d[a] + b2 * (mjr * mom[i, a] + mir * mom[j, a])
-                                f[a] += pa
-                                for b in range(3):
-                                    v[3 * b + a] += 0.5 * d[b] * pa
-        for a in range(3):
-            out_h[ti, a] = h[a]
+                            px = g * dx + b2 * (mjr * mix + mir * mjx)
+                            py = g * dy + b2 * (mjr * miy + mir * mjy)
+                            pz = g * dz + b2 * (mjr * miz + mir * mjz)
+                            fx += px
+                            fy += py
+                            fz += pz
+                            # half of r (x) F, row-major [b, a] = d_b p_a
+                            vxx += 0.5 * dx * px
+                            vxy += 0.5 * dx * py
+                            vxz += 0.5 * dx * pz
+                            vyx += 0.5 * dy * px
+                            vyy += 0.5 * dy * py
+                            vyz += 0.5 * dy * pz
+                            vzx += 0.5 * dz * px
+                            vzy += 0.5 * dz * py
+                            vzz += 0.5 * dz * pz
+        out_h[ti, 0] = hx
+        out_h[ti, 1] = hy
+        out_h[ti, 2] = hz
         if want_force:
-            for a in range(3):
-                out_f[ti, a] = f[a]
-            for q in range(9):
-                out_vir[ti, q] = v[q]
+            out_f[ti, 0] = fx
+            out_f[ti, 1] = fy
+            out_f[ti, 2] = fz
+            out_vir[ti, 0] = vxx
+            out_vir[ti, 1] = vxy
+            out_vir[ti, 2] = vxz
+            out_vir[ti, 3] = vyx
+            out_vir[ti, 4] = vyy
+            out_vir[ti, 5] = vyz
+            out_vir[ti, 6] = vzx
+            out_vir[ti, 7] = vzy
+            out_vir[ti, 8] = vzz
 
 
 ewald_real = nb.njit(cache=True, parallel=True)(_ewald_real_impl)
@@ -406,72 +431,139 @@ def pme_stencil(g, p, kk, w, idx):
         idx[q] = j + kk if j < 0 else (j - kk if j >= kk else j)
 
 
-@nb.njit(cache=True)
-def pme_spread(gpos, val, p, out):
-    """Spread per-particle values ``val`` (N, C) onto ``out`` (C, K, K, K) with order-p
-    B-splines; ``gpos`` (N, 3) are grid coordinates in [0, K). Serial: no write races."""
-    n = gpos.shape[0]
+@nb.njit(cache=True, parallel=True)
+def pme_spread(gpos, val, p, order, slab_start, work, iwork, row, out):
+    """Spread per-particle values ``val`` (N, C) onto ``out`` (K, K, K, C) (component last,
+    caller-zeroed) with order-p B-splines; ``gpos`` (N, 3) are grid coordinates in [0, K).
+
+    Race-free in parallel: the particles ``order[slab_start[s]:slab_start[s+1]]`` have
+    floor(gpos_x) in x-slab s of at least p grid planes; a particle writes planes
+    floor(u) - p + 1 .. floor(u), so slabs s and s + 2 never touch the same plane. With an even
+    number of slabs (or one), even slabs run in parallel, then odd ones: every grid point
+    receives its contributions in a fixed order whatever the number of threads.
+    ``work`` (S, 3, p), ``row`` (S, >= C) float64 and ``iwork`` (S, 3, p) int64 are scratch,
+    S >= slab pairs (a grid point's C values are contiguous; one particle's C values are held
+    in ``row``: 1.7x faster than reading ``val`` in the innermost loop)."""
+    nslab = slab_start.shape[0] - 1
+    npair = (nslab + 1) // 2
     nc = val.shape[1]
-    kk = out.shape[1]
-    wx = np.empty(p)
-    wy = np.empty(p)
-    wz = np.empty(p)
-    ix = np.empty(p, dtype=np.int64)
-    iy = np.empty(p, dtype=np.int64)
-    iz = np.empty(p, dtype=np.int64)
-    for i in range(n):
-        pme_stencil(gpos[i, 0], p, kk, wx, ix)
-        pme_stencil(gpos[i, 1], p, kk, wy, iy)
-        pme_stencil(gpos[i, 2], p, kk, wz, iz)
-        for d in range(nc):
-            vd = val[i, d]
-            for a in range(p):
-                for b in range(p):
-                    wab = wx[a] * wy[b] * vd
-                    for c in range(p):
-                        out[d, ix[a], iy[b], iz[c]] += wab * wz[c]
+    kk = out.shape[0]
+    for colour in range(2):
+        for h in nb.prange(npair):
+            s = 2 * h + colour
+            if s >= nslab:
+                continue
+            wx, wy, wz = work[h, 0], work[h, 1], work[h, 2]
+            ix, iy, iz = iwork[h, 0], iwork[h, 1], iwork[h, 2]
+            v = row[h]
+            for t in range(slab_start[s], slab_start[s + 1]):
+                i = order[t]
+                pme_stencil(gpos[i, 0], p, kk, wx, ix)
+                pme_stencil(gpos[i, 1], p, kk, wy, iy)
+                pme_stencil(gpos[i, 2], p, kk, wz, iz)
+                for d in range(nc):
+                    v[d] = val[i, d]
+                for a in range(p):
+                    for b in range(p):
+                        wab = wx[a] * wy[b]
+                        for c in range(p):
+                            w = wab * wz[c]
+                            o = out[ix[a], iy[b], iz[c]]
+                            for d in range(nc):
+                                o[d] += w * v[d]
 
 
 @nb.njit(cache=True, parallel=True)
-def pme_gather(gpos, grid, p, out):
-    """Interpolate ``grid`` (C, K, K, K) at grid coordinates ``gpos`` (N, 3) with order-p
-    B-splines into ``out`` (N, C) (the transpose of :func:`pme_spread`)."""
+def pme_gather(gpos, grid, p, work, iwork, row, out):
+    """Interpolate ``grid`` (K, K, K, C) (component last) at grid coordinates ``gpos`` (N, 3)
+    with order-p B-splines into ``out`` (N, C) (the transpose of :func:`pme_spread`).
+    ``work`` (S, 3, p), ``row`` (S, >= C) float64 and ``iwork`` (S, 3, p) int64: scratch of S
+    chunks of particles (each particle's sum runs in the same order whatever S or the thread
+    count). Accumulating in ``row`` rather than ``out`` is 2x faster (fewer stores)."""
     n = gpos.shape[0]
-    nc = grid.shape[0]
-    kk = grid.shape[1]
-    nchunk = 64
+    nc = grid.shape[3]
+    kk = grid.shape[0]
+    nchunk = work.shape[0]
     for ch in nb.prange(nchunk):
-        wx = np.empty(p)
-        wy = np.empty(p)
-        wz = np.empty(p)
-        ix = np.empty(p, dtype=np.int64)
-        iy = np.empty(p, dtype=np.int64)
-        iz = np.empty(p, dtype=np.int64)
+        wx, wy, wz = work[ch, 0], work[ch, 1], work[ch, 2]
+        ix, iy, iz = iwork[ch, 0], iwork[ch, 1], iwork[ch, 2]
+        acc = row[ch]
         for i in range(ch * n // nchunk, (ch + 1) * n // nchunk):
             pme_stencil(gpos[i, 0], p, kk, wx, ix)
             pme_stencil(gpos[i, 1], p, kk, wy, iy)
             pme_stencil(gpos[i, 2], p, kk, wz, iz)
             for d in range(nc):
-                acc = 0.0
-                for a in range(p):
-                    for b in range(p):
-                        wab = wx[a] * wy[b]
-                        for c in range(p):
-                            acc += wab * wz[c] * grid[d, ix[a], iy[b], iz[c]]
-                out[i, d] = acc
+                acc[d] = 0.0
+            for a in range(p):
+                for b in range(p):
+                    wab = wx[a] * wy[b]
+                    for c in range(p):
+                        w = wab * wz[c]
+                        g = grid[ix[a], iy[b], iz[c]]
+                        for d in range(nc):
+                            acc[d] += w * g[d]
+            for d in range(nc):
+                out[i, d] = acc[d]
 
 
 @nb.njit(cache=True, parallel=True)
 def pme_influence(qh, kv, kvz, g, scale, out):
-    """k-space step of dipolar PME: ``out[a] = -scale g(k) k_a (k . qh(k))`` for the rfft grids
-    ``qh`` (3, K, K, K/2+1) (complex); ``kv`` (K,) and ``kvz`` (K/2+1,) are the wavenumbers."""
-    kk = qh.shape[1]
-    kz = qh.shape[3]
+    """k-space step of dipolar PME: ``out[..., a] = -scale g(k) k_a (k . qh(k))`` for the rfft
+    grids ``qh`` (K, K, K/2+1, 3) (complex, component last); ``kv`` (K,) and ``kvz`` (K/2+1,)
+    are the wavenumbers."""
+    kk = qh.shape[0]
+    kz = qh.shape[2]
     for a in nb.prange(kk):
         for b in range(kk):
             for c in range(kz):
-                s = kv[a] * qh[0, a, b, c] + kv[b] * qh[1, a, b, c] + kvz[c] * qh[2, a, b, c]
+                s = kv[a] * qh[a, b, c, 0] + kv[b] * qh[a, b, c, 1] + kvz[c] * qh[a, b, c, 2]
                 t = -scale * g[a, b, c] * s
-                out[0, a, b, c] = kv[a] * t
-                out[1, a, b, c] = kv[b] * t
-                out[2, a, b, c] = kvz[c] * t
+                out[a, b, c, 0] = kv[a] * t
+                out[a, b, c, 1] = kv[b] * t
+                out[a, b, c, 2] = kvz[c] * t
+
+
+@nb.njit(cache=True, parallel=True)
+def pme_influence_grad(qh, kv, kvz, g, wz, scale, inv4a2, out, acc):
+    """k-space step of dipolar PME with forces, energy and virial, one pass over the rfft grid.
+
+    ``out[..., 0:3]`` = field ``k_a t`` with ``t = -scale g(k) (k . qh)``; ``out[..., 3:9]`` =
+    its gradient ``i k_a k_b t`` for (a, b) = xx, yy, zz, xy, xz, yz (the field is curl-free, so
+    the gradient is symmetric: 6 grids, not 9). ``acc`` (K, 10): per x-plane partial sums (added
+    in a fixed order by the caller) of the energy ``(1/2) sum wz g |s|^2`` (column 0) and of
+    ``P_ab = sum wz g [(1/k^2 + inv4a2) |s|^2 k_a k_b - Re(conj(s) k_a qh_b)]`` (columns 1..9,
+    row-major), with ``s = k . qh`` and ``wz`` (K/2+1,) the half-space weights."""
+    kk = qh.shape[0]
+    nz = qh.shape[2]
+    for a in nb.prange(kk):
+        for q in range(10):
+            acc[a, q] = 0.0
+        for b in range(kk):
+            for c in range(nz):
+                k0, k1, k2 = kv[a], kv[b], kvz[c]
+                q0, q1, q2 = qh[a, b, c, 0], qh[a, b, c, 1], qh[a, b, c, 2]
+                s = k0 * q0 + k1 * q1 + k2 * q2
+                gk = g[a, b, c]
+                t = -scale * gk * s
+                it = 1j * t
+                out[a, b, c, 0] = k0 * t
+                out[a, b, c, 1] = k1 * t
+                out[a, b, c, 2] = k2 * t
+                out[a, b, c, 3] = k0 * k0 * it
+                out[a, b, c, 4] = k1 * k1 * it
+                out[a, b, c, 5] = k2 * k2 * it
+                out[a, b, c, 6] = k0 * k1 * it
+                out[a, b, c, 7] = k0 * k2 * it
+                out[a, b, c, 8] = k1 * k2 * it
+                if gk == 0.0:
+                    continue
+                wg = wz[c] * gk
+                ss = s.real * s.real + s.imag * s.imag
+                acc[a, 0] += 0.5 * wg * ss
+                w = wg * (1.0 / (k0 * k0 + k1 * k1 + k2 * k2) + inv4a2) * ss
+                ks = (k0, k1, k2)
+                qs = (q0, q1, q2)
+                for x in range(3):
+                    for y in range(3):
+                        cq = s.real * qs[y].real + s.imag * qs[y].imag    # Re(conj(s) q_y)
+                        acc[a, 1 + 3 * x + y] += w * ks[x] * ks[y] - wg * ks[x] * cq

@@ -140,12 +140,25 @@ def test_bspline_weights_against_scipy():
             assert abs(w.sum() - 1) < 1e-14
 
 
+def _slabs(gpos, kk, nslab):
+    bounds = np.arange(nslab + 1) * kk // nslab
+    slab = np.searchsorted(bounds, np.floor(gpos[:, 0]), side="right") - 1
+    order = np.argsort(slab, kind="stable").astype(np.int64)
+    return order, np.searchsorted(slab[order], np.arange(nslab + 1)).astype(np.int64)
+
+
+def _scratch(s, p):
+    return np.empty((s, 3, p)), np.empty((s, 3, p), dtype=np.int64), np.empty((s, 4))
+
+
 def test_spread_gather_adjoint_and_numpy():
     p, kk = 4, 8
     gpos = RNG.random((6, 3)) * kk
+    gpos[0, 0] = kk - 1e-9                   # a particle whose stencil wraps around the box
     val = RNG.normal(size=(6, 2))
-    grid = np.zeros((2, kk, kk, kk))
-    K.pme_spread(gpos, val, p, grid)
+    order, start = _slabs(gpos, kk, 1)
+    grid = np.zeros((kk, kk, kk, 2))
+    K.pme_spread(gpos, val, p, order, start, *_scratch(1, p), grid)
     ref = np.zeros_like(grid)
     card = BSpline.basis_element(np.arange(p + 1), extrapolate=False)
     for i, u in enumerate(gpos):
@@ -154,24 +167,83 @@ def test_spread_gather_adjoint_and_numpy():
             for a in range(3):
                 x = (u[a] - g[a]) % kk          # M_p(u - g) on the periodic grid
                 w *= np.nan_to_num(card(x)) if x < p else 0.0
-            ref[:, g[0], g[1], g[2]] += w * val[i]
+            ref[g[0], g[1], g[2], :] += w * val[i]
     np.testing.assert_allclose(grid, ref, atol=1e-13)
-    G = RNG.normal(size=(2, kk, kk, kk))
-    out = np.empty((6, 2))
-    K.pme_gather(gpos, G, p, out)
+    G = RNG.normal(size=(kk, kk, kk, 2))
+    out = np.full((6, 2), np.nan)               # gather overwrites, never accumulates
+    K.pme_gather(gpos, G, p, *_scratch(4, p), out)
     # gather is the transpose of spread: <spread(v), G> = <v, gather(G)>
     assert math.isclose(np.sum(grid * G), np.sum(val * out), rel_tol=1e-12)
+    out1 = np.empty((6, 2))
+    K.pme_gather(gpos, G, p, *_scratch(1, p), out1)       # chunking changes nothing
+    np.testing.assert_array_equal(out, out1)
 
 
-def test_pme_influence_against_numpy():
-    kk = 6
-    qh = RNG.normal(size=(3, kk, kk, kk // 2 + 1)) + 1j * RNG.normal(size=(3, kk, kk, kk // 2 + 1))
+def test_parallel_spread_slabs_equal_serial():
+    # 4 slabs of 6 planes (>= p = 6) run as two race-free colours; the result must be the
+    # serial one to rounding (contributions to a grid point arrive in another order), and
+    # bitwise the same on a second call (fixed order whatever the threads)
+    p, kk, n = 6, 24, 500
+    gpos = RNG.random((n, 3)) * kk
+    val = RNG.normal(size=(n, 3))
+    o1, s1 = _slabs(gpos, kk, 1)
+    o4, s4 = _slabs(gpos, kk, 4)
+    assert np.all(np.diff(s4) > 0)
+    g1 = np.zeros((kk, kk, kk, 3))
+    K.pme_spread(gpos, val, p, o1, s1, *_scratch(1, p), g1)
+    g4 = np.zeros((kk, kk, kk, 3))
+    K.pme_spread(gpos, val, p, o4, s4, *_scratch(2, p), g4)
+    g4b = np.zeros((kk, kk, kk, 3))
+    K.pme_spread(gpos, val, p, o4, s4, *_scratch(2, p), g4b)
+    np.testing.assert_allclose(g4, g1, rtol=0, atol=1e-13 * np.abs(g1).max())
+    np.testing.assert_array_equal(g4, g4b)
+
+
+def _kspace_case(kk=6):
+    sh = (kk, kk, kk // 2 + 1, 3)
+    qh = RNG.normal(size=sh) + 1j * RNG.normal(size=sh)
     kv = RNG.normal(size=kk)
     kvz = RNG.normal(size=kk // 2 + 1)
     g = RNG.random((kk, kk, kk // 2 + 1))
+    g[0, 0, 0] = 0.0                             # k = 0 is excluded (tin-foil)
+    return qh, kv, kvz, g
+
+
+def test_pme_influence_against_numpy():
+    qh, kv, kvz, g = _kspace_case()
     out = np.empty_like(qh)
     K.pme_influence(qh, kv, kvz, g, 2.0, out)
     kx, ky, kz = kv[:, None, None], kv[None, :, None], kvz[None, None, :]
-    s = kx * qh[0] + ky * qh[1] + kz * qh[2]
+    s = kx * qh[..., 0] + ky * qh[..., 1] + kz * qh[..., 2]
     for a, k in enumerate((kx, ky, kz)):
-        np.testing.assert_allclose(out[a], -2.0 * g * s * k, atol=1e-12)
+        np.testing.assert_allclose(out[..., a], -2.0 * g * s * k, atol=1e-12)
+
+
+def test_pme_influence_grad_against_numpy():
+    qh, kv, kvz, g = _kspace_case()
+    kk = qh.shape[0]
+    wz = RNG.random(kk // 2 + 1)
+    out = np.empty(qh.shape[:3] + (9,), dtype=complex)
+    acc = np.full((kk, 10), np.nan)
+    K.pme_influence_grad(qh, kv, kvz, g, wz, 2.0, 0.3, out, acc)
+    ks = np.broadcast_arrays(kv[:, None, None], kv[None, :, None], kvz[None, None, :])
+    s = sum(ks[a] * qh[..., a] for a in range(3))
+    t = -2.0 * g * s
+    # all nine i k_b k_a t, then check the six stored ones and the symmetry that allows it
+    full = np.stack([np.stack([1j * ks[b] * ks[a] * t for b in range(3)]) for a in range(3)])
+    np.testing.assert_allclose(full, np.swapaxes(full, 0, 1), atol=0)
+    for a in range(3):
+        np.testing.assert_allclose(out[..., a], ks[a] * t, atol=1e-12)
+    for c, (a, b) in enumerate([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]):
+        np.testing.assert_allclose(out[..., 3 + c], full[a, b], atol=1e-12)
+    k2 = ks[0] ** 2 + ks[1] ** 2 + ks[2] ** 2
+    k2[0, 0, 0] = 1.0
+    wg = wz * g
+    ss = np.abs(s) ** 2
+    u = 0.5 * np.sum(wg * ss)
+    w = wg * (1 / k2 + 0.3) * ss
+    p = np.array([[np.sum(w * ks[a] * ks[b]) - np.sum(wg * np.real(np.conj(s) * ks[a] * qh[..., b]))
+                   for b in range(3)] for a in range(3)])
+    tot = acc.sum(axis=0)
+    assert math.isclose(tot[0], u, rel_tol=1e-12)
+    np.testing.assert_allclose(tot[1:].reshape(3, 3), p, rtol=1e-12, atol=1e-12 * np.abs(p).max())
