@@ -189,12 +189,21 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
             stored = 0
             for fut in as_completed(futures):
                 t, k = by_key[fut.key]
-                if fut.status != "finished":          # error (after retries) or cancelled
-                    exc = fut.exception() if fut.status == "error" else None
-                    msg = f"{type(exc).__name__}: {exc}" if exc is not None else fut.status
-                    failures.append((t, msg))
+                # a result held by a worker that died after finishing is "lost": the scheduler
+                # recomputes it because this client still holds the future, so wait for it;
+                # only an error (after retries) or a cancellation is a failure
+                result = exc = None
+                if fut.status == "error":
+                    exc = fut.exception()
                 else:
-                    _write_part(_part_path(parts, t, k), t, k, fut.result())
+                    try:
+                        result = fut.result()
+                    except Exception as e:          # cancelled, or failed on recomputation
+                        exc = e
+                if exc is not None:
+                    failures.append((t, f"{type(exc).__name__}: {exc}"))
+                else:
+                    _write_part(_part_path(parts, t, k), t, k, result)
                     stored += 1
                     bar.update(1)
                 fut.release()
