@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = ["CORNERS", "OFFSETS", "reference_matrices", "node_coefficients", "assemble_bsr",
-           "affine_load", "body_force_load", "element_mean_strain", "voigt_stress_mean",
+           "affine_load", "body_force_load", "element_mean_strain",
            "rigid_body_modes"]
 
 # local corner a -> (ax, ay, az)
@@ -241,16 +241,6 @@ def element_stress(lam: np.ndarray, mu: np.ndarray, eps: np.ndarray) -> np.ndarr
     for c in range(3):
         sig[..., c, c] += lam * tr
     return sig
-
-
-def voigt_stress_mean(lam, mu, eps) -> np.ndarray:
-    """Volume average of the voxel stress in Voigt order (6,) [Pa]."""
-    tr = np.trace(eps, axis1=-2, axis2=-1)
-    out = np.empty(6)
-    lt = float(np.mean(lam * tr))
-    for v, (r, c) in enumerate(VOIGT):
-        out[v] = 2.0 * float(np.mean(mu * eps[..., r, c])) + (lt if r == c else 0.0)
-    return out
 
 
 def rigid_body_modes(n: int, h: float) -> np.ndarray:

@@ -18,7 +18,6 @@ from __future__ import annotations
 import types
 
 import numba as nb
-import numpy as np
 
 PARALLEL_MIN_ROWS = 50_000
 

@@ -4,8 +4,9 @@ Displacement ``u = E x + w`` with the fluctuation ``w`` periodic (node index mod
 :mod:`homogenize._assembly`) and the mean strain ``E`` prescribed. The rigid translation is
 fixed by pinning one matrix node (the loads are balanced, so the pin carries no force).
 
-* Stiffness: six unit mean strains (Voigt order 11, 22, 33, 23, 13, 12; engineering shear)
-  give the columns of ``C_eff`` = volume average of the stress.
+* Stiffness: six unit mean strains (Voigt order 11, 22, 33, 23, 13, 12; engineering shear);
+  ``C_eff`` from the energy of the solutions (variational, error ~ the squared solution error;
+  the plain volume-averaged stress is kept as an error indicator).
 * Magnetic case (zero mean strain): the force ``F_i`` on particle ``i`` is spread as a uniform body
   force over its voxels; ``f_eff = sum F_i / V`` is balanced by the uniform counter-load ``-f_eff``
   (on the macro scale it is carried by the macroscopic stress gradient). The macroscopic stress at
@@ -20,11 +21,12 @@ fixed by pinning one matrix node (the loads are balanced, so the pin carries no 
   partner sits at, pass the dipole solver's pairwise ``virial_stress_Pa`` when you have it; it
   replaces the first-moment term (whose cell-cut choice is then irrelevant).
 
-Solver: smoothed-aggregation AMG (pyamg, rigid-body near-nullspace, built once and reused for all
-load cases) as preconditioner of a conjugate-gradient method DEFLATED by the six rigid-body modes
-of every stiff particle. Plain AMG-CG needs ~15x more iterations at Fe/PDMS contrast (1e5)
-than at contrast 1, because each stiff particle adds six near-zero modes (its rigid motions in the
-soft matrix); deflation removes exactly those (Vuik, Segal & Meijerink 1999).
+Solver: all load cases in one block (:mod:`homogenize._amg`): lock-step CG preconditioned by a
+block V-cycle on a pyamg smoothed-aggregation hierarchy (rigid-body near-nullspace, built once),
+DEFLATED by the six rigid-body modes of every stiff particle. Plain AMG-CG needs ~4x more
+iterations at Fe/PDMS contrast (1e5) than at contrast 1, because each stiff particle adds six
+near-zero modes (its rigid motions in the soft matrix); deflation removes exactly those (Vuik,
+Segal & Meijerink 1999).
 """
 from __future__ import annotations
 
