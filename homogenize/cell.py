@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from micro._validate import InputError, check_finite, check_positive, check_range
+from micro._validate import ConvergenceError, InputError, check_finite, check_positive, check_range
 
 from . import _assembly as asm
 from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
@@ -430,10 +430,10 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
         iters[name], resid[name], hist[name] = len(h) - 1, h[-1], h
     bad = [nm for nm in names if resid[nm] > tol]
     if bad:
-        raise RuntimeError("cell problem(s) " + ", ".join(
+        raise ConvergenceError("cell problem(s) " + ", ".join(
             f"{nm} (residual {resid[nm]:.2e}, history ... "
             + ", ".join(f"{v:.1e}" for v in hist[nm][-4:]) + ")" for nm in bad)
-            + f" did not converge to {tol:.0e} in {maxiter} iterations")
+            + f" did not converge to {tol:.0e} in {maxiter} iterations", hist[bad[0]])
     ns = len(cases)
     # Products of the solutions: f_a . w_b and w_a . K w_b. With them the effective stiffness
     # is VARIATIONAL (energy of the approximate fields, error quadratic in the solution error):

@@ -2,17 +2,17 @@
 
 Public API is what ``__all__`` lists; modules starting with ``_`` are private.
 """
-from ._validate import InputError
+from ._validate import ConvergenceError, InputError
 from .rve import RVE
 from .particles import (CoreShell, Histogram, LogNormal, Monodisperse, default_distribution,
                         describe, generate_rve)
 
-__all__ = ["InputError"]
+__all__ = ["InputError", "ConvergenceError"]
 __all__ += ["RVE", "generate_rve", "describe", "LogNormal", "Histogram", "Monodisperse",
             "CoreShell", "default_distribution"]
 from .magnetization import get_law
-from .dipoles import (ConvergenceError, DipoleSum, MagneticState, applied_gradient,
+from .dipoles import (DipoleSum, MagneticState, applied_gradient,
                       dipole_field_direct, dipole_pair_interactions, solve)
 
-__all__ += ["get_law", "solve", "MagneticState", "ConvergenceError", "DipoleSum",
+__all__ += ["get_law", "solve", "MagneticState", "DipoleSum",
             "applied_gradient", "dipole_field_direct", "dipole_pair_interactions"]

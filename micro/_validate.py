@@ -10,11 +10,28 @@ import math
 
 import numpy as np
 
-__all__ = ["InputError", "check_finite", "check_positive", "check_range", "check_choice"]
+__all__ = ["InputError", "ConvergenceError", "EXIT_INPUT", "EXIT_CONVERGENCE", "check_finite", "check_positive", "check_range", "check_choice"]
+
+
+#: Exit code of the CLI for unusable input (:class:`InputError`).
+EXIT_INPUT = 2
+#: Exit code of the CLI for a numerical solve that did not converge (:class:`ConvergenceError`).
+EXIT_CONVERGENCE = 3
 
 
 class InputError(ValueError):
     """Unusable input: the message names what is wrong and what is allowed."""
+
+
+class ConvergenceError(RuntimeError):
+    """A numerical solve did not converge. Not an input error: the CLI exits with 3.
+
+    ``residual_history`` holds the relative residuals of the iteration, first to last.
+    """
+
+    def __init__(self, message, residual_history=()):
+        super().__init__(message)
+        self.residual_history = list(residual_history)
 
 
 def _fmt(unit: str) -> str:

@@ -40,29 +40,19 @@ from scipy.constants import mu_0 as MU0
 
 from . import _kernels as K
 from ._ewald import PeriodicSum
-from ._validate import InputError, check_choice, check_finite, check_positive, check_range
+from ._validate import ConvergenceError, InputError, check_choice, check_finite, check_positive, check_range
 from .magnetization import LAW_NAMES, MagnetizationLaw, get_law
+from .materials import SEED
 
 __all__ = ["MagneticState", "ConvergenceError", "solve", "applied_gradient", "DipoleSum",
            "langevin_coupling", "LANGEVIN_LAMBDA_MAX",
-           "dipole_field_direct", "dipole_pair_interactions", "add_cli_arguments", "cli_summary",
-           "RHO_FE_KG_M3", "SIGMA_S_FE_AM2_KG", "C_POWDER_SEED"]
+           "dipole_field_direct", "dipole_pair_interactions", "METHODS", "SUMMATIONS",
+           "PME_ABOVE_N"]
 
-RHO_FE_KG_M3 = 7870.0          # seed paper, particle density
-SIGMA_S_FE_AM2_KG = 178.0      # seed paper, specific saturation moment
-C_POWDER_SEED = 0.035          # seed paper, powder concentration (vol fraction of powder)
-_METHODS = ("anderson", "fixed-point", "newton-krylov")
-_SUMMATIONS = ("auto", "ewald", "pme")
+METHODS = ("anderson", "fixed-point", "newton-krylov")
+SUMMATIONS = ("auto", "ewald", "pme")
 _STALL_ITERATIONS = 40         # Anderson gives up after this many iterations without progress
-_PME_ABOVE_N = 3000            # "auto": plain Ewald below, PME above (both O(N^1.5)/O(N log N))
-
-
-class ConvergenceError(InputError):
-    """The self-consistent moments did not converge; ``residual_history`` tells how far."""
-
-    def __init__(self, message, residual_history):
-        super().__init__(message)
-        self.residual_history = list(residual_history)
+PME_ABOVE_N = 3000            # "auto": plain Ewald below, PME above (both O(N^1.5)/O(N log N))
 
 
 # ------------------------------------------------------------------------------------------
@@ -540,7 +530,7 @@ def _rve_arrays(rve):
 def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None, tol=1e-8,
           accuracy=1e-6, method="anderson", summation="auto", max_iter=500, damping=1.0,
           precondition=True,
-          rho_kg_m3=RHO_FE_KG_M3, sigma_s_Am2_kg=SIGMA_S_FE_AM2_KG, c_powder=C_POWDER_SEED,
+          rho_kg_m3=SEED.particle_density_kg_m3, sigma_s_Am2_kg=SEED.sigma_s_Am2_kg, c_powder=SEED.c,
           initial_moments_Am2=None, **law_params) -> MagneticState:
     """Self-consistent moments, forces and effective quantities of an RVE in an applied field.
 
@@ -577,8 +567,8 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
         raise InputError("rve has no particles")
     law_obj = law if isinstance(law, MagnetizationLaw) else get_law(law, **law_params)
     check_range("tol", tol, 1e-15, 1e-1, "(relative)")
-    check_choice("method", method, _METHODS)
-    check_choice("summation", summation, _SUMMATIONS)
+    check_choice("method", method, METHODS)
+    check_choice("summation", summation, SUMMATIONS)
     check_positive("rho_kg_m3", rho_kg_m3, "kg/m^3")
     check_positive("sigma_s_Am2_kg", sigma_s_Am2_kg, "A m^2/kg")
     check_range("c_powder", c_powder, 0.0, 1.0, lo_open=True)
@@ -589,7 +579,7 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
     if law_obj.name == "langevin":
         _check_langevin_coupling(c, box, m_sat, law_obj.T_K)
     if summation == "auto":
-        summation = "pme" if n > _PME_ABOVE_N else "ewald"
+        summation = "pme" if n > PME_ABOVE_N else "ewald"
     dsum = DipoleSum(box, c, accuracy=accuracy, summation=summation, demag_factor=demag_factor)
     xc = np.full(3, 0.5 * box)
     H_app = (B[None, :] + (c - xc) @ G.T) / MU0           # (N, 3)
@@ -667,83 +657,3 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
         d_eff=d_eff, iterations=int(its), residual_history=tuple(hist),
         field_evaluations=dsum.evaluations, energy_dd_J=energy, B_applied_T=B,
         gradient_T_per_m=G, summation=dsum.parameters, law=law_obj.name)
-
-
-# ------------------------------------------------------------------------------------------
-# CLI hooks (called by `mapsim rve`, homogenize/_cli_rve.py)
-# ------------------------------------------------------------------------------------------
-def add_cli_arguments(parser) -> None:
-    """Add the magnetics options of ``mapsim rve`` to an argparse parser."""
-    g = parser.add_argument_group("magnetics (self-consistent dipoles; active when --B is given)")
-    g.add_argument("--B", dest="B_T", type=float, default=None,
-                   help="applied flux density mu0 H [T]; enables the magnetic solve "
-                        "(default: none, no magnetics)")
-    g.add_argument("--B-direction", dest="B_direction", type=float, nargs=3, default=None,
-                   metavar=("BX", "BY", "BZ"),
-                   help="direction of the applied field (any length) [-] (default: 0 0 1)")
-    g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=1.78,
-                   help="gradient of |B| along z [T/m] (default: 1.78, the seed paper)")
-    g.add_argument("--law", default="frohlich-kennelly", choices=LAW_NAMES,
-                   help="magnetization law of one particle (default: frohlich-kennelly)")
-    g.add_argument("--chi", type=float, default=None,
-                   help="linear law: intrinsic susceptibility [-] (default: inf, i.e. m = 3 V H)")
-    g.add_argument("--chi0", type=float, default=None,
-                   help="frohlich-kennelly: initial apparent susceptibility [-] (default: 3)")
-    g.add_argument("--T", dest="T_K", type=float, default=None,
-                   help="langevin: temperature [K] (default: 300)")
-    g.add_argument("--demag-factor", dest="demag_factor", type=float, default=None,
-                   help="specimen demagnetizing factor N in [0, 1] [-] (default: none = "
-                        "metallic boundary, internal field = applied field)")
-    g.add_argument("--tol", type=float, default=1e-8,
-                   help="relative residual of the self-consistent moments [-] (default: 1e-8)")
-    g.add_argument("--accuracy", type=float, default=1e-6,
-                   help="relative accuracy of the periodic dipole sums [-] (default: 1e-6)")
-    g.add_argument("--solver", dest="mag_method", default="anderson", choices=_METHODS,
-                   help="nonlinear solver for the moments (default: anderson)")
-    g.add_argument("--summation", default="auto", choices=_SUMMATIONS,
-                   help="periodic sum: plain Ewald, particle-mesh Ewald, or auto (PME above "
-                        f"{_PME_ABOVE_N} particles) (default: auto)")
-    g.add_argument("--c-powder", dest="c_powder", type=float, default=C_POWDER_SEED,
-                   help="the seed's powder concentration c for d_eff = phi_eff / c [-] "
-                        "(default: 0.035)")
-    g.add_argument("--rho-particle", dest="rho_kg_m3", type=float, default=RHO_FE_KG_M3,
-                   help="density of the saturated reference material in phi_eff [kg/m^3] "
-                        "(default: 7870)")
-    g.add_argument("--sigma-s", dest="sigma_s_Am2_kg", type=float, default=SIGMA_S_FE_AM2_KG,
-                   help="specific saturation moment of the reference material [A m^2/kg] "
-                        "(default: 178)")
-
-
-def cli_summary(args, rve) -> dict:
-    """Solve the magnetics for the CLI options ``args`` and return the JSON summary entries.
-
-    Returns an empty dict when ``--B`` was not given.
-    """
-    if getattr(args, "B_T", None) is None:
-        return {}
-    B = float(args.B_T)
-    if getattr(args, "B_direction", None) is not None:
-        d = np.asarray(args.B_direction, dtype=float)
-        check_finite("--B-direction", d)
-        if np.linalg.norm(d) == 0:
-            raise InputError("--B-direction must not be the zero vector")
-        B = B * d / np.linalg.norm(d)
-    st = solve(rve, B, args.gradB_T_per_m, args.law, demag_factor=args.demag_factor,
-               tol=args.tol, accuracy=args.accuracy, method=args.mag_method,
-               summation=args.summation, c_powder=args.c_powder, rho_kg_m3=args.rho_kg_m3,
-               sigma_s_Am2_kg=args.sigma_s_Am2_kg, chi=args.chi, chi0=args.chi0, T_K=args.T_K)
-    return {
-        "B_applied_T": st.B_applied_T.tolist(),
-        "gradB_T_per_m": float(args.gradB_T_per_m),
-        "law": st.law,
-        "M_eff_A_per_m": st.M_eff_A_per_m.tolist(),
-        "f_eff_N_m3": st.f_eff_N_m3.tolist(),
-        "phi_eff": st.phi_eff,
-        "d_eff": st.d_eff,
-        "virial_stress_Pa": st.virial_stress_Pa.tolist(),
-        "iterations": st.iterations,
-        "residual": st.residual,
-        "field_evaluations": st.field_evaluations,
-        "dd_force_sum_rel": st.dd_force_sum_rel,
-        "summation": st.summation,
-    }
