@@ -15,16 +15,19 @@ and the quantities it returns, all listed in :data:`QUANTITIES` with their unit 
 """
 from __future__ import annotations
 
+import hashlib
 import inspect
 import math
 import os
 import time
 import uuid
 from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
+import micro
 from micro._validate import InputError
 
 __all__ = ["QUANTITIES", "get_evaluator", "RVEEvaluator", "SyntheticEvaluator", "synthetic_truth"]
@@ -192,27 +195,29 @@ _COMP_KEYS = {"shell_thickness_m": "shell_m", "core_density_kg_m3": "core_densit
 _DISTRIBUTIONS = ("lognormal", "monodisperse")
 
 
-_SOURCE_MODULES = ("micro.rve", "micro.particles", "micro.magnetization", "micro.dipoles",
-                   "micro._ewald", "micro._kernels", "homogenize._evaluate")
-_FEM_MODULES = ("homogenize.mesh", "homogenize.cell", "homogenize._assembly")
+#: Libraries whose version can change a stored result.
+_RESULT_LIBRARIES = ("numpy", "scipy", "numba", "scikit-fem", "pyamg", "h5py")
 _SOURCE_HASH: dict = {}
 
 
 def _source_hash(fem: bool = False) -> str:
-    """sha256 (12 hex digits) of the source files of the evaluation chain (+ FEM modules)."""
+    """sha256 (12 hex digits) of everything that can change a stored result.
+
+    Every ``.py`` file of the ``micro`` and ``homogenize`` packages (not a hand-kept list, which
+    went stale when a solver module was added) and the versions of the numerical libraries.
+    ``fem`` only tags the key; the FEM sources are always part of it.
+    """
     if fem not in _SOURCE_HASH:
-        import hashlib
-        import importlib.util
-        h = hashlib.sha256()
-        for name in _SOURCE_MODULES + (_FEM_MODULES if fem else ()):
+        h = hashlib.sha256(b"fem" if fem else b"dipoles")
+        for root in (Path(micro.__file__).resolve().parent, Path(__file__).resolve().parent):
+            for f in sorted(root.rglob("*.py")):
+                h.update(f.relative_to(root.parent).as_posix().encode())
+                h.update(f.read_bytes())
+        for lib in _RESULT_LIBRARIES:
             try:
-                spec = importlib.util.find_spec(name)
-            except ModuleNotFoundError:
-                spec = None
-            origin = getattr(spec, "origin", None)
-            h.update(name.encode())
-            if origin and Path(origin).is_file():
-                h.update(Path(origin).read_bytes())
+                h.update(f"{lib}=={metadata.version(lib)}".encode())
+            except metadata.PackageNotFoundError:
+                h.update(f"{lib} missing".encode())
         _SOURCE_HASH[fem] = h.hexdigest()[:12]
     return _SOURCE_HASH[fem]
 

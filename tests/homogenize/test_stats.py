@@ -200,7 +200,7 @@ def test_interpolated_interval_covers_truth_at_stated_rate():
 
 
 def test_tip_deflection_from_table_propagates_the_force_interval():
-    from homogenize.tables import tip_deflection_from_table
+    from homogenize.macro.effective import tip_deflection_from_table
     study, table = _synthetic_table(2, 5)
     L, w, t = 0.0187, 5e-3, 1e-3
     r = tip_deflection_from_table(table, 0.02, 0.05, 1.78, L, w, t, model="eb")
