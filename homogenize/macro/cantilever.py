@@ -1,9 +1,11 @@
-"""Cantilever strip under a uniform body force: closed forms, 3D FEM, large deformation.
+"""Cantilever strip under a body force: closed forms, 3D FEM, large deformation.
 
 Geometry: the strip occupies ``[0, L] x [0, w] x [0, t]``, is clamped (all displacement
 components zero) on the face ``x = 0`` and carries a body force of magnitude ``f`` along ``-z``
-(the thickness direction). The tip deflection is the displacement along the force of the
-centre of the free end, ``(L, w/2, t/2)``.
+(the thickness direction). The force is uniform (a number) or varies along the strip, ``f(x)``
+(a callable of ``x`` [m] or a :class:`~homogenize.macro.closed_form.BodyForceProfile`, e.g. the
+force of a real magnet from :mod:`homogenize.macro.magnets`). The tip deflection is the
+displacement along the force of the centre of the free end, ``(L, w/2, t/2)``.
 
 :func:`tip_deflection_m` is the one-call entry point used by ``mapsim beam`` and by other layers;
 :func:`solve_cantilever` returns the full :class:`CantileverResult`.
@@ -46,7 +48,8 @@ class CantileverResult:
 
     tip_m : deflection of the tip centre along the force [m];
     tip_horizontal_m : shortening of the tip along the beam axis [m] (0 for linear models);
-    f_N_m3 : total transverse body force applied [N/m^3];
+    f_N_m3 : total transverse body force applied [N/m^3] (its mean over the length for a force
+    that varies along the strip);
     divisions : (nx, ny, nz) hexahedra along length, width, thickness (6 tets each), FEM only;
     order : polynomial degree of the tetrahedra; n_dof : displacement dofs;
     solver : "closed-form" | "bvp" | "direct" | "amg-pcg" | "newton"; iterations : Krylov or
@@ -127,7 +130,10 @@ def solve_cantilever(strip: Strip, material: Material, f_N_m3: float, *, model: 
     ----------
     strip : Strip -- geometry [m]
     material : Material -- E [Pa], nu, density [kg/m^3]
-    f_N_m3 : float -- magnetic body force along -z [N/m^3], >= 0
+    f_N_m3 : float, callable or BodyForceProfile -- magnetic body force along -z [N/m^3]:
+        uniform (>= 0), or varying along the strip, ``f(x_m)`` vectorised over an array of ``x``
+        in ``[0, L]`` (any sign), or sampled (:class:`closed_form.BodyForceProfile`); the FEM
+        integrates it at its quadrature points, the 1D models as in :mod:`.closed_form`
     model : one of :data:`MODELS` -- "eb" Euler-Bernoulli, "eb-plate" with E/(1-nu^2),
         "timoshenko", "elastica" (large deflection, 1D), "fem" (3D linear), "neo-hookean"
         (3D large deformation, total Lagrangian)
@@ -150,11 +156,15 @@ def solve_cantilever(strip: Strip, material: Material, f_N_m3: float, *, model: 
     check_choice("clamp", clamp, ("full", "beam"))
     if clamp == "beam" and not half:
         raise InputError("clamp='beam' uses the mirror plane y = w/2: set half=True")
-    f = check_positive("f_N_m3", f_N_m3, "N/m^3", allow_zero=True)
     g = check_positive("gravity_m_s2", gravity_m_s2, "m/s^2", allow_zero=True)
-    total = f + material.density_kg_m3 * g
     L, w, t = strip.length_m, strip.width_m, strip.thickness_m
     E, nu = material.E_Pa, material.nu
+    weight = material.density_kg_m3 * g
+    if callable(f_N_m3):
+        return _solve_varying(strip, material, f_N_m3, weight, model, order, divisions, nz,
+                              aspect, lateral, solver, n_steps, half, clamp)
+    f = check_positive("f_N_m3", f_N_m3, "N/m^3", allow_zero=True)
+    total = f + weight
     if model in ("eb", "eb-plate"):
         d = cf.eb_tip_deflection_m(total, L, w, t, E, nu, plate=model == "eb-plate")
         return CantileverResult(model, d, 0.0, total)
@@ -164,6 +174,47 @@ def solve_cantilever(strip: Strip, material: Material, f_N_m3: float, *, model: 
     if model == "elastica":
         v, h = cf.elastica_tip_deflection(total, L, w, t, E)
         return CantileverResult(model, v, h, total, solver="bvp")
+    load = np.array([0.0, 0.0, -total])
+    return _solve_fem(strip, material, load, total, model, order, divisions, nz, aspect,
+                      lateral, solver, n_steps, half, clamp)
+
+
+def _solve_varying(strip, material, f, weight, model, order, divisions, nz, aspect, lateral,
+                   solver, n_steps, half, clamp):
+    """:func:`solve_cantilever` for a body force ``f(x)`` varying along the strip."""
+    L, w, t = strip.length_m, strip.width_m, strip.thickness_m
+    E, nu = material.E_Pa, material.nu
+
+    if isinstance(f, cf.BodyForceProfile):
+        # stays a profile, so that the 1D quadratures see its nodes (kinks)
+        along = cf.BodyForceProfile(f.x_m, f.f_N_m3 + weight)
+    else:
+        def along(x):
+            return np.asarray(f(x), dtype=float) + weight
+
+    mean = cf._VaryingLoad(along, L).mean_N_m3   # also checks that f covers [0, L]
+    if model in ("eb", "eb-plate"):
+        d = cf.eb_tip_deflection_m(along, L, w, t, E, nu, plate=model == "eb-plate")
+        return CantileverResult(model, d, 0.0, mean)
+    if model == "timoshenko":
+        return CantileverResult(model, cf.timoshenko_tip_deflection_m(along, L, w, t, E, nu),
+                                0.0, mean)
+    if model == "elastica":
+        v, h = cf.elastica_tip_deflection(along, L, w, t, E)
+        return CantileverResult(model, v, h, mean, solver="bvp")
+
+    def load(x):
+        # x: reference coordinates, shape (3, ...); the force acts along -z
+        fz = -along(x[0])
+        return np.stack([np.zeros_like(fz), np.zeros_like(fz), fz])
+
+    return _solve_fem(strip, material, load, mean, model, order, divisions, nz, aspect,
+                      lateral, solver, n_steps, half, clamp)
+
+
+def _solve_fem(strip, material, load, total, model, order, divisions, nz, aspect, lateral,
+               solver, n_steps, half, clamp):
+    L, w, t = strip.length_m, strip.width_m, strip.thickness_m
     if divisions is None:
         modelled = Strip(L, w / 2, t) if half else strip
         divisions = beam_divisions(modelled, nz, aspect)
@@ -171,7 +222,6 @@ def solve_cantilever(strip: Strip, material: Material, f_N_m3: float, *, model: 
     if len(divisions) != 3 or min(divisions) < 1:
         raise ValueError(f"divisions must be three positive integers, got {divisions}")
     mesh = _mesh(strip, divisions, half)
-    load = np.array([0.0, 0.0, -total])
     fixed = _clamp(strip, lateral, half, clamp)
     if model == "fem":
         sol = linear_solve(mesh, material, load, fixed, order=order, solver=solver)

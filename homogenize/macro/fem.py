@@ -1,7 +1,8 @@
 """Three-dimensional finite elements shared by the macro solvers (scikit-fem).
 
 * :func:`box_mesh` -- structured tetrahedral mesh of a box (each hexahedron split in six tets);
-* :func:`linear_solve` -- linear isotropic elasticity with P1 or P2 tetrahedra, a body force and
+* :func:`linear_solve` -- linear isotropic elasticity with P1 or P2 tetrahedra, a body force
+  (uniform, or a callable of position: :func:`load_vector`) and
   Dirichlet-fixed dofs, solved directly (SuperLU) or with conjugate gradients preconditioned by
   smoothed-aggregation AMG (pyamg) whose near-null space is the six rigid-body modes;
 * :func:`neo_hookean_solve` -- compressible neo-Hookean solid in total-Lagrangian form under a
@@ -21,9 +22,9 @@ from skfem import (Basis, ElementTetP1, ElementTetP2, ElementVector, LinearForm,
                    condense)
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
-from micro._validate import check_choice, check_positive, check_range
+from micro._validate import InputError, check_choice, check_finite, check_positive, check_range
 
-__all__ = ["Material", "FEMSolution", "box_mesh", "vector_basis", "linear_solve",
+__all__ = ["Material", "FEMSolution", "box_mesh", "vector_basis", "load_vector", "linear_solve",
            "neo_hookean_solve", "rigid_body_modes", "probe_displacement"]
 
 #: direct sparse factorisation below this many free dofs, AMG-PCG above (``solver="auto"``)
@@ -89,6 +90,54 @@ def vector_basis(mesh, order: int = 2):
     return Basis(mesh, ElementVector(elem), intorder=2 * (order - 1) if order > 1 else 1)
 
 
+def load_vector(basis, body_force_N_m3) -> np.ndarray:
+    """Consistent nodal forces ``int N_a f dV`` [N] of a body force on the vector ``basis``.
+
+    Parameters
+    ----------
+    basis : skfem.Basis -- vector basis from :func:`vector_basis`
+    body_force_N_m3 : array_like, shape (3,), or callable -- uniform force per volume [N/m^3],
+        or ``f(x) -> array (3, ...)`` of the coordinates ``x`` [m], shape (3, ...) (vectorised over
+        quadrature points)
+
+    Returns
+    -------
+    ndarray, shape (n_dof,) -- interleaved like the displacement dofs
+
+    Notes
+    -----
+    A uniform force is integrated with the basis' own rule (exact: the integrand has the degree
+    of the shape functions). A callable is integrated on the same elements with a rule of degree
+    ``order + 3`` (same dof numbering), exact for forces up to cubic in ``x``.
+    """
+    if callable(body_force_N_m3):
+        fun = body_force_N_m3
+        order = 1 if isinstance(basis.elem.elem, ElementTetP1) else 2
+        lbasis = Basis(basis.mesh, basis.elem, intorder=order + 3)
+
+        @LinearForm
+        def load(v, w):
+            x = np.asarray(w.x)
+            fx = np.asarray(fun(x), dtype=float)
+            if fx.shape != x.shape:
+                raise InputError(f"the body force callable must return shape {x.shape} "
+                                 f"(3, ...) [N/m^3], got {fx.shape}")
+            check_finite("body_force_N_m3(x)", fx, "N/m^3")
+            vv = np.asarray(v)
+            return fx[0] * vv[0] + fx[1] * vv[1] + fx[2] * vv[2]
+
+        return asm(load, lbasis)
+    fvec = np.asarray(check_finite("body_force_N_m3", body_force_N_m3, "N/m^3"),
+                      float).reshape(3)
+
+    @LinearForm
+    def uniform(v, w):
+        vv = np.asarray(v)
+        return fvec[0] * vv[0] + fvec[1] * vv[1] + fvec[2] * vv[2]
+
+    return asm(uniform, basis)
+
+
 def rigid_body_modes(basis, dofs=None) -> np.ndarray:
     """The six rigid-body displacement modes (3 translations, 3 rotations), shape (n, 6)."""
     x = basis.doflocs  # (3, n_dof): location of each dof
@@ -138,30 +187,24 @@ def _solve_free(K, rhs, fixed, solver, rtol, basis):
 
 def linear_solve(mesh, material: Material, body_force_N_m3, fixed_dofs, *, order=2,
                  solver="auto", rtol=1e-10) -> FEMSolution:
-    """Small-strain isotropic elasticity under a uniform body force.
+    """Small-strain isotropic elasticity under a body force.
 
     Parameters
     ----------
     mesh : skfem.MeshTet -- the body [m]
     material : Material
-    body_force_N_m3 : array_like, shape (3,) -- force per volume [N/m^3]
+    body_force_N_m3 : array_like, shape (3,), or callable -- force per volume [N/m^3], uniform
+        or ``f(x)`` of the coordinates (see :func:`load_vector`)
     fixed_dofs : callable(basis) -> int array -- dofs held at zero displacement
     order : 1 (linear tetrahedra) or 2 (quadratic tetrahedra)
     solver : "auto" | "direct" | "amg-pcg"
     rtol : relative residual of the Krylov solver [-]
     """
     check_choice("solver", solver, ("auto", "direct", "amg-pcg"))
-    fvec = np.asarray(body_force_N_m3, float).reshape(3)
     basis = vector_basis(mesh, order)
     lam, mu = material.lame_Pa
     K = asm(linear_elasticity(lam, mu), basis)
-
-    @LinearForm
-    def load(v, w):
-        vv = np.asarray(v)
-        return fvec[0] * vv[0] + fvec[1] * vv[1] + fvec[2] * vv[2]
-
-    rhs = asm(load, basis)
+    rhs = load_vector(basis, body_force_N_m3)
     u, name, it, res = _solve_free(K, rhs, fixed_dofs(basis), solver, rtol, basis)
     return FEMSolution(u, basis, name, it, res)
 
@@ -207,7 +250,7 @@ def _neo_hookean_pointwise(H, lam, mu):
 class _NeoHookeanAssembler:
     """Residual and tangent of the total-Lagrangian neo-Hookean problem, vectorised."""
 
-    def __init__(self, basis, lam, mu, fvec):
+    def __init__(self, basis, lam, mu, body_force):
         self.basis = basis
         self.lam, self.mu = lam, mu
         sb = basis.with_element(basis.elem.elem)
@@ -222,9 +265,14 @@ class _NeoHookeanAssembler:
         self.rows = np.repeat(self.vdofs, 3 * nb, axis=1).ravel()
         self.cols = np.tile(self.vdofs, (1, 3 * nb)).ravel()
         self.n = 3 * sb.N
-        # dead load: f_i int N_a dX
-        fe = np.einsum("eq,eqa,i->eai", self.dx, self.N, fvec).reshape(len(edofs), 3 * nb)
-        self.f_ext = np.bincount(self.vdofs.ravel(), fe.ravel(), minlength=self.n)
+        if callable(body_force):
+            # dead load varying in the reference configuration: int N_a f(X) dX
+            self.f_ext = load_vector(basis, body_force)
+        else:
+            # dead load: f_i int N_a dX
+            fvec = np.asarray(body_force, float).reshape(3)
+            fe = np.einsum("eq,eqa,i->eai", self.dx, self.N, fvec).reshape(len(edofs), 3 * nb)
+            self.f_ext = np.bincount(self.vdofs.ravel(), fe.ravel(), minlength=self.n)
 
     def grad_u(self, u):
         ue = u[self.vdofs].reshape(len(self.vdofs), -1, 3)  # (e, a, i)
@@ -249,6 +297,9 @@ def neo_hookean_solve(mesh, material: Material, body_force_N_m3, fixed_dofs, *, 
                       ) -> FEMSolution:
     """Large-deformation neo-Hookean solution under a dead body force (per reference volume).
 
+    ``body_force_N_m3`` is a uniform vector, shape (3,), or a callable of the reference
+    coordinates as in :func:`load_vector` [N/m^3].
+
     The load is applied in ``n_steps`` equal increments (each halved if Newton fails, at most
     ``max_cuts`` times); each increment is solved by Newton's method until the residual of the
     free dofs is below ``tol`` times the norm of the current external load (or stalls below
@@ -257,10 +308,9 @@ def neo_hookean_solve(mesh, material: Material, body_force_N_m3, fixed_dofs, *, 
     the converged load factors in ``load_steps``.
     """
     n_steps = int(check_positive("n_steps", n_steps, ""))
-    fvec = np.asarray(body_force_N_m3, float).reshape(3)
     basis = vector_basis(mesh, order)
     lam, mu = material.lame_Pa
-    asmb = _NeoHookeanAssembler(basis, lam, mu, fvec)
+    asmb = _NeoHookeanAssembler(basis, lam, mu, body_force_N_m3)
     fixed = np.asarray(fixed_dofs(basis))
     free = np.setdiff1d(np.arange(asmb.n), fixed)
     fnorm = np.linalg.norm(asmb.f_ext[free]) or 1.0
