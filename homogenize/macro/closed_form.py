@@ -23,7 +23,8 @@ a callable ``f(x_m) -> N/m^3`` (vectorised over an array of ``x`` in ``[0, L]``)
 from :mod:`homogenize.macro.magnets`. A number or an array keeps its meaning (uniform force;
 vectorised over loads). With ``q(x) = f(x) w t`` and ``Q(x) = int_x^L q`` (the shear force):
 
-* Euler-Bernoulli by superposition of point loads: ``delta = int_0^L q(x) x^2 (3L - x) dx / (6 EI)``;
+* Euler-Bernoulli by superposition of point loads:
+  ``delta = int_0^L q(x) x^2 (3L - x) dx / (6 EI)``;
 * Timoshenko adds ``int_0^L Q(x) dx / (kappa G A) = int_0^L q(x) x dx / (kappa G A)``;
 * elastica: ``EI theta'' = Q(s) cos(theta)`` with the same boundary conditions.
 
@@ -151,7 +152,10 @@ class _VaryingLoad:
         return float(np.sum(self.w * self.q * weight(self.x)))
 
     def shear_shape(self):
-        """``(f_ref, Qhat)``: ``Qhat(s) = Q(s L) / (f_ref L)``, ``f_ref = max |f|`` (uniform: 1 - s)."""
+        """``(f_ref, Qhat)``: ``Qhat(s) = Q(s L) / (f_ref L)``, ``f_ref = max |f|``.
+
+        A uniform load has ``Qhat = 1 - s``.
+        """
         f_ref = float(np.max(np.abs(self.q)))
         if f_ref == 0.0:
             return 0.0, None
