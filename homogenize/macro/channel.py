@@ -10,9 +10,15 @@ and the magnet underneath), pulling the ceiling into the channel.
 Coordinates: ``x`` along the channel (length ``d``), ``y`` across it, ``z`` up from the glass.
 The two mirror planes ``x = d/2`` and ``y = W/2`` are used to solve a quarter of the block.
 
-Outputs per case: the largest ceiling deflection (at the centre) and the relative reduction of
+Optionally a uniform liquid pressure ``pressure_Pa`` (gauge) acts on the polymer faces of the
+channel (ceiling and side walls), pushing them away from the channel: the ceiling bulges up.
+The glass is rigid, so the pressure on the channel floor does nothing.
+
+Outputs per case: the largest ceiling deflection (at the centre), the relative reduction of
 the channel cross-section at mid-length, ``-Delta A / (a b)`` with
-``Delta A = oint u . n ds`` over the channel outline (outward normal of the channel).
+``Delta A = oint u . n ds`` over the channel outline (outward normal of the channel), and the
+ceiling deflection profile across the half width at mid-length (used by
+:mod:`homogenize.macro.flow` for the gap of the deformed channel).
 """
 from __future__ import annotations
 
@@ -21,8 +27,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from homogenize.macro.fem import Material, box_mesh, linear_solve, probe_displacement
-from micro._validate import check_positive
+from skfem import FacetBasis, LinearForm, asm
+from skfem.models.elasticity import linear_elasticity
+
+from homogenize.macro.fem import (FEMSolution, Material, _solve_free, box_mesh, probe_displacement,
+                                  vector_basis)
+from micro._validate import check_choice, check_finite, check_positive
 
 __all__ = ["ChannelGeometry", "ChannelResult", "solve_channel"]
 
@@ -54,7 +64,11 @@ class ChannelResult:
     """max_deflection_m : ceiling deflection at the channel centre, along the force [m];
     area_reduction : relative loss of the mid-length cross-section [-];
     closes : True if the linear deflection exceeds the channel height (contact not modelled);
-    divisions : (nx, ny, nz) hexahedra of the quarter model; n_dof; order."""
+    divisions : (nx, ny, nz) hexahedra of the quarter model; n_dof; order;
+    pressure_Pa : liquid gauge pressure on the channel's polymer faces [Pa];
+    ceiling_y_m : tuple, shape (n,) -- distance from the side wall across the half width,
+    0 ... a/2 [m]; ceiling_deflection_m : tuple, shape (n,) -- mid-length ceiling deflection
+    towards the glass at those points [m] (negative: bulged up)."""
     a_m: float
     b_m: float
     c_m: float
@@ -67,6 +81,9 @@ class ChannelResult:
     divisions: tuple
     n_dof: int
     order: int
+    pressure_Pa: float = 0.0
+    ceiling_y_m: tuple = ()
+    ceiling_deflection_m: tuple = ()
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -91,8 +108,9 @@ def _divisions(g: ChannelGeometry, nc: int, aspect: float):
 
 def solve_channel(geometry: ChannelGeometry, material: Material, f_N_m3: float, *, order=2,
                   nc: int = 2, aspect: float = 4.0, gravity_m_s2: float = 0.0,
-                  solver: str = "auto") -> ChannelResult:
-    """Linear-elastic deformation of the channel block under the body force ``f_N_m3``.
+                  solver: str = "auto", pressure_Pa: float = 0.0) -> ChannelResult:
+    """Linear-elastic deformation of the channel block under the body force ``f_N_m3`` and a
+    liquid pressure ``pressure_Pa`` in the channel.
 
     Parameters
     ----------
@@ -103,8 +121,11 @@ def solve_channel(geometry: ChannelGeometry, material: Material, f_N_m3: float, 
     nc : int -- element layers through the ceiling; other sizes follow with ``aspect``
     gravity_m_s2 : float -- self-weight ``density g`` added to the force [m/s^2]
     solver : "auto" | "direct" | "amg-pcg"
+    pressure_Pa : float -- uniform gauge pressure of the liquid on the ceiling and side walls
+        [Pa] (>= 0 or < 0: suction pulls the ceiling down)
     """
     f = check_positive("f_N_m3", f_N_m3, "N/m^3", allow_zero=True)
+    p_liq = float(check_finite("pressure_Pa", pressure_Pa, "Pa"))
     g_acc = check_positive("gravity_m_s2", gravity_m_s2, "m/s^2", allow_zero=True)
     nc = int(check_positive("nc", nc, ""))
     g = geometry
@@ -130,7 +151,9 @@ def solve_channel(geometry: ChannelGeometry, material: Material, f_N_m3: float, 
         return np.unique(np.concatenate((bottom, sym_x[sym_x % 3 == 0], sym_y[sym_y % 3 == 1])))
 
     total = f + material.density_kg_m3 * g_acc
-    sol = linear_solve(mesh, material, [0.0, 0.0, -total], fixed, order=order, solver=solver)
+    sol = _solve_loaded(mesh, material, total, p_liq, fixed, order, solver,
+                        ceiling=lambda x: (np.abs(x[2] - b) < tol) & (x[1] > s - tol),
+                        wall=lambda x: (np.abs(x[1] - s) < tol) & (x[2] < b + tol))
     # mid-length section, probed just inside the polymer
     eps = 1e-7 * min(b, c, a)
     xm = d / 2 - eps
@@ -143,4 +166,43 @@ def solve_channel(geometry: ChannelGeometry, material: Material, f_N_m3: float, 
     area_red = -2.0 * dA_half / (a * b)
     delta = float(-ceiling[2, -1])
     return ChannelResult(a, b, c, d, s, total, delta, float(area_red), bool(delta >= b),
-                         (nd, nw + na, nb + nc), sol.n_dof, order)
+                         (nd, nw + na, nb + nc), sol.n_dof, order, p_liq,
+                         tuple(float(v) for v in yc - s),
+                         tuple(float(-v) for v in ceiling[2]))
+
+
+def _solve_loaded(mesh, material: Material, f_down_N_m3: float, pressure_Pa: float, fixed,
+                  order: int, solver: str, ceiling, wall) -> FEMSolution:
+    """Linear elasticity under the body force ``-f e_z`` and the liquid pressure on the channel.
+
+    The liquid pushes on the polymer along its outward normal ``n`` with traction ``-p n``:
+    ``+p e_z`` on the ceiling (``n = -e_z``), ``-p e_y`` on the side wall of the quarter model
+    (``n = +e_y``). ``ceiling`` and ``wall`` select those boundary facets by their midpoints.
+    """
+    check_choice("solver", solver, ("auto", "direct", "amg-pcg"))
+    basis = vector_basis(mesh, order)
+    lam, mu = material.lame_Pa
+    K = asm(linear_elasticity(lam, mu), basis)
+
+    @LinearForm
+    def body(v, w):
+        return -f_down_N_m3 * v[2]
+
+    rhs = asm(body, basis)
+    if pressure_Pa != 0.0:
+        # traction quadrature exact for P2 traces (a constant load times a quadratic)
+        qorder = 2 * order
+
+        @LinearForm
+        def lift(v, w):
+            return pressure_Pa * v[2]
+
+        @LinearForm
+        def push(v, w):
+            return -pressure_Pa * v[1]
+
+        for sel, form in ((ceiling, lift), (wall, push)):
+            facets = mesh.facets_satisfying(sel, boundaries_only=True)
+            rhs = rhs + asm(form, FacetBasis(mesh, basis.elem, facets=facets, intorder=qorder))
+    u, name, it, res = _solve_free(K, rhs, fixed(basis), solver, 1e-10, basis)
+    return FEMSolution(u, basis, name, it, res)
