@@ -32,7 +32,7 @@ Units: SI throughout (m, Pa, Pa s, m^3/s, N/m^3).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Callable
 
 import numpy as np
