@@ -11,23 +11,47 @@ realizations are loaded, not recomputed, and a changed study never reuses stale 
 The table is then aggregated from the stored parts in grid order, so it is identical whatever
 the number of workers, the order of completion, or how often the batch was interrupted.
 
-Table layout (HDF5, readable by ``xarray.open_dataset(path, engine="h5netcdf")``)
--------------------------------------------------------------------------------
-dimensions ``point`` (grid points, C order over the grid axes), ``realization``, ``i`` and
-``j`` (Cartesian components x, y, z of vectors and tensors).
+Table layout (HDF5 / netCDF-4, format version 2, CF-1.10 attributes)
+--------------------------------------------------------------------
+The grid of a study is always the full Cartesian product of its axes, so each grid axis is a
+dimension of its own and the table is a regular xarray grid::
 
-* one coordinate variable per grid axis, shape (point,): e.g. ``phi``, ``B_T`` [T],
-  ``gradB_T_per_m`` [T/m], ``arrangement`` (strings);
+    import xarray as xr
+    ds = xr.open_dataset("results/chain/table.h5", engine="h5netcdf")
+    ds["f_eff_N_m3_mean"].sel(phi=0.035, B_T=0.1, i="z")           # one grid point
+    ds["f_eff_N_m3_mean"].sel(phi=0.035, i="z").interp(B_T=0.3)    # linear in B
+
+Dimensions: one per grid axis, in the study's canonical order (e.g. ``phi``, ``arrangement``,
+``B_T``, ``gradB_T_per_m``; axes with one value are dimensions of length 1), then
+``realization``, ``i`` and ``j`` (Cartesian components of vectors and tensors).
+
+* coordinate variables: each grid axis (float64, or strings such as ``arrangement``), the
+  ``realization`` index, and ``i``, ``j`` = ``"x", "y", "z"`` (strings, so ``.sel(i="z")``);
+  every one with ``units`` (``"1"`` for dimensionless and string coordinates) and
+  ``long_name``;
 * for each quantity Q (``f_eff_N_m3``, ``phi_eff``, ``d_eff``, ``M_eff_A_per_m``,
   ``virial_stress_Pa``, ``volume_m3``, ``phi_rve``; with ``fem = true`` also ``E_eff_Pa``,
-  ``nu_eff``, ``stress_mag_Pa``, ``strain_mag``): ``Q_mean``, ``Q_sd`` (sample sd, ddof 1), ``Q_ci_low``, ``Q_ci_high``
-  (Student-t interval of the mean at the study's confidence), shape (point, [i, [j]]), and the
-  per-realization values ``Q`` (point, realization, [i, [j]]); each with a ``units`` attribute;
-* ``n`` (point,): realizations per point; ``seed`` (point, realization): the integer seed of
+  ``nu_eff``, ``stress_mag_Pa``, ``strain_mag``): ``Q_mean``, ``Q_sd`` (sample sd, ddof 1),
+  ``Q_ci_low``, ``Q_ci_high`` (Student-t interval of the mean at the study's confidence), shape
+  (*grid, [i, [j]]), and the per-realization values ``Q`` (*grid, realization, [i, [j]]); each
+  with ``units`` and ``long_name``;
+* ``n`` (*grid): realizations per point; ``seed`` (*grid, realization): the integer seed of
   each realization (``generate_rve(..., seed=...)`` reproduces it alone);
-* root attributes: ``format = "mapsim-table"``, ``confidence``, ``grid_axes`` (JSON: axis ->
-  values), ``study_toml`` (the study file text), ``evaluator``, ``manifest`` (JSON: versions,
-  git revision, start and end times); the same manifest is written to ``<table>.manifest.json``.
+* root attributes: ``Conventions = "CF-1.10"``, ``title``, ``source``,
+  ``format = "mapsim-table"``, ``format_version = 2``, ``confidence``, ``grid_axes`` (JSON:
+  axis -> values), ``grid_shape``, ``study_toml`` (the study file text), ``evaluator``,
+  ``manifest`` (JSON: versions, git revision, start and end times); the same manifest is
+  written to ``<table>.manifest.json``.
+
+The flat grid-point index of :func:`read_table` (and of the seeds, ``study.tasks()``) is the C
+order over the grid dimensions. A flat view, or a sparse (non-product) subset of points, is an
+xarray MultiIndex::
+
+    flat = ds.stack(point=list(json.loads(ds.attrs["grid_axes"])))  # point = MultiIndex
+    some = flat.sel(point=[(0.035, 0.1, 1.78), (0.0175, 0.5, 1.78)])  # tuples in axis order
+
+Version 1 files (a flat ``point`` dimension with the axes as ``point`` coordinates) are still
+read by :func:`read_table`.
 """
 from __future__ import annotations
 
@@ -54,7 +78,7 @@ __all__ = ["run_batch", "aggregate", "read_table", "Table", "Estimate", "BatchEr
            "load_study"]
 
 FORMAT = "mapsim-table"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 _COMPONENTS = ("x", "y", "z")
 
 
@@ -265,65 +289,87 @@ def _str_array(values):
     return np.array(values, dtype=h5py.string_dtype())
 
 
+#: CF conventions version the table attributes follow
+CONVENTIONS = "CF-1.10"
+_COMPONENT_NAME = "Cartesian component of vectors and tensors (x, y, z)"
+
+
 def write_table(out, study: Study, data: dict, man: dict, evaluator_id: str) -> None:
-    """Write the aggregated table atomically (layout: module docstring)."""
+    """Write the aggregated table atomically (layout: module docstring).
+
+    Arrays in ``data`` are indexed by the flat grid point (C order over the grid axes); they
+    are stored reshaped to one dimension per grid axis.
+    """
     import h5py
-    P, R = study.n_points, study.realizations
-    points = study.points()
+    R = study.realizations
+    grid_shape = tuple(study.grid_shape)
     axis_names = study.axis_names
-    coords_attr = " ".join(axis_names)
+    dimsizes = [(a, len(v)) for a, v in study.axes]
+    dimsizes += [("realization", R), ("i", 3), ("j", 3)]
+
+    def grid(arr):
+        arr = np.asarray(arr)
+        return arr.reshape(grid_shape + arr.shape[1:])
+
     with atomic_path(out) as tmp, h5py.File(tmp, "w") as h:
+        h.attrs["Conventions"] = CONVENTIONS
+        h.attrs["title"] = f"mapsim effective-parameter table of study {study.name}"
+        h.attrs["source"] = f"mapsim batch run, evaluator {evaluator_id}"
         h.attrs["format"] = FORMAT
         h.attrs["format_version"] = FORMAT_VERSION
         h.attrs["confidence"] = study.confidence
         h.attrs["grid_axes"] = json.dumps({a: list(v) for a, v in study.axes})
-        h.attrs["grid_shape"] = np.array(study.grid_shape, dtype=np.int64)
+        h.attrs["grid_shape"] = np.array(grid_shape, dtype=np.int64)
         h.attrs["study_name"] = study.name
         h.attrs["study_toml"] = study.text
         h.attrs["evaluator"] = evaluator_id
         h.attrs["manifest"] = json.dumps(man, default=str)
         dims = {}
-        for name, size in (("point", P), ("realization", R), ("i", 3), ("j", 3)):
-            d = h.create_dataset(name, data=np.arange(size, dtype=np.int64))
+        for name, size in dimsizes:
+            if name in axis_names:
+                vals = dict(study.axes)[name]
+                if isinstance(vals[0], str):
+                    d = h.create_dataset(name, data=_str_array(vals))
+                    d.attrs["units"] = "1"
+                else:
+                    d = h.create_dataset(name, data=np.array(vals, dtype=np.float64))
+                    d.attrs["units"] = _unit_of(name)
+                d.attrs["long_name"] = f"grid axis {name}"
+            elif name == "realization":
+                d = h.create_dataset(name, data=np.arange(size, dtype=np.int64))
+                d.attrs["units"] = "1"
+                d.attrs["long_name"] = "realization index (random RVE) at each grid point"
+            else:
+                d = h.create_dataset(name, data=_str_array(_COMPONENTS))
+                d.attrs["units"] = "1"
+                d.attrs["long_name"] = _COMPONENT_NAME
             d.make_scale(name)
             dims[name] = d
-        dims["i"].attrs["long_name"] = "Cartesian component (0 = x, 1 = y, 2 = z)"
-        dims["j"].attrs["long_name"] = "Cartesian component (0 = x, 1 = y, 2 = z)"
-        dims["point"].attrs["long_name"] = "grid point (C order over the grid axes)"
 
-        def put(name, arr, dimnames, units=None, desc=None, coords=True):
+        def put(name, arr, dimnames, units, desc):
             ds = h.create_dataset(name, data=arr)
             for ax, dn in enumerate(dimnames):
                 ds.dims[ax].attach_scale(dims[dn])
-            if units is not None:
-                ds.attrs["units"] = units
-            if desc:
-                ds.attrs["long_name"] = desc
-            if coords and coords_attr:
-                ds.attrs["coordinates"] = coords_attr
+            ds.attrs["units"] = units
+            ds.attrs["long_name"] = desc
             return ds
 
-        for a in axis_names:
-            col = [p[a] for p in points]
-            if isinstance(col[0], str):
-                put(a, _str_array(col), ("point",), desc=f"grid axis {a}", coords=False)
-            else:
-                put(a, np.array(col, dtype=np.float64), ("point",), units=_unit_of(a),
-                    desc=f"grid axis {a}", coords=False)
-        put("n", data["n"], ("point",), units="1", desc="realizations per grid point")
-        put("seed", data["seeds"], ("point", "realization"), units="1",
-            desc="integer seed of each realization")
+        gdims = tuple(axis_names)
+        put("n", grid(data["n"]), gdims, "1", "realizations per grid point")
+        put("seed", grid(data["seeds"]), gdims + ("realization",), "1",
+            "integer seed of each realization")
+        lvl = f"{100 * study.confidence:g} %"
         for q, vals in data["values"].items():
             unit, shape, desc = QUANTITIES[q]
             comp = ("i", "j")[:len(shape)]
-            put(q, vals, ("point", "realization") + comp, unit, desc + " (per realization)")
+            put(q, grid(vals), gdims + ("realization",) + comp, unit,
+                desc + " (per realization)")
             s = data["summaries"][q]
-            put(f"{q}_mean", s["mean"], ("point",) + comp, unit, desc + " (mean)")
-            put(f"{q}_sd", s["sd"], ("point",) + comp, unit, desc + " (sample sd)")
-            lvl = f"{100 * study.confidence:g} %"
-            put(f"{q}_ci_low", s["ci_low"], ("point",) + comp, unit,
+            put(f"{q}_mean", grid(s["mean"]), gdims + comp, unit, desc + " (mean)")
+            put(f"{q}_sd", grid(s["sd"]), gdims + comp, unit, desc + " (sample sd)")
+            put(f"{q}_ci_low", grid(s["ci_low"]), gdims + comp, unit,
                 desc + f" (lower end of the {lvl} Student-t interval of the mean)")
-            put(f"{q}_ci_high", s["ci_high"], ("point",) + comp, unit,
+            put(f"{q}_ci_high", grid(s["ci_high"]), gdims + comp, unit,
                 desc + f" (upper end of the {lvl} Student-t interval of the mean)")
 
 
@@ -417,33 +463,55 @@ def _same(grid_value, text: str) -> bool:
     return math.isclose(v, grid_value, rel_tol=1e-9, abs_tol=0.0)
 
 
+def _decode_axis(raw) -> list:
+    return [x.decode() if isinstance(x, bytes) else
+            (str(x) if isinstance(x, str) else float(x)) for x in raw]
+
+
 def read_table(path) -> Table:
-    """Load a table written by :func:`run_batch`."""
+    """Load a table written by :func:`run_batch` (format version 1 or 2).
+
+    The returned :class:`Table` is flat over the grid points (C order over the axes), whatever
+    the file layout: version 2 files store one dimension per grid axis, version 1 files a flat
+    ``point`` dimension.
+    """
     from micro._io import open_hdf5
     path = Path(path)
     with open_hdf5(path, "table") as h:
         if h.attrs.get("format") != FORMAT:
             raise InputError(f"{path} is not a mapsim table (format attribute "
                              f"{h.attrs.get('format')!r})")
+        version = int(h.attrs.get("format_version", 1))
+        if version not in (1, 2):
+            raise InputError(f"{path}: table format version {version} is newer than this "
+                             f"mapsim understands (1 or 2)")
         axes = {a: tuple(v) for a, v in json.loads(h.attrs["grid_axes"]).items()}
-        P = h["point"].shape[0]
-        cols = {}
-        for a in axes:
-            raw = h[a][()]
-            cols[a] = [x.decode() if isinstance(x, bytes) else
-                       (str(x) if isinstance(x, str) else float(x)) for x in raw]
-        points = tuple({a: cols[a][i] for a in axes} for i in range(P))
+        if version == 1:
+            P = h["point"].shape[0]
+            cols = {a: _decode_axis(h[a][()]) for a in axes}
+            points = tuple({a: cols[a][i] for a in axes} for i in range(P))
+        else:
+            import itertools
+            cols = {a: _decode_axis(h[a][()]) for a in axes}
+            points = tuple(dict(zip(axes, combo))
+                           for combo in itertools.product(*(cols[a] for a in axes)))
+            P = len(points)
+        nd = 1 if version == 1 else len(axes)
+
+        def flat(arr):
+            return arr.reshape((P,) + arr.shape[nd:])
+
         values, units = {}, {}
         for q in QUANTITIES:
             if q in h:
-                values[q] = h[q][()]
+                values[q] = flat(h[q][()])
                 units[q] = h[q].attrs["units"]
                 if isinstance(units[q], bytes):
                     units[q] = units[q].decode()
         attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
         return Table(path=str(path), axes=axes, points=points,
-                     confidence=float(h.attrs["confidence"]), n=h["n"][()], values=values,
-                     units=units, attrs=attrs)
+                     confidence=float(h.attrs["confidence"]), n=flat(h["n"][()]),
+                     values=values, units=units, attrs=attrs)
 
 
 # --------------------------------------------------------------------------- interpolation

@@ -85,17 +85,18 @@ def test_table_layout_units_and_statistics(study, reference):
         assert h["B_T"].attrs["units"] == "T"
         assert h["gradB_T_per_m"].attrs["units"] == "T/m"
         assert h["f_eff_N_m3_mean"].attrs["units"] == "N/m^3"
-        assert h["virial_stress_Pa_sd"].shape == (6, 3, 3)
+        # one dimension per grid axis (phi, B_T, gradB_T_per_m); flat point 4 = (1, 1, 0)
+        assert h["virial_stress_Pa_sd"].shape == (2, 3, 1, 3, 3)
         assert h.attrs["study_toml"] == STUDY
         man = json.loads(h.attrs["manifest"])
         assert {"versions", "git_revision", "started_utc", "finished_utc"} <= set(man)
         assert man["started_utc"] <= man["finished_utc"]
-        s = summarize(h["f_eff_N_m3"][4], 0.95)
+        s = summarize(h["f_eff_N_m3"][1, 1, 0], 0.95)
         for key in ("mean", "sd", "ci_low", "ci_high"):
-            assert np.array_equal(h[f"f_eff_N_m3_{key}"][4], s[key])
-        assert np.array_equal(h["n"][()], np.full(6, 3))
+            assert np.array_equal(h[f"f_eff_N_m3_{key}"][1, 1, 0], s[key])
+        assert np.array_equal(h["n"][()], np.full((2, 3, 1), 3))
         seeds = h["seed"][()]
-    assert seeds[4, 1] == study.tasks()[4 * 3 + 1].seed_int()
+    assert seeds[1, 1, 0, 1] == study.tasks()[4 * 3 + 1].seed_int()
     assert Path(str(reference).replace(".h5", ".manifest.json")).exists()
     # the stored values are those of the evaluator at that seed (reproducible one by one)
     t41 = study.tasks()[4 * 3 + 1]
@@ -109,11 +110,11 @@ def test_xarray_can_open_the_table(reference):
     xr = pytest.importorskip("xarray")
     pytest.importorskip("h5netcdf")
     with xr.open_dataset(reference, engine="h5netcdf") as ds:
-        assert set(ds["f_eff_N_m3_mean"].dims) == {"point", "i"}
+        assert ds["f_eff_N_m3_mean"].dims == ("phi", "B_T", "gradB_T_per_m", "i")
         assert "B_T" in ds.coords and "phi" in ds.coords
         assert ds["f_eff_N_m3_mean"].attrs["units"] == "N/m^3"
-        sel = ds["f_eff_N_m3_mean"].where((ds.B_T == 0.1) & (ds.phi == 0.035), drop=True)
-        assert sel.sizes["point"] == 1
+        sel = ds["f_eff_N_m3_mean"].sel(B_T=0.1, phi=0.035)
+        assert sel.sizes == {"gradB_T_per_m": 1, "i": 3}
 
 
 def test_two_workers_give_the_same_table_as_one(study, client2, reference, tmp_path):
