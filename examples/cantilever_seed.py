@@ -7,7 +7,7 @@ tip deflection. Run it to print the table and save a plot; import it to use the 
 """
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.fem import Material
-from homogenize.macro.paper import SeedParameters, seed_body_force
+from homogenize.studies.paper import SeedParameters, seed_body_force
 
 SEED = SeedParameters()
 BODY_FORCE_N_M3 = seed_body_force(SEED.c, SEED.d, SEED.radius_m, SEED.sigma_s_Am2_kg,

@@ -175,7 +175,8 @@ class BlockVCycle:
     __call__ = __matmul__
 
 
-def block_cg(A, M, F, *, tol: float, maxiter: int, project=None, x0=None, coarse=None):
+def block_cg(A, M, F, *, tol: float, maxiter: int, project=None, x0=None, coarse=None,
+             callback=None):
     """Preconditioned CG on the k columns of F at once.
 
     A, M : callables mapping an (n, k) array to an (n, k) array (the matrix and the
@@ -189,6 +190,8 @@ def block_cg(A, M, F, *, tol: float, maxiter: int, project=None, x0=None, coarse
         exact arithmetic; the round-off that builds up there when the load acts mostly on the
         deflated modes (particle forces move the particles rigidly) grows until CG diverges below
         ~1e-9. Applying the correction after every step keeps ``R = F - A X`` and removes it.
+    callback : callable or None -- ``callback(iteration, n_converged, worst_residual)`` after
+        every step (progress reporting)
 
     Returns ``(X, histories)``: the solutions and, per column, the list of relative residuals
     (first entry: the start). Each column follows exactly the recursion of a single-vector CG.
@@ -225,6 +228,8 @@ def block_cg(A, M, F, *, tol: float, maxiter: int, project=None, x0=None, coarse
         for c, v in zip(idx, res):
             hist[c].append(float(v))
         done = res <= tol
+        if callback is not None:
+            callback(it, k - idx.size + int(done.sum()), float(res.max()))
         if done.any():                  # converged columns leave the block
             X[:, idx[done]] = Xa[:, done]
             keep = ~done

@@ -13,6 +13,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from micro._validate import InputError
+from homogenize._effective_media import lame
+from homogenize.cell import voigt_to_tensor
 
 __all__ = ["conforming_tet_mesh", "homogenize_conforming"]
 
@@ -86,8 +88,6 @@ def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(2e6
     from skfem import Basis, BilinearForm, ElementTetP2, ElementVector, LinearForm, MeshTet
     from skfem.helpers import ddot, sym_grad, trace
 
-    from ._effective_media import lame
-    from .cell import voigt_to_tensor
 
     pts, tets, phase = conforming_tet_mesh(box_m, centers_m, radii_m, mesh_size_m)
     L = float(box_m)

@@ -29,6 +29,11 @@ import numpy as np
 
 import micro
 from micro._validate import InputError
+from micro.particles import CoreShell, LogNormal, Monodisperse
+import itertools
+from micro.dipoles import solve
+from micro.magnetization import get_law
+from micro.particles import generate_rve
 
 __all__ = ["QUANTITIES", "get_evaluator", "RVEEvaluator", "SyntheticEvaluator", "synthetic_truth"]
 
@@ -229,7 +234,6 @@ def _signature_keys(func) -> set:
 
 def _rve_kwargs(params: dict) -> dict:
     """Keywords of generate_rve from the study's RVE keys (distribution, composition, rest)."""
-    from micro.particles import CoreShell, LogNormal, Monodisperse
     p = dict(params)
     d = {k: p.pop(k, v) for k, v in _DIST_KEYS.items()}
     if d["distribution"] == "lognormal":
@@ -308,7 +312,6 @@ class RVEEvaluator:
         # every distinct particle population of the grid must be constructible
         rve_axes = [(a, v) for a, v in study.axes if a in gen_keys]
         seen = set()
-        import itertools
         for combo in itertools.product(*(v for _, v in rve_axes)):
             key = tuple(combo)
             if key in seen:
@@ -335,9 +338,6 @@ class RVEEvaluator:
             raise InputError(f"{study.path}: [cell] is given but [study] fem = false")
 
     def __call__(self, task) -> dict:
-        from micro.dipoles import solve
-        from micro.magnetization import get_law
-        from micro.particles import generate_rve
         point = dict(task.point)
         s = task.settings
         phi = point.pop("phi")
@@ -352,7 +352,7 @@ class RVEEvaluator:
                "volume_m3": rve.volume_m3, "phi_rve": rve.phi}
         if s["fem"]:
             from homogenize.cell import homogenize_rve
-            forces = np.asarray(state.force_ext_N) + np.asarray(state.force_dd_N)
+            forces = state.total_force_N
             cell = homogenize_rve(rve, s["voxels"], forces_N=forces,
                                   virial_stress_Pa=state.virial_stress_Pa, **s["cell"])
             out.update(E_eff_Pa=cell.E_eff_Pa, nu_eff=cell.nu_eff,

@@ -15,24 +15,12 @@ so wrappers use the parallel variant only for large loops (:data:`PARALLEL_MIN_R
 """
 from __future__ import annotations
 
-import types
 
 import numba as nb
 
+from micro._numba import parallel_and_serial
+
 PARALLEL_MIN_ROWS = 50_000
-
-
-def _both(f):
-    """Compile ``f`` as a parallel and a serial kernel (same source).
-
-    The serial one is compiled from a renamed copy of the function: numba's on-disk cache is keyed
-    by the function's qualified name, not by the ``parallel`` flag, so the two variants would
-    otherwise load each other's machine code.
-    """
-    g = types.FunctionType(f.__code__, f.__globals__, f.__name__ + "_serial", f.__defaults__,
-                           f.__closure__)
-    g.__qualname__ = f.__qualname__ + "_serial"
-    return nb.njit(cache=True, parallel=True)(f), nb.njit(cache=True)(g)
 
 
 def _bsr_matmat(indptr, indices, data, x, y):
@@ -168,8 +156,8 @@ def _voxel_stencil_blocks(n, lam, mu, tab, axis_order, Gl, Gm, indices, data):
                     out += 1
 
 
-bsr_matmat, bsr_matmat_serial = _both(_bsr_matmat)
-bsr_residual, bsr_residual_serial = _both(_bsr_residual)
-bsr_gauss_seidel_colour, bsr_gauss_seidel_colour_serial = _both(_bsr_gauss_seidel_colour)
+bsr_matmat, bsr_matmat_serial = parallel_and_serial(_bsr_matmat)
+bsr_residual, bsr_residual_serial = parallel_and_serial(_bsr_residual)
+bsr_gauss_seidel_colour, bsr_gauss_seidel_colour_serial = parallel_and_serial(_bsr_gauss_seidel_colour)
 greedy_colouring = nb.njit(cache=True)(_greedy_colouring)
-voxel_stencil_blocks, voxel_stencil_blocks_serial = _both(_voxel_stencil_blocks)
+voxel_stencil_blocks, voxel_stencil_blocks_serial = parallel_and_serial(_voxel_stencil_blocks)

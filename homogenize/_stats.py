@@ -19,9 +19,33 @@ import numpy as np
 from scipy import stats
 
 from micro._validate import InputError
+import dataclasses
 
 __all__ = ["summarize", "welch_permutation", "fit_power_law", "realizations_needed",
            "TwoSampleResult", "PowerLaw"]
+
+
+def t_half_width(se, dof, confidence: float):
+    """Half-width of the two-sided Student-t interval: ``t_{(1+c)/2}(dof) * se`` (arrays
+    broadcast; a float for scalar input)."""
+    h = stats.t.ppf(0.5 + confidence / 2.0, dof) * np.asarray(se, dtype=float)
+    return float(h) if np.ndim(h) == 0 else h
+
+
+def widen_in_quadrature(mid, lo, hi, rel):
+    """Widen the interval ``[lo, hi]`` around ``mid`` by an independent relative error ``rel``.
+
+    The relative half-widths add in quadrature (first-order propagation of independent errors,
+    an approximation good while both are small): ``mid (1 -+ hypot(rel_side, rel))``. Arrays
+    broadcast; where ``mid`` is 0 the interval is returned unchanged.
+    """
+    mid, lo, hi = (np.asarray(x, dtype=float) for x in (mid, lo, hi))
+    safe = np.where(mid != 0, mid, 1.0)
+    new_lo = np.where(mid != 0, mid * (1 - np.hypot(1 - lo / safe, rel)), lo)
+    new_hi = np.where(mid != 0, mid * (1 + np.hypot(hi / safe - 1, rel)), hi)
+    if new_lo.ndim == 0:
+        return float(new_lo), float(new_hi)
+    return new_lo, new_hi
 
 
 def summarize(values, confidence: float = 0.95) -> dict:
@@ -44,7 +68,7 @@ def summarize(values, confidence: float = 0.95) -> dict:
         raise InputError(f"a confidence interval needs at least 2 realizations, got {n}")
     mean = x.mean(axis=0)
     sd = x.std(axis=0, ddof=1)
-    half = stats.t.ppf(0.5 + confidence / 2.0, n - 1) * sd / math.sqrt(n)
+    half = t_half_width(sd / math.sqrt(n), n - 1, confidence)
     return {"mean": mean, "sd": sd, "n": n, "ci_low": mean - half, "ci_high": mean + half}
 
 
@@ -68,7 +92,6 @@ class TwoSampleResult:
     confidence: float
 
     def as_dict(self) -> dict:
-        import dataclasses
         return dataclasses.asdict(self)
 
 
@@ -96,7 +119,7 @@ def welch_permutation(a, b, *, confidence: float = 0.95, n_resamples: int = 9999
         t = diff / math.sqrt(se2)
         dof = se2 ** 2 / ((va / na) ** 2 / (na - 1) + (vb / nb) ** 2 / (nb - 1))
         p_w = float(2 * stats.t.sf(abs(t), dof))
-        half = stats.t.ppf(0.5 + confidence / 2, dof) * math.sqrt(se2)
+        half = t_half_width(math.sqrt(se2), dof, confidence)
 
     def stat(x, y, axis=-1):
         return np.mean(y, axis=axis) - np.mean(x, axis=axis)

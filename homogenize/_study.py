@@ -51,6 +51,8 @@ from pathlib import Path
 import numpy as np
 
 from micro._validate import InputError
+import dataclasses
+from homogenize import _evaluate
 
 __all__ = ["Study", "Task", "load_study", "parse_study", "AXIS_ORDER"]
 
@@ -149,7 +151,6 @@ class Study:
                 for g, p in enumerate(self.points()) for r in range(self.realizations)]
 
     def replace(self, **changes) -> "Study":
-        import dataclasses
         return dataclasses.replace(self, **changes)
 
     def config(self) -> dict:
@@ -353,7 +354,6 @@ def parse_study(text: str, path: str = "<study>") -> Study:
                   realizations=s["realizations"], n_particles=n_particles, evaluator=evaluator,
                   fem=s.get("fem", False), voxels=voxels, confidence=confidence,
                   axes=tuple(axes), rve_size=rve_size, synthetic=synth, **tables)
-    from . import _evaluate
     _evaluate.get_evaluator(evaluator).check(study)
     return study
 

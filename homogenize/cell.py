@@ -35,42 +35,31 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from tqdm import tqdm
 
 from micro._validate import ConvergenceError, InputError, check_finite, check_positive, check_range
+from micro.materials import FE, PDMS, ElasticMaterial, elastic
+from micro.rve import minimum_image
 
 from . import _assembly as asm
 from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
 from .mesh import VoxelMesh, voxelize
+from homogenize._amg import BlockVCycle, BSROp, grid_colours
+from homogenize._amg import block_cg
 
-__all__ = ["Material", "CellResult", "homogenize_rve", "homogenize_mesh", "isotropic_projection",
+__all__ = ["Material", "CellConfig", "homogenize", "CellResult", "homogenize_rve", "homogenize_mesh", "isotropic_projection",
            "anisotropy_index", "voigt_to_tensor", "tensor_to_voigt",
            "hashin_shtrikman_bounds", "eshelby_dilute", "mori_tanaka", "guth_gold",
            "bulk_shear", "young_poisson", "lame", "isotropic_stiffness_voigt", "FE_PDMS_CONTRAST"]
 
 VOIGT = asm.VOIGT
 CASES = ("e11", "e22", "e33", "g23", "g13", "g12")
-FE_PDMS_CONTRAST = 211e9 / 2e6
+FE_PDMS_CONTRAST = FE.E_Pa / PDMS.E_Pa
 
 
-@dataclass(frozen=True)
-class Material:
-    """Isotropic linear elastic material: Young's modulus [Pa] and Poisson's ratio [1]."""
-
-    E_Pa: float
-    nu: float
-
-    def __post_init__(self):
-        check_positive("E_Pa (Young's modulus)", self.E_Pa, "Pa")
-        check_range("nu (Poisson's ratio)", self.nu, -1.0, 0.5, "", lo_open=True, hi_open=True)
-
-    @property
-    def lame_Pa(self) -> tuple[float, float]:
-        return lame(self.E_Pa, self.nu)
-
-    @property
-    def bulk_shear_Pa(self) -> tuple[float, float]:
-        return bulk_shear(self.E_Pa, self.nu)
+#: The elastic material of the cell problems (one class for every elastic solver).
+Material = ElasticMaterial
 
 
 @dataclass(frozen=True, eq=False)
@@ -190,7 +179,6 @@ class _CellSolver:
                  maxiter: int, solver: str = "fast"):
         import pyamg
 
-        from ._amg import BlockVCycle, BSROp, grid_colours
 
         if solver not in SOLVERS:
             raise InputError(f"solver must be one of {SOLVERS}, got {solver!r}")
@@ -272,7 +260,7 @@ class _CellSolver:
         c = mesh.centers_m[pids]
         x = nodes * h
         d = x - c
-        d -= mesh.box_m * np.round(d / mesh.box_m)           # unwrap around the particle centre
+        d = minimum_image(d, mesh.box_m)           # unwrap around the particle centre
         d /= mesh.radii_m[pids][:, None]
         pc = np.array([col_of[p] for p in pids], dtype=np.int64) if pids.size else pids
         base = 6 * pc
@@ -287,14 +275,13 @@ class _CellSolver:
                           shape=(3 * n ** 3, 6 * parts.size))
         return Z
 
-    def solve(self, F: np.ndarray):
+    def solve(self, F: np.ndarray, callback=None):
         """Solve K W = F (pinned node) for the columns of F (n_dof, k), deflated AMG-CG.
 
         Returns (W, histories): zero-mean periodic fluctuations and the relative residual history
         of every column. The fast path solves all columns in one block; the reference path one
         after another.
         """
-        from ._amg import block_cg
         F = np.array(F, dtype=np.float64, order="C")
         F[3 * self.pin:3 * self.pin + 3] = 0.0
         project = x0 = coarse = None
@@ -311,11 +298,11 @@ class _CellSolver:
             x0 = Z @ Es(np.asarray(Z.T @ F))
         if self.kind == "fast":
             W, hist = block_cg(self.matvec, self.M, F, tol=self.tol, maxiter=self.maxiter,
-                               project=project, x0=x0, coarse=coarse)
+                               project=project, x0=x0, coarse=coarse, callback=callback)
         else:
             cols = [block_cg(self.matvec, self.M, F[:, [c]], tol=self.tol, maxiter=self.maxiter,
                              project=project, x0=None if x0 is None else x0[:, [c]],
-                             coarse=coarse)
+                             coarse=coarse, callback=callback)
                     for c in range(F.shape[1])]
             W = np.concatenate([c[0] for c in cols], axis=1)
             hist = [c[1][0] for c in cols]
@@ -371,7 +358,7 @@ def _force_density(mesh: VoxelMesh, forces_N: np.ndarray) -> tuple[np.ndarray, n
         wn = w / w.sum()
         np.add.at(b, v, wn[:, None] * forces_N[p][None, :] / h ** 3)
         d = centres[v] - mesh.centers_m[p]
-        d -= L * np.round(d / L)        # the particle's voxels, unwrapped around its centre
+        d = minimum_image(d, L)        # the particle's voxels, unwrapped around its centre
         xbar = mesh.centers_m[p] + wn @ d
         moment += np.outer(xbar - 0.5 * L, forces_N[p])
     f_eff = forces_N.sum(axis=0) / L ** 3
@@ -381,7 +368,7 @@ def _force_density(mesh: VoxelMesh, forces_N: np.ndarray) -> tuple[np.ndarray, n
 
 
 def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
-                    matrix: Material = Material(2e6, 0.45), particle: Material = Material(211e9, 0.29),
+                    matrix: Material = elastic(PDMS), particle: Material = elastic(FE),
                     rigid: bool = False, deflate: bool = True, tol: float = 1e-6,
                     maxiter: int = 2000, keep_fields: bool = False, cases=CASES,
                     progress: bool = False, solver: str = "fast") -> CellResult:
@@ -392,7 +379,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
         # rigid particles as the stiff limit: 1e6 x the matrix modulus, same Poisson's ratio as
         # the particle; deflation makes the iteration count independent of this contrast and the
         # relative error of the rigid limit is O(1e-6) (tested against increasing contrast).
-        particle = Material(matrix.E_Pa * 1e6, particle.nu)
+        particle = Material(matrix.E_Pa * 1e6, particle.nu, particle.density_kg_m3)
     lam, mu = _material_fields(mesh, matrix, particle)
     stiff = particle.E_Pa > 10.0 * matrix.E_Pa
     solver = _CellSolver(mesh, lam, mu, deflate=deflate and stiff,
@@ -417,13 +404,18 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
         loads.append(asm.body_force_load(b, mesh.h_m))
     names = list(cases) + (["magnetic"] if forces_N is not None else [])
     F = np.stack(loads, axis=1)
-    bar = None
+    bar = callback = None
     if progress:
-        from tqdm import tqdm
+        # the bar counts converged load cases; its text shows the CG iteration and the worst
+        # residual against the tolerance, so it moves with the work
         bar = tqdm(total=len(names), desc="cell problems (block CG)", unit="case", leave=False)
-    W, histories = solver.solve(F)
+
+        def callback(it, n_done, worst):
+            bar.n = min(n_done, len(names))
+            bar.set_postfix_str(f"CG it {it}, worst residual {worst:.1e} -> {tol:.0e}",
+                                refresh=True)
+    W, histories = solver.solve(F, callback=callback)
     if bar is not None:
-        bar.update(len(names))
         bar.close()
     for c, name in enumerate(names):
         h = histories[c]
@@ -524,8 +516,9 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
 
 
 def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
-                   matrix_E_Pa: float = 2e6, matrix_nu: float = 0.45,
-                   particle_E_Pa: float = 211e9, particle_nu: float = 0.29, rigid: bool = False,
+                   matrix_E_Pa: float = PDMS.E_Pa, matrix_nu: float = PDMS.nu,
+                   particle_E_Pa: float = FE.E_Pa, particle_nu: float = FE.nu,
+                   rigid: bool = False,
                    method: str = "centre", deflate: bool = True, tol: float = 1e-6,
                    maxiter: int = 2000, keep_fields: bool = False, progress: bool = False,
                    solver: str = "fast") -> CellResult:
@@ -568,3 +561,45 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
                            matrix=matrix, particle=particle, rigid=rigid, deflate=deflate,
                            tol=tol, maxiter=maxiter, keep_fields=keep_fields, progress=progress,
                            solver=solver)
+
+
+# ------------------------------------------------------------------------------------------
+# The stage: RVE (+ magnetic state) + cell configuration -> CellResult
+# ------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CellConfig:
+    """Everything the cell stage needs besides the RVE (frozen; SI units).
+
+    See :func:`homogenize_rve` for the meaning of each field. ``tol`` is the relative CG
+    residual per load case, in (0, 1e-2]: larger values return meaningless moduli.
+    """
+
+    voxels: int = 32
+    matrix: ElasticMaterial = elastic(PDMS)
+    particle: ElasticMaterial = elastic(FE)
+    rigid: bool = False
+    method: str = "centre"
+    tol: float = 1e-6
+    maxiter: int = 2000
+    solver: str = "fast"
+
+    def __post_init__(self):
+        if isinstance(self.voxels, bool) or not isinstance(self.voxels, (int, np.integer)):
+            raise InputError(f"voxels must be an integer, got {self.voxels!r}")
+        check_range("voxels", self.voxels, 4, 256, "(per cube edge)")
+        check_range("tol", self.tol, 0.0, 1e-2, "(relative residual)", lo_open=True)
+        if self.solver not in SOLVERS:
+            raise InputError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
+
+
+def homogenize(rve, state=None, config: CellConfig = CellConfig(), *, keep_fields=False,
+               progress=False) -> CellResult:
+    """The cell stage: effective stiffness and, given the magnetic ``state``
+    (:class:`micro.dipoles.MagneticState`), the magnetic load case of ``rve``."""
+    forces = None if state is None else state.total_force_N
+    virial = None if state is None else np.asarray(state.virial_stress_Pa)
+    mesh = voxelize(rve, int(config.voxels), method=config.method)
+    return homogenize_mesh(mesh, forces_N=forces, virial_stress_Pa=virial,
+                           matrix=config.matrix, particle=config.particle, rigid=config.rigid,
+                           tol=config.tol, maxiter=config.maxiter, keep_fields=keep_fields,
+                           progress=progress, solver=config.solver)

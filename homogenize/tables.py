@@ -70,7 +70,7 @@ from micro._io import atomic_path, manifest as _manifest, write_json
 from micro._validate import InputError
 
 from ._evaluate import QUANTITIES, get_evaluator
-from ._stats import summarize
+from ._stats import summarize, t_half_width
 from ._study import Study, Task, _unit_of, load_study
 
 __all__ = ["run_batch", "aggregate", "read_table", "Table", "Estimate", "BatchError",
@@ -527,6 +527,11 @@ class Estimate:
     confidence: float
     unit: str
 
+    @property
+    def rel_half_width(self) -> float:
+        """Half the interval width relative to the mean (0 for a zero mean)."""
+        return (self.ci_high - self.ci_low) / (2 * abs(self.mean)) if self.mean else 0.0
+
     def scaled(self, factor: float) -> "Estimate":
         lo, hi = sorted((self.ci_low * factor, self.ci_high * factor))
         return Estimate(self.mean * factor, lo, hi, self.se * abs(factor), self.dof,
@@ -602,8 +607,7 @@ def interpolate(table, quantity: str, *, component: str | None = None,
         dof = se2 ** 2 / sum(v * v / (n - 1) for v, n in var_terms)
     else:
         dof = float(min(n for _, n in var_terms) - 1)
-    from scipy import stats
-    half = float(stats.t.ppf(0.5 + conf / 2, dof) * math.sqrt(se2))
+    half = t_half_width(math.sqrt(se2), dof, conf)
     return Estimate(mean, mean - half, mean + half, math.sqrt(se2), float(dof), conf,
                     table.units[q])
 
@@ -657,6 +661,5 @@ def modulus_from_table(table, phi: float, *, confidence: float | None = None,
     se2 = sum(e.se ** 2 for e in ests) / m ** 2
     dof = se2 ** 2 / sum((e.se ** 2 / m ** 2) ** 2 / e.dof for e in ests) if se2 > 0 else ests[0].dof
     conf = ests[0].confidence
-    from scipy import stats
-    half = float(stats.t.ppf(0.5 + conf / 2, dof) * math.sqrt(se2))
+    half = t_half_width(math.sqrt(se2), dof, conf)
     return Estimate(mean, mean - half, mean + half, math.sqrt(se2), float(dof), conf, "Pa")

@@ -11,12 +11,33 @@ import sys
 import tempfile
 from importlib import metadata
 from pathlib import Path
+from micro._validate import InputError
 
 __all__ = ["atomic_path", "atomic_write_text", "write_json", "manifest", "git_revision",
            "open_hdf5"]
 
 _PACKAGES = ("mapsim", "numpy", "scipy", "numba", "scikit-fem", "h5py", "trimesh", "pyamg",
              "dask", "distributed", "matplotlib", "meshio")
+
+
+def _read_umask() -> int:
+    """The process umask, read without changing it where the OS tells it (Linux /proc).
+
+    Elsewhere it is read once here, at import, by setting and restoring it: never again while
+    threads (Dask workers, numba) may be creating files.
+    """
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()
 
 
 @contextlib.contextmanager
@@ -32,9 +53,9 @@ def atomic_path(path):
     try:
         yield Path(tmp)
         # mkstemp creates 0600; results are meant to be shared like any other file
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        os.chmod(tmp, 0o666 & ~_UMASK)
+        with open(tmp, "rb") as fh:          # on disk before it takes the name
+            os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -55,7 +76,6 @@ def open_hdf5(path, what: str):
     """
     import h5py
 
-    from ._validate import InputError
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{what} {path} does not exist")

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ._numba import parallel_and_serial
+
 # ---------------------------------------------------------------------------------------------
 # Placement (cell lists, overlap tests) -- owned by particles.py
 # ---------------------------------------------------------------------------------------------
@@ -233,8 +235,7 @@ def _dipole_field_direct_impl(src, mom, obs, out):
             out[2, i0 + i] = az[i]
 
 
-dipole_field_direct = nb.njit(cache=True)(_dipole_field_direct_impl)
-dipole_field_direct_par = nb.njit(cache=True, parallel=True)(_dipole_field_direct_impl)
+dipole_field_direct_par, dipole_field_direct = parallel_and_serial(_dipole_field_direct_impl)
 
 
 @nb.njit(cache=True)

@@ -88,7 +88,7 @@ def _slice_circles(rve: RVE, axis: int, level_m: float):
     images needed to draw circles that cross the picture edges.
     """
     d = rve.centers_m[:, axis] - level_m
-    d -= rve.box_m * np.round(d / rve.box_m)
+    d = rve.minimum_image(d)
     hit = np.abs(d) < rve.radii_m
     rc = np.sqrt(rve.radii_m[hit] ** 2 - d[hit] ** 2)
     other = [k for k in range(3) if k != axis]

@@ -43,10 +43,11 @@ from ._ewald import PeriodicSum
 from ._validate import ConvergenceError, InputError, check_choice, check_finite, check_positive, check_range
 from .magnetization import LAW_NAMES, MagnetizationLaw, get_law
 from .materials import SEED
+from .rve import minimum_image
 
 __all__ = ["MagneticState", "ConvergenceError", "solve", "applied_gradient", "DipoleSum",
            "langevin_coupling", "LANGEVIN_LAMBDA_MAX",
-           "dipole_field_direct", "dipole_pair_interactions", "METHODS", "SUMMATIONS",
+           "dipole_field_direct", "dipole_pair_interactions", "FieldConfig", "magnetize", "METHODS", "SUMMATIONS",
            "PME_ABOVE_N"]
 
 METHODS = ("anderson", "fixed-point", "newton-krylov")
@@ -280,6 +281,12 @@ class MagneticState:
         return float(self.residual_history[-1]) if self.residual_history else 0.0
 
     @property
+    def total_force_N(self) -> np.ndarray:
+        """(N, 3) total magnetic force on each particle, external gradient + dipole-dipole [N]:
+        what the cell problem spreads over the particles."""
+        return np.asarray(self.force_ext_N) + np.asarray(self.force_dd_N)
+
+    @property
     def dd_force_sum_rel(self) -> float:
         """|sum of dipole-dipole forces| / sum |F_dd|: zero by Newton's third law."""
         tot = float(np.abs(self.force_dd_N).sum())
@@ -328,7 +335,7 @@ class _NearFieldPreconditioner:
             return
         i, j = pr[:, 0], pr[:, 1]
         d = centers_m[i] - centers_m[j]
-        d -= box_m * np.rint(d / box_m)
+        d = minimum_image(d, box_m)
         r = np.sqrt(np.einsum("ij,ij->i", d, d))
         keep = (r < self.factor * (radii_m[i] + radii_m[j])) & (r > 0)
         if not keep.any():
@@ -566,6 +573,8 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
     if n == 0:
         raise InputError("rve has no particles")
     law_obj = law if isinstance(law, MagnetizationLaw) else get_law(law, **law_params)
+    if getattr(law_obj, "bind", None) is not None:
+        law_obj = law_obj.bind(rve)        # per-particle core radii (core-shell laws)
     check_range("tol", tol, 1e-15, 1e-1, "(relative)")
     check_choice("method", method, METHODS)
     check_choice("summation", summation, SUMMATIONS)
@@ -657,3 +666,60 @@ def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None
         d_eff=d_eff, iterations=int(its), residual_history=tuple(hist),
         field_evaluations=dsum.evaluations, energy_dd_J=energy, B_applied_T=B,
         gradient_T_per_m=G, summation=dsum.parameters, law=law_obj.name)
+
+
+# ------------------------------------------------------------------------------------------
+# The stage: RVE + field configuration -> MagneticState
+# ------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FieldConfig:
+    """Everything the magnetic stage needs besides the RVE (frozen; SI units).
+
+    Parameters
+    ----------
+    B_T : float or tuple of 3 floats -- applied flux density mu0 H [T] (a scalar is along z)
+    gradB_T_per_m : float -- d|B|/dz of the applied field [T/m]
+    law : str -- magnetization law name (:data:`micro.magnetization.LAW_NAMES`)
+    law_params : tuple of (name, value) pairs -- the law's parameters (e.g. ``(("T_K", 300),)``)
+    demag_factor : float or None -- specimen demagnetizing factor along the field (None: metallic
+        boundary, the internal field equals the applied field)
+    tol, accuracy, method, summation : solver settings of :func:`solve`
+    """
+
+    B_T: float | tuple = 0.1
+    gradB_T_per_m: float = SEED.gradB_T_per_m
+    law: str = "frohlich-kennelly"
+    law_params: tuple = ()
+    demag_factor: float | None = None
+    tol: float = 1e-8
+    accuracy: float = 1e-6
+    method: str = "anderson"
+    summation: str = "auto"
+    c_powder: float = SEED.c
+    rho_kg_m3: float = SEED.particle_density_kg_m3
+    sigma_s_Am2_kg: float = SEED.sigma_s_Am2_kg
+
+    def __post_init__(self):
+        check_choice("method", self.method, METHODS)
+        check_choice("summation", self.summation, SUMMATIONS)
+        check_range("tol", self.tol, 0.0, 1e-2, "(relative residual)", lo_open=True)
+        check_range("accuracy", self.accuracy, 0.0, 1e-2, "(relative accuracy)", lo_open=True)
+        check_finite("B_T", self.B_T, "T")
+        check_finite("gradB_T_per_m", self.gradB_T_per_m, "T/m")
+        if self.demag_factor is not None:
+            check_range("demag_factor", self.demag_factor, 0.0, 1.0, "")
+
+    @property
+    def B_vector_T(self) -> np.ndarray:
+        """The applied flux density as a 3-vector [T]."""
+        B = np.asarray(self.B_T, dtype=float)
+        return B if B.ndim else np.array([0.0, 0.0, float(B)])
+
+
+def magnetize(rve, field: FieldConfig) -> MagneticState:
+    """The magnetic stage: self-consistent moments and forces of ``rve`` in ``field``."""
+    return solve(rve, field.B_vector_T, field.gradB_T_per_m, field.law,
+                 demag_factor=field.demag_factor, tol=field.tol, accuracy=field.accuracy,
+                 method=field.method, summation=field.summation, c_powder=field.c_powder,
+                 rho_kg_m3=field.rho_kg_m3, sigma_s_Am2_kg=field.sigma_s_Am2_kg,
+                 **dict(field.law_params))

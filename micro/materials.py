@@ -18,11 +18,47 @@ from dataclasses import dataclass
 
 from scipy.constants import mu_0 as MU0
 
-__all__ = ["Constituent", "FE", "FE3O4", "PDMS", "SeedParameters", "SEED", "GRAVITY_M_S2",
-           "mixture_density_kg_m3"]
+from ._validate import check_positive, check_range
+
+__all__ = ["ElasticMaterial", "Constituent", "FE", "FE3O4", "PDMS", "SeedParameters", "SEED", "GRAVITY_M_S2",
+           "mixture_density_kg_m3", "elastic"]
 
 #: Standard acceleration of gravity [m/s^2] (the seed paper's self-weight uses 9.81).
 GRAVITY_M_S2 = 9.81
+
+
+@dataclass(frozen=True)
+class ElasticMaterial:
+    """Isotropic linear elastic solid: the one material type of every elastic solver.
+
+    Parameters
+    ----------
+    E_Pa : float -- Young's modulus [Pa], > 0 (default: the seed's PDMS, 2 MPa)
+    nu : float -- Poisson's ratio [-], in (-1, 0.5) (default: the seed's PDMS, 0.45)
+    density_kg_m3 : float -- mass density [kg/m^3], >= 0 (self-weight only; default: the
+        seed's PDMS, 1210)
+    """
+
+    E_Pa: float = 2.0e6
+    nu: float = 0.45
+    density_kg_m3: float = 1210.0
+
+    def __post_init__(self):
+        check_positive("E_Pa (Young's modulus)", self.E_Pa, "Pa")
+        check_range("nu (Poisson's ratio)", self.nu, -1.0, 0.5, "", lo_open=True, hi_open=True)
+        check_positive("density_kg_m3", self.density_kg_m3, "kg/m^3", allow_zero=True)
+
+    @property
+    def lame_Pa(self) -> tuple[float, float]:
+        """Lame parameters (lambda, mu) [Pa]."""
+        E, nu = self.E_Pa, self.nu
+        return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
+
+    @property
+    def bulk_shear_Pa(self) -> tuple[float, float]:
+        """Bulk and shear modulus (K, G) [Pa]."""
+        E, nu = self.E_Pa, self.nu
+        return E / (3.0 * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
 
 
 @dataclass(frozen=True)
@@ -126,3 +162,8 @@ def mixture_density_kg_m3(phi: float, matrix: Constituent = PDMS,
                           particle: Constituent = FE) -> float:
     """Density of the composite ``(1 - phi) rho_m + phi rho_p`` [kg/m^3]."""
     return (1.0 - phi) * matrix.density_kg_m3 + phi * particle.density_kg_m3
+
+
+def elastic(c: Constituent) -> ElasticMaterial:
+    """The elastic material of a constituent (its E, nu and density)."""
+    return ElasticMaterial(c.E_Pa, c.nu, c.density_kg_m3)

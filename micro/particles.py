@@ -31,9 +31,9 @@ from scipy import special
 
 from . import _kernels as K
 from ._validate import InputError, check_positive, check_range, check_choice
-from .rve import RVE
+from .rve import RVE, minimum_image
 
-__all__ = ["LogNormal", "Histogram", "Monodisperse", "CoreShell", "default_distribution",
+__all__ = ["ParticleConfig", "place", "LogNormal", "Histogram", "Monodisperse", "CoreShell", "default_distribution",
            "generate_rve", "describe", "cluster_packing_density", "pair_correlation",
            "min_surface_gap_m", "pair_distances", "cluster_members", "chain_axis",
            "chain_kappa", "chain_order_parameter", "ARRANGEMENTS", "PLACEMENTS",
@@ -935,6 +935,42 @@ def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangeme
 
 
 
+@dataclass(frozen=True)
+class ParticleConfig:
+    """Everything the placement stage needs (frozen; SI units). See :func:`generate_rve`.
+
+    ``distribution`` None is the seed's powder (:func:`default_distribution`); ``composition``
+    None is homogeneous particles with the seed's specific moment.
+    """
+
+    phi: float
+    n: int
+    seed: int = 0
+    distribution: object = None
+    composition: object = None
+    arrangement: str = "dispersed"
+    gap_m: float = 0.0
+    cluster_size: int = 20
+    cluster_density: float = 0.5
+    chain_length: float = 5.0
+    chain_direction: tuple = (0.0, 0.0, 1.0)
+    chain_spread_deg: float = 0.0
+    agglomerated_fraction: float = 1.0
+    max_attempts: int = 200_000
+    placement: str = "auto"
+
+    def generator_kwargs(self) -> dict:
+        """The keywords of :func:`generate_rve` beyond ``phi, n, seed``."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if f.name not in ("phi", "n", "seed")}
+
+
+def place(config: ParticleConfig, progress: bool = False) -> RVE:
+    """The placement stage: a periodic RVE drawn and placed as ``config`` says."""
+    return generate_rve(config.phi, config.n, config.seed, progress=progress,
+                        **config.generator_kwargs())
+
+
 def _check_vector(name, value):
     try:
         v = np.asarray(value, dtype=float)
@@ -952,7 +988,7 @@ def _check_vector(name, value):
 def _unwrap(centers, box):
     """Unwrap a compact group of centres (extent < box/2) relative to its first member."""
     d = centers - centers[0]
-    return centers[0] + d - box * np.round(d / box)
+    return centers[0] + minimum_image(d, box)
 
 
 def pair_distances(rve: RVE, r_max_m: float):

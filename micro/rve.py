@@ -20,8 +20,9 @@ import numpy as np
 
 from ._io import atomic_path
 from ._validate import InputError
+from micro._io import open_hdf5
 
-__all__ = ["RVE", "FORMAT_VERSION"]
+__all__ = ["RVE", "minimum_image", "FORMAT_VERSION"]
 
 FORMAT_VERSION = 1
 
@@ -48,6 +49,14 @@ def _frozen_array(name, value, dtype, shape):
         raise InputError(f"RVE.{name} must be finite")
     arr.setflags(write=False)
     return arr
+
+
+def minimum_image(d_m, box_m: float) -> np.ndarray:
+    """Separations (..., 3) or coordinates [m] mapped to their shortest image in a periodic cube
+    of edge ``box_m`` [m]: ``d - L round(d / L)``, each component in [-L/2, L/2]. The one
+    implementation of the project's periodic geometry (the numba kernels repeat it inline)."""
+    d = np.asarray(d_m, dtype=float)
+    return d - box_m * np.round(d / box_m)
 
 
 @dataclass(frozen=True, eq=False)
@@ -172,8 +181,7 @@ class RVE:
     # ------------------------------------------------------------------ periodic geometry
     def minimum_image(self, d_m: np.ndarray) -> np.ndarray:
         """Map separation vectors (..., 3) [m] to their shortest periodic image."""
-        d = np.asarray(d_m, dtype=float)
-        return d - self.box_m * np.round(d / self.box_m)
+        return minimum_image(d_m, self.box_m)
 
     def translated(self, shift_m) -> "RVE":
         """A copy with every centre moved by ``shift_m`` (3,) [m] and wrapped into the box."""
@@ -226,7 +234,6 @@ class RVE:
     @classmethod
     def load(cls, path) -> "RVE":
         """Read an RVE written by :meth:`save`; a missing or malformed file raises InputError."""
-        from ._io import open_hdf5
 
         path = Path(path)
         with open_hdf5(path, "RVE file") as f:

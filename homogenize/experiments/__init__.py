@@ -1,7 +1,7 @@
 """Measured data, the seed model, causes and their extensions, and ``diagnose``.
 
 * :func:`load_experiment` -- read and validate an experiment (TOML + CSV, see
-  ``shared/spec/experiments.md``); :func:`write_experiment` writes one.
+  ``examples/data/EXPERIMENT_FORMAT.md`` in the project); :func:`write_experiment` writes one.
 * :func:`seed_predict` -- the seed model of each kind.
 * :data:`CAUSES`, :class:`ModelSpec`, :func:`predict` -- the causes' vocabulary and the seed
   model composed with any set of extensions.

@@ -16,14 +16,13 @@ Adapters (the physics lives elsewhere in the project; nothing is re-implemented)
 * filler stiffening -- the voxel-FEM table of ``homogenize.cell`` (module ``tables``),
 * core-shell moments -- ``micro.particles``.
 
-An adapter whose module has not landed raises :class:`Unavailable`; the diagnosis then leaves
-that cause out and says so, rather than faking it.
+An extension whose precomputed table is missing raises :class:`Unavailable`; the diagnosis
+then leaves that cause out and says so, rather than faking it.
 """
 from __future__ import annotations
 
 import csv
 import functools
-import importlib
 import math
 from pathlib import Path
 
@@ -31,25 +30,20 @@ import numpy as np
 from scipy import integrate, special
 from scipy.constants import mu_0
 
+from micro import dipoles, magnetization, particles
+
+from homogenize import cell as cellmod
+from homogenize.experiments.tables import Unavailable, filler_stiffness_ratio
+from homogenize.macro import closed_form
+from micro._io import atomic_write_text
+from micro._validate import InputError
+
 __all__ = ["local_field_factor", "dipolar_local_field_point", "Unavailable", "cylinder_demag_factor", "shape_stress_coefficient", "uniaxial_stress_Pa", "HYPERELASTIC_FORMS",
            "eb_compliance_m4_N", "elastica_ratio", "LAWS", "particle_magnetization_A_per_m",
            "stiffening_ratio", "core_shell_moment_ratio", "composite_density_kg_m3", "mu_0",
            "elastica_table_path"]
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
-
-
-class Unavailable(RuntimeError):
-    """The project module an extension needs is not (yet) available."""
-
-
-def _module(name: str):
-    try:
-        return importlib.import_module(name)
-    except ModuleNotFoundError as exc:
-        if exc.name == name:
-            raise Unavailable(f"{name} is not available") from None
-        raise
 
 
 # ------------------------------------------------------------------------------------------
@@ -167,7 +161,7 @@ def eb_compliance_m4_N(length_m, width_m, thickness_m, E_Pa):
     Calls ``homogenize.macro.closed_form.eb_tip_deflection_m`` with f = 1 N/m^3 per distinct
     geometry (the deflection is linear in f).
     """
-    cf = _module("homogenize.macro.closed_form")
+    cf = closed_form
     L, w, t = (np.atleast_1d(np.asarray(x, dtype=float)) for x in (length_m, width_m, thickness_m))
     E = np.broadcast_to(np.asarray(E_Pa, dtype=float), L.shape)
     out = np.empty(L.shape)
@@ -199,11 +193,10 @@ def _elastica_table():
         rows = [r for r in csv.reader(path.read_text().splitlines()) if r and not r[0].startswith("#")]
         arr = np.array([[float(x) for x in r] for r in rows[1:]])
         return np.log(arr[:, 0]), arr[:, 1] / (arr[:, 0] / 8.0)
-    cf = _module("homogenize.macro.closed_form")
+    cf = closed_form
     alpha = np.geomspace(1e-3, _ELASTICA_ALPHA_MAX, 201)
     # unit beam: L = w = 1, t = 1, E = 12  ->  EI = E w t^3 / 12 = 1, alpha = f w t L^3 / EI = f
     v, _ = cf.elastica_tip_deflection(alpha, 1.0, 1.0, 1.0, 12.0)
-    from micro._io import atomic_write_text
     lines = ["# elastica tip deflection of a clamped-free beam under a uniform dead load",
              "# made by homogenize.experiments._physics._elastica_table() from",
              "# homogenize.macro.closed_form.elastica_tip_deflection (solve_bvp, tol 1e-9) on a",
@@ -295,7 +288,7 @@ def _project_law(law, H_abs, Ms, chi0):
     * frohlich-kennelly: ``chi0`` is the law's own parameter;
     * langevin: at T = 300 K, the moment ``m = 3 k_B T chi0 / (mu0 Ms)`` and volume ``m / Ms``.
     """
-    mag = _module("micro.magnetization")
+    mag = magnetization
     if law == "linear":
         c = min(chi0, 3.0 * (1.0 - 1e-12))
         obj = mag.get_law("linear", chi=3.0 * c / (3.0 - c))
@@ -336,8 +329,8 @@ def dipolar_local_field_point(phi: float, seed: int) -> float:
     Froehlich-Kennelly law at chi0 = 3 in the linear regime (H = 100 A/m):
     ``c = 1 / chi_c - H / M_eff``. The Lorentz cavity gives c = 1/3.
     """
-    parts = _module("micro.particles")
-    dip = _module("micro.dipoles")
+    parts = particles
+    dip = dipoles
     rve = parts.generate_rve(float(phi), DIPOLAR_TABLE_N, int(seed),
                              distribution=parts.Monodisperse(25e-9))
     st = dip.solve(rve, mu_0 * _DIPOLAR_H, 0.0, "frohlich-kennelly", chi0=_DIPOLAR_CHI0)
@@ -355,7 +348,6 @@ def _dipolar_table():
         return phis, np.array([arr[arr[:, 0] == p, 2].mean() for p in phis])
     vals = [(p, s, dipolar_local_field_point(p, s)) for p in DIPOLAR_TABLE_PHI
             for s in DIPOLAR_TABLE_SEEDS]
-    from micro._io import atomic_write_text
     lines = ["# local-field factor c of random dispersed RVEs: M = phi chi0 (H + c M)",
              "# made by homogenize.experiments._physics._dipolar_table() with",
              "# dipolar_local_field_point(phi, seed): micro.particles.generate_rve(phi, 200, seed,",
@@ -396,14 +388,13 @@ def stiffening_ratio(phi, nu_matrix: float = 0.45, E_matrix_Pa: float = 2e6):
     contrast 1e5, i.e. rigid spheres, matrix nu = 0.45). ``nu_matrix`` and ``E_matrix_Pa`` are
     accepted for the adapter's signature; the ratio does not depend on E_matrix at this
     contrast, and the table is for nu = 0.45 (see ``filler_stiffness_ratio``)."""
-    from .tables import filler_stiffness_ratio
     return filler_stiffness_ratio(phi)
 
 
 def mori_tanaka_stiffening_ratio(phi, nu_matrix: float, E_matrix_Pa: float = 2e6):
     """The Mori-Tanaka estimate of ``homogenize.cell`` for the same particles (the
     Hashin-Shtrikman bound on the matrix side): a cross-check of the FEM table only."""
-    cell = _module("homogenize.cell")
+    cell = cellmod
     Km, Gm = cell.bulk_shear(E_matrix_Pa, nu_matrix)
     Kp, Gp = cell.bulk_shear(PARTICLE_E_PA, PARTICLE_NU)
     K, G = cell.mori_tanaka(np.asarray(phi, dtype=float), Km, Gm, Kp, Gp)
@@ -424,12 +415,11 @@ def core_shell_moment_ratio(radius_m, shell_m, nominal_radius_m, core_density_kg
     reproduces it there, and ``CoreShell.apply`` gives every radius its moment. Smaller particles
     have a larger Fe3O4 fraction, hence less moment per volume. Ratio 1 at the nominal radius.
     """
-    P = _module("micro.particles")
+    P = particles
     r = np.atleast_1d(np.asarray(radius_m, dtype=float))
     cs = P.CoreShell(shell_m=float(shell_m), core_density_kg_m3=float(core_density_kg_m3),
                      calibrate_sigma_Am2_kg=float(powder_sigma_Am2_kg))
     nominal = P.Monodisperse(float(nominal_radius_m))
-    from micro._validate import InputError
     try:
         core_sigma = cs.core_sigma(nominal)
     except InputError:

@@ -54,6 +54,7 @@ import numpy as np
 
 from . import _physics as P
 from .io import Experiment
+from homogenize.experiments.tables import microstructure_stress_coefficient
 
 __all__ = ["CAUSES", "DESCRIPTIONS", "VARIANTS", "ModelSpec", "Param", "parameters",
            "predict", "applicable", "LORENTZ_FACTOR"]
@@ -282,7 +283,6 @@ def predicted_stress_coefficients(exp: Experiment, M) -> tuple[np.ndarray, np.nd
     """(k_shape, k_rve) per row: the specimen's Maxwell (shape) stress and the particles'
     interaction (RVE virial) stress, both over ``mu0 M^2`` [-] (module doc)."""
     c = exp.columns
-    from .tables import microstructure_stress_coefficient
     m = np.clip(np.abs(M) / (c["phi"] * exp.particles.Ms_A_per_m), 0.0, 1.0)
     return (np.asarray(P.shape_stress_coefficient(c["aspect_ratio"]), dtype=float),
             np.asarray(microstructure_stress_coefficient(c["phi"], m), dtype=float))

@@ -41,6 +41,9 @@ from scipy import optimize, stats
 
 from .causes import CAUSES, VARIANTS, ModelSpec, Param, applicable, parameters, predict
 from .io import Experiment
+from homogenize.experiments.causes import composite_magnetization_A_per_m, predicted_stress_coefficients
+from dataclasses import replace as _replace
+from dataclasses import replace
 
 __all__ = ["Diagnosis", "FitResult", "diagnose", "make_folds", "fit", "cross_validate",
            "covariates", "MIN_GAIN", "ALPHA"]
@@ -123,7 +126,6 @@ def _predicted_out(exp: Experiment, c: Candidate) -> dict:
     parameters: for magnetostriction, the row-mean shape and RVE stress coefficients."""
     if c.spec.kind != "magnetostriction" or not c.spec.has("dipolar_interaction"):
         return {}
-    from .causes import composite_magnetization_A_per_m, predicted_stress_coefficients
     M = composite_magnetization_A_per_m(c.spec, exp, c.fit.params)
     k_shape, k_rve = predicted_stress_coefficients(exp, M)
     return {"kappa_shape_predicted": float(np.mean(k_shape)),
@@ -424,7 +426,6 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
                 var_b = None
                 if b.cause in VARIANTS:
                     var_b = spec_b.law if b.cause == "field_dependent_magnetization" else spec_b.hyper
-                from dataclasses import replace as _replace
                 spec = a.spec.plus(b.cause, var_b)
                 if b.spec.law and not a.spec.law:
                     spec = _replace(spec, law=b.spec.law)
@@ -470,7 +471,6 @@ def _specs_with(spec: ModelSpec, cause: str):
     """``spec`` plus ``cause``, in every physical form: the new cause's own forms, and -- since
     an added cause changes which law fits best -- every form of a law already in the model.
     Yields (spec, label of the form or None)."""
-    from dataclasses import replace
     forms = VARIANTS.get(cause)
     if forms:
         for v in forms:

@@ -1,4 +1,4 @@
-"""Measured experiments: one TOML file plus one CSV file (see ``shared/spec/experiments.md``).
+"""Measured experiments: one TOML file plus one CSV file (see ``examples/data/EXPERIMENT_FORMAT.md`` in the project).
 
 :func:`load_experiment` reads and validates both files completely before returning; any
 problem raises :class:`micro._validate.InputError` with ONE message naming the file, the row
@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from micro._validate import InputError
+from micro._io import atomic_write_text
 
 __all__ = ["KINDS", "REQUIRED", "OPTIONAL", "MEASURED", "Matrix", "Particles", "Setup",
            "Experiment", "load_experiment", "write_experiment"]
@@ -335,7 +336,6 @@ def write_experiment(toml_path, exp_or_kind, columns: dict, *, title: str = "",
     ``columns`` maps column names to sequences of equal length (``specimen`` and ``branch``
     as strings). Floats are written with 17 significant digits so a reload is exact.
     """
-    from micro._io import atomic_write_text
 
     kind = exp_or_kind
     toml_path = Path(toml_path)

@@ -19,6 +19,7 @@ from micro._io import atomic_path, atomic_write_text, manifest, write_json
 from .causes import CAUSES, applicable
 from .diagnose import diagnose
 from .synthetic import generate, study_cases
+from pathlib import Path
 
 __all__ = ["run_study", "summarize"]
 
@@ -102,7 +103,6 @@ def summarize(records: list[dict]) -> dict:
 
 def write_study(records, summary, out_dir, config) -> None:
     """study.json, confusion.csv, confusion.png and manifest.json in ``out_dir``."""
-    from pathlib import Path
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "study.json", {"summary": summary, "cases": records})

@@ -47,6 +47,7 @@ from scipy import integrate, optimize, special
 from scipy.constants import mu_0
 
 from .io import Experiment, Matrix, Particles, Setup, _ro
+from homogenize.experiments.io import write_experiment
 
 __all__ = ["SyntheticCase", "generate", "CASES", "study_cases", "write_case"]
 
@@ -458,7 +459,6 @@ def study_cases(n: int, seed: int = 0):
 
 def write_case(case: SyntheticCase, toml_path) -> Path:
     """Write a synthetic case as TOML + CSV in the spec's format."""
-    from .io import write_experiment
     e = case.experiment
     cols = {"specimen": list(e.specimen)}
     for k, v in e.columns.items():

@@ -59,6 +59,14 @@ from pathlib import Path
 
 import numpy as np
 from scipy.constants import mu_0
+import inspect
+from homogenize.cell import homogenize_rve
+from micro.particles import Monodisperse, generate_rve
+from types import SimpleNamespace
+from homogenize.cell import bulk_shear, eshelby_dilute, homogenize_rve, young_poisson
+from micro.dipoles import solve
+from micro._validate import InputError
+from micro._io import atomic_write_text, manifest, write_json
 
 __all__ = ["STIFFNESS_PHIS", "STIFFNESS_SEEDS", "STIFFNESS_VOXELS", "RADIUS_VOXELS", "GAP_VOXELS",
            "stiffness_point", "build_stiffness_table", "stiffness_resolution_study", "stiffness_table",
@@ -67,6 +75,10 @@ __all__ = ["STIFFNESS_PHIS", "STIFFNESS_SEEDS", "STIFFNESS_VOXELS", "RADIUS_VOXE
            "build_stress_table", "stress_table", "stress_table_path",
            "microstructure_stress_coefficient", "LORENTZ_STRESS", "cell_stress_point",
            "build_cell_stress_table", "cell_stress_factor", "cell_factor_nodes", "cell_stress_path"]
+
+
+class Unavailable(RuntimeError):
+    """A precomputed table an extension needs is missing (run ``mapsim diagnose-tables``)."""
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 _RADIUS_M = 25e-9                 # monodisperse; only ratios of lengths enter either table
@@ -84,9 +96,7 @@ PARTICLE_E_PA, PARTICLE_NU = 211e9, 0.29
 
 
 def _cell_tol() -> float:
-    import inspect
 
-    from homogenize.cell import homogenize_rve
     return float(inspect.signature(homogenize_rve).parameters["tol"].default)
 
 
@@ -103,9 +113,7 @@ def _n_particles(phi: float, voxels: int) -> int:
 
 def stiffness_point(phi: float, seed: int, voxels: int = STIFFNESS_VOXELS) -> dict:
     """E_eff / E_matrix and nu_eff of one random RVE by the voxel FEM (see module doc)."""
-    from micro.particles import Monodisperse, generate_rve
 
-    from homogenize.cell import homogenize_rve
     n = _n_particles(phi, voxels)
     box = (n * 4.0 / 3.0 * math.pi * _RADIUS_M ** 3 / phi) ** (1.0 / 3.0)
     # the gap is GAP_VOXELS voxels of the reference resolution STIFFNESS_VOXELS: other
@@ -154,9 +162,7 @@ def stiffness_resolution_study(phi: float = 0.02, voxels=(12, 16, 24, 32, 40), p
     """Discretization error of the table: one sphere (the dilute limit, where Eshelby is exact
     to O(phi)) at increasing resolution; the stiffening per unit ``phi_voxel`` against the
     voxel size, and its fitted convergence rate. Written to ``path`` (JSON) if given."""
-    from types import SimpleNamespace
 
-    from homogenize.cell import bulk_shear, eshelby_dilute, homogenize_rve, young_poisson
     a = (3.0 * phi / (4.0 * math.pi)) ** (1.0 / 3.0)
     rve = SimpleNamespace(box_m=1e-6, centers_m=np.full((1, 3), 0.5e-6),
                           radii_m=np.array([a * 1e-6]))
@@ -253,8 +259,6 @@ def stress_table_path() -> Path:
 
 def stress_point(phi: float, seed: int, h: float | None) -> dict:
     """Virial stress coefficients of one random RVE (see module doc); ``h = H / Ms`` or None."""
-    from micro.dipoles import solve
-    from micro.particles import Monodisperse, generate_rve
     rve = generate_rve(float(phi), STRESS_N, int(seed), distribution=Monodisperse(_RADIUS_M))
     if h is None:
         st = solve(rve, 1.0, 0.0, "saturated")
@@ -358,10 +362,7 @@ def cell_stress_point(phi: float, seed: int, voxels: int = CELL_VOXELS) -> dict:
     ``homogenize.cell.homogenize_rve`` with the dipole forces and the dipole virial: the
     virial alone (point forces in a homogeneous matrix) and the cell's ``stress_mag`` (the
     stiff particles carry part of it), in units of mu0 M^2. Saturated particles."""
-    from micro.dipoles import solve
-    from micro.particles import Monodisperse, generate_rve
 
-    from homogenize.cell import homogenize_rve
     box = (CELL_N * 4.0 / 3.0 * math.pi * _RADIUS_M ** 3 / phi) ** (1.0 / 3.0)
     rve = generate_rve(float(phi), CELL_N, int(seed), distribution=Monodisperse(_RADIUS_M),
                        gap_m=GAP_VOXELS * box / voxels)
@@ -382,7 +383,6 @@ def cell_stress_point(phi: float, seed: int, voxels: int = CELL_VOXELS) -> dict:
 def build_cell_stress_table(phis=CELL_PHIS, voxels=CELL_VOXELS, path=None, progress=True,
                             argv=None) -> Path:
     """:func:`cell_stress_point` for ``CELL_PER_PHI`` placeable seeds per phi; CSV + provenance."""
-    from micro._validate import InputError
     path = Path(path) if path is not None else cell_stress_path()
     rows, skipped = [], []
     t0 = time.perf_counter()
@@ -448,7 +448,6 @@ def cell_stress_factor(phi):
 # CSV + provenance
 
 def _write_table(path: Path, cols, rows, what, config, seconds, argv):
-    from micro._io import atomic_write_text, manifest, write_json
     lines = [f"# {what}; made by {config['function']} (provenance: {path.stem}.provenance.json)",
              ",".join(cols)]
     for r in rows:
@@ -462,7 +461,6 @@ def _write_table(path: Path, cols, rows, what, config, seconds, argv):
 
 def _read_table(path: Path) -> list[dict]:
     if not path.exists():
-        from ._physics import Unavailable
         raise Unavailable(f"{path.name} is missing: run `mapsim diagnose-tables`")
     lines = [l for l in path.read_text().splitlines() if l and not l.startswith("#")]
     rows = []

@@ -12,12 +12,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from micro._validate import check_choice
-from micro.materials import PDMS
+from micro._validate import InputError
+from micro.materials import FE, PDMS, ElasticMaterial, mixture_density_kg_m3
 
+from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.closed_form import eb_tip_deflection_m, elastica_tip_deflection
-from homogenize.tables import Estimate, Table, body_force_from_table, modulus_from_table, read_table
+from homogenize._stats import widen_in_quadrature
+from homogenize.tables import (Estimate, Table, body_force_from_table, interpolate,
+                               modulus_from_table, read_table)
 
-__all__ = ["TipDeflection", "tip_deflection_from_table"]
+__all__ = ["TipDeflection", "tip_deflection_from_table", "EffectiveMaterial",
+           "effective_material_from_table", "beam_with_interval"]
 
 
 @dataclass(frozen=True)
@@ -74,7 +79,89 @@ def tip_deflection_from_table(table, phi: float, B_T: float, gradB_T_per_m: floa
         d = eb
     mid, lo, hi = float(d[0]), float(d[1]), float(d[2])
     if E_est is not None and mid > 0:
-        rel_E = (E_est.ci_high - E_est.ci_low) / (2 * E_est.mean)
-        lo = mid * (1 - math.hypot(1 - lo / mid, rel_E))
-        hi = mid * (1 + math.hypot(hi / mid - 1, rel_E))
+        lo, hi = widen_in_quadrature(mid, lo, hi, E_est.rel_half_width)
     return TipDeflection(mid, lo, hi, float(eb[0]), model, f, E, E_est, f.confidence)
+
+
+@dataclass(frozen=True)
+class EffectiveMaterial:
+    """The composite as a macro solver sees it: body force and modulus with their intervals.
+
+    force : Estimate -- transverse magnetic body force [N/m^3] (mean and confidence interval)
+    E_Pa : float -- Young's modulus used [Pa]; E_estimate : Estimate or None -- the table's
+        E_eff with its interval (None when E was given or taken as the PDMS value)
+    nu : float -- Poisson's ratio [-]; density_kg_m3 : float -- mass density [kg/m^3]
+    E_source : str -- "given", "table" or "PDMS"
+    """
+
+    force: Estimate
+    E_Pa: float
+    nu: float
+    density_kg_m3: float
+    E_estimate: Estimate | None = None
+    E_source: str = "given"
+
+    @property
+    def elastic(self) -> ElasticMaterial:
+        return ElasticMaterial(self.E_Pa, self.nu, self.density_kg_m3)
+
+
+def effective_material_from_table(table, phi: float, B_T: float, gradB_T_per_m: float, *,
+                                  other_axes: dict | None = None, E_Pa: float | None = None,
+                                  E_from_table: bool = True, nu: float | None = None,
+                                  density_kg_m3: float | None = None) -> EffectiveMaterial:
+    """Interpolate the effective material of a batch table at (phi, B, gradB).
+
+    The body force comes with its interval. ``E_Pa`` given wins; else the table's ``E_eff`` if
+    it holds FEM results and ``E_from_table``; else the PDMS value. ``nu``: given, else the
+    table's ``nu_eff``, else PDMS. The density defaults to the mixture of PDMS and Fe at phi.
+    """
+    if not isinstance(table, Table):
+        table = read_table(table)
+    others = dict(other_axes or {})
+    force = body_force_from_table(table, phi, B_T, gradB_T_per_m, **others)
+    mech = {k: v for k, v in others.items() if k not in ("B_T", "gradB_T_per_m")}
+    E_est = modulus_from_table(table, phi, **mech) if (E_Pa is None and E_from_table) else None
+    if E_Pa is not None:
+        E, src = float(E_Pa), "given"
+    elif E_est is not None:
+        E, src = E_est.mean, "table"
+    else:
+        E, src = PDMS.E_Pa, "PDMS"
+    if nu is None:
+        if "nu_eff" in table.values:
+            coords = {"phi": phi, **mech}
+            for a, v in (("B_T", B_T), ("gradB_T_per_m", gradB_T_per_m)):
+                if a in table.axes and len(table.axes[a]) > 1:
+                    coords[a] = v
+            nu = interpolate(table, "nu_eff", **coords).mean
+        else:
+            nu = PDMS.nu
+    rho = density_kg_m3 if density_kg_m3 is not None else mixture_density_kg_m3(phi, PDMS, FE)
+    return EffectiveMaterial(force, E, float(nu), float(rho), E_est, src)
+
+
+def beam_with_interval(strip: Strip, material: EffectiveMaterial, models, *, order: int = 2,
+                       nz: int = 3, gravity_m_s2: float = 0.0, n_steps: int = 4) -> list[dict]:
+    """Tip deflection [m] of each model at the mean force and at both ends of its interval.
+
+    The deflection is monotone in the force, so the force interval maps to the deflection
+    interval; the modulus interval (deflection ~ 1/E) is added in quadrature.
+    """
+    f = material.force
+    if f.ci_low < 0:
+        raise InputError(f"the force interval reaches below zero ({f.ci_low:g} N/m^3): too few "
+                         f"realizations for a deflection interval")
+    mat = material.elastic
+    rows = []
+    for model in models:
+        tips = {}
+        for k, q in (("mean", f.mean), ("ci_low", f.ci_low), ("ci_high", f.ci_high)):
+            r = solve_cantilever(strip, mat, q, model=model, order=order, nz=nz,
+                                 gravity_m_s2=gravity_m_s2, n_steps=n_steps)
+            tips[k] = r.tip_m
+        lo, hi = tips["ci_low"], tips["ci_high"]
+        if material.E_estimate is not None and tips["mean"] > 0:
+            lo, hi = widen_in_quadrature(tips["mean"], lo, hi, material.E_estimate.rel_half_width)
+        rows.append({"model": model, "tip_m": tips["mean"], "ci_low_m": lo, "ci_high_m": hi})
+    return rows

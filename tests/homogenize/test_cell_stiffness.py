@@ -77,7 +77,7 @@ def test_single_sphere_converges_to_eshelby_dilute():
     # `mapsim cell-dilute-study` (results/cell/dilute_convergence.json: rate 0.79 over 32-64,
     # Richardson limit 2.4 % from dilute, 1.5 % from Mori-Tanaka, which includes the periodic
     # images' interaction); here the same study on the three grids CI can afford.
-    from homogenize._cell_study import dilute_convergence_study
+    from homogenize.studies.cell_studies import dilute_convergence_study
     st = dilute_convergence_study((16, 24, 32), 0.01)
     errs = [r["error_vs_dilute"] for r in st["rows"]]
     print("relative error of the dilute shear coefficient:", errs, "rate", st["observed_rate"])

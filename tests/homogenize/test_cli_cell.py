@@ -34,7 +34,6 @@ def test_homogenize_writes_results(rve_file, tmp_path):
 
 
 def test_homogenize_with_field(rve_file, tmp_path):
-    pytest.importorskip("micro.dipoles")
     out = tmp_path / "mag.json"
     rc = main(["homogenize", str(rve_file), "--voxels", "8", "--B", "0.1", "--gradB", "1.78",
                "--law", "saturated", "--json", str(out), "--quiet"])

@@ -145,7 +145,7 @@ def test_rve_size_recovers_kanit_exponent(scheduler, tmp_path, capsys):
 
 
 def test_default_study_file_is_valid():
-    from homogenize._chain import DEFAULT_STUDY
+    from homogenize.studies.chain import DEFAULT_STUDY
     from homogenize._study import load_study
     s = load_study(DEFAULT_STUDY)
     assert s.evaluator == "rve" and dict(s.axes)["phi"] == (0.0175, 0.035)
@@ -156,7 +156,7 @@ def test_default_study_file_is_valid():
 
 def test_chain_reduced_real_rves(scheduler, tmp_path):
     """The whole chain on a reduced study of real RVEs (particles -> dipoles -> beam)."""
-    from homogenize._chain import SEED, seed_strip
+    from homogenize.studies.chain import SEED, seed_strip
     p = tmp_path / "chain.toml"
     p.write_text('[study]\nseed = 3\nrealizations = 3\nn_particles = 40\n'
                  '[grid]\nphi = [0.0175, 0.035]\nB_T = [0.01, 0.3]\ngradB_T_per_m = 1.78\n')
@@ -190,7 +190,6 @@ def test_chain_reduced_real_rves(scheduler, tmp_path):
 def test_beam_with_table_propagates_interval(table, tmp_path, capsys):
     """`mapsim beam --table`: the force and its interval come from the table; with
     Euler-Bernoulli the deflection is 3 f L^4 / (2 E t^2) at the mean and at both ends."""
-    pytest.importorskip("homogenize.macro._cli")
     from homogenize.tables import body_force_from_table
     js = tmp_path / "beam.json"
     L, t = 0.02, 1e-3
@@ -223,7 +222,6 @@ def test_fem_quantities_in_table_and_beam_E_from_table(scheduler, tmp_path, caps
     """With fem = true the table holds E_eff, nu_eff, stress_mag and strain_mag (synthetic
     values here: the FEM itself is tested by its own module); `beam --E-from-table` uses E_eff
     and widens the interval by its relative half-width in quadrature."""
-    pytest.importorskip("homogenize.macro._cli")
     from homogenize.tables import body_force_from_table, modulus_from_table
     p = tmp_path / "fem.toml"
     p.write_text('[study]\nseed = 8\nrealizations = 5\nevaluator = "synthetic"\nfem = true\n'
@@ -252,7 +250,6 @@ def test_fem_quantities_in_table_and_beam_E_from_table(scheduler, tmp_path, caps
 
 
 def test_export_from_table(table, tmp_path, capsys):
-    pytest.importorskip("homogenize.macro._cli")
     from homogenize.macro.exporters import parse_abaqus
     from homogenize.tables import body_force_from_table
     f = body_force_from_table(table, 0.035, 0.3, 1.78, arrangement="chains")

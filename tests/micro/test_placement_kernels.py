@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from micro import _kernels as K
-from micro._bench_particles import relax_step_reference, rsa_bodies_reference
+from homogenize.bench.reference import relax_step_reference, rsa_bodies_reference
 from micro.particles import _place_bodies
 
 

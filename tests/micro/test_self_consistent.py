@@ -7,7 +7,7 @@ import pytest
 from scipy.constants import mu_0 as MU0
 
 from micro import RVE, ConvergenceError, InputError, applied_gradient, get_law, solve
-from micro.dipoles import add_cli_arguments, cli_summary
+from micro.dipoles import FieldConfig, magnetize
 from micro.particles import generate_rve
 
 A = 25e-9                                         # particle radius [m]
@@ -316,18 +316,14 @@ def test_bad_input(clustered):
         solve(object(), 0.1, 1.78, "linear")
 
 
-def test_cli_hooks(clustered):
-    p = argparse.ArgumentParser()
-    add_cli_arguments(p)
-    args = p.parse_args(["--B", "0.1", "--gradB", "1.78", "--law", "frohlich-kennelly",
-                         "--B-direction", "0", "0", "2"])
-    out = cli_summary(args, clustered)
-    for key in ("M_eff_A_per_m", "f_eff_N_m3", "phi_eff", "d_eff", "virial_stress_Pa",
-                "iterations", "residual"):
-        assert key in out
+def test_magnetize_stage_equals_solve(clustered):
+    """The typed stage is the solver with its configuration: same numbers to round-off."""
+    cfg = FieldConfig(B_T=(0.0, 0.0, 0.1), gradB_T_per_m=1.78, law="frohlich-kennelly")
+    st = magnetize(clustered, cfg)
     ref = solve(clustered, 0.1, 1.78, "frohlich-kennelly")
-    np.testing.assert_allclose(out["f_eff_N_m3"], ref.f_eff_N_m3, rtol=1e-12)
-    assert cli_summary(p.parse_args([]), clustered) == {}
-    for action in p._actions:
-        if action.dest != "help":
-            assert "default" in (action.help or ""), action.dest
+    np.testing.assert_allclose(st.f_eff_N_m3, ref.f_eff_N_m3, rtol=1e-12)
+    np.testing.assert_allclose(st.total_force_N, ref.force_ext_N + ref.force_dd_N, rtol=1e-12)
+    with pytest.raises(InputError, match="tol"):
+        FieldConfig(tol=2.0)
+    with pytest.raises(InputError, match="method"):
+        FieldConfig(method="magic")

@@ -76,7 +76,6 @@ def test_local_field_table_is_the_dipole_solver_and_near_lorentz():
     """The committed table was made by dipolar_local_field_point: recompute one entry (the
     solver converges to 1e-8, so 1e-5 is ample). Dispersed random spheres sit slightly above
     the Lorentz cavity's 1/3 (pair correlations of hard spheres), within 0.1 of it."""
-    pytest.importorskip("micro.dipoles")
     import csv
     rows = list(csv.reader(l for l in P.dipolar_table_path().read_text().splitlines()
                            if not l.startswith("#")))[1:]
@@ -116,7 +115,6 @@ def test_tensile_hysteresis_and_hyperelastic_limits():
 
 
 def test_oxide_shell_is_neutral_at_the_nominal_radius():
-    pytest.importorskip("micro.particles")
     exp = generate(("oxide_shell",), "magnetization", seed=4).experiment
     nominal = _with(exp, radius_mean_m=exp.particles.radius_mean_m)
     spec = ModelSpec("magnetization", ("oxide_shell",))

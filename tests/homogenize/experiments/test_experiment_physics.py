@@ -83,7 +83,7 @@ def test_elastica_table_against_shooting(alpha):
     """Independent solver: closed_form.elastica_shooting (shooting from the free end). The
     cubic interpolation in log(alpha) on 201 nodes up to 1e4 is accurate to ~1e-6, the
     heavy-load asymptote beyond to ~1e-6 (next term O(alpha^-3/2)); tolerance 1e-5."""
-    cf = pytest.importorskip("homogenize.macro.closed_form")
+    import homogenize.macro.closed_form as cf
     v, _ = cf.elastica_shooting(alpha)
     assert P.elastica_ratio(alpha) * alpha / 8.0 == pytest.approx(v, rel=1e-5)
 
@@ -106,7 +106,6 @@ def test_elastica_ratio_limits():
 
 @pytest.mark.parametrize("law", P.LAWS)
 def test_law_adapter_initial_slope_and_saturation(law):
-    pytest.importorskip("micro.magnetization")
     Ms, chi0 = 1.4e6, 2.0
     h = 1e-3 * Ms / chi0
     M = P.particle_magnetization_A_per_m(law, np.array([h, -h]), Ms, chi0)
@@ -121,7 +120,6 @@ def test_law_adapter_initial_slope_and_saturation(law):
 # --- core-shell through micro.particles ------------------------------------------------------
 
 def test_core_shell_ratio_against_hand_formula():
-    pytest.importorskip("micro.particles")
     r0, t = 25e-9, 3e-9
     r = np.array([10e-9, 25e-9, 50e-9])
     ratio = P.core_shell_moment_ratio(r, t, r0, 7870.0, 178.0)
@@ -146,7 +144,6 @@ def test_composite_density():
 def test_mori_tanaka_cross_check_dilute_einstein_limit():
     """Rigid spheres in an incompressible matrix: E_eff / E_m = 1 + 2.5 phi + O(phi^2)
     (Einstein / Smallwood). Iron in PDMS is rigid to 1e-5; nu = 0.4999 leaves O(1e-4)."""
-    pytest.importorskip("homogenize.cell")
     phi = 1e-4
     slope = (P.mori_tanaka_stiffening_ratio(phi, 0.4999, 2e6) - 1.0) / phi
     assert slope == pytest.approx(2.5, rel=2e-3)

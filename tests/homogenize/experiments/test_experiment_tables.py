@@ -20,7 +20,6 @@ def test_stiffness_table_is_the_fem():
     variational (error ~ tol^2 at the solver's relative residual tol, 1e-6 by default) and the
     table was made at tol 1e-8 by an earlier, slower build of the same method: tolerance 1e-5
     admits the re-ordered sums of a faster FEM, not a change of discretization."""
-    pytest.importorskip("homogenize.cell")
     ref = next(r for r in _rows(T.stiffness_table_path()) if r["phi"] == 0.005 and r["seed"] == 1)
     got = T.stiffness_point(0.005, 1, int(ref["voxels"]))
     assert got["phi_voxel"] == ref["phi_voxel"]
@@ -92,7 +91,6 @@ def test_filler_stiffness_ratio_interpolates_the_table():
 def test_stress_table_is_the_dipole_solver():
     """Recompute two entries (saturated and soft particles); the dipole solver converges to
     1e-8 and its Ewald sums to 1e-6 relative: tolerance 1e-5."""
-    pytest.importorskip("micro.dipoles")
     rows = _rows(T.stress_table_path())
     for h in (None, 0.3):
         ref = next(r for r in rows if r["phi"] == 0.1 and r["seed"] == 1

@@ -6,7 +6,7 @@ import pytest
 
 from homogenize.cli import main
 from homogenize.macro import closed_form as cf
-from homogenize.macro.paper import seed_body_force
+from homogenize.studies.paper import seed_body_force
 
 KEYS = ["body_force_seed_N_m3", "beam", "force_for_4mm_N_m3", "tip_linear_m", "tip_nonlinear_m",
         "gravity", "channel"]

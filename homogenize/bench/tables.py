@@ -15,6 +15,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from homogenize._evaluate import RVEEvaluator
+import contextlib
+import os
+from homogenize._study import parse_study
+from homogenize.tables import read_table, run_batch
 
 _STUDY = """
 [study]
@@ -31,7 +36,6 @@ gradB_T_per_m = 1.78
 
 
 def _warm(task):
-    from homogenize._evaluate import RVEEvaluator
     RVEEvaluator()(task)
     return True
 
@@ -44,13 +48,9 @@ def _cluster(workers):
 
 
 def bench_records(quick: bool) -> list[dict]:
-    import contextlib
-    import os
 
     from dask.distributed import Client
 
-    from ._study import parse_study
-    from .tables import read_table, run_batch
     load_before = os.getloadavg()[0]
     R, N = (4, 60) if quick else (12, 150)
     repeats = 1 if quick else 2

@@ -10,6 +10,8 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from homogenize.macro.cantilever import Strip, _mesh, solve_cantilever
+from homogenize.macro.fem import Material, _NeoHookeanAssembler, _skfem_neo_hookean, vector_basis
 
 __all__ = ["bench_records"]
 
@@ -24,9 +26,6 @@ def _timed(fn, repeat=1):
 
 
 def bench_records(quick: bool) -> list[dict]:
-    from homogenize.macro.cantilever import Strip, _mesh, solve_cantilever
-    from homogenize.macro.fem import Material, _NeoHookeanAssembler, _skfem_neo_hookean, \
-        vector_basis
 
     mat = Material()
     strip = Strip(0.0191, 5e-3, 1e-3)

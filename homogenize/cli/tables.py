@@ -4,7 +4,22 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from micro._io import manifest, write_json
 from micro._validate import InputError
+
+from homogenize.cli._common import config_of, parse_at, write_snippet
+from homogenize.macro.cantilever import Strip
+from homogenize.macro.effective import beam_with_interval, effective_material_from_table
+from homogenize.macro.exporters import ExportSpec, export_text
+from homogenize.tables import read_table
+from homogenize.tables import BatchError, run_batch
+from homogenize._study import load_study
+from homogenize.tables import read_table
+from homogenize._stats import summarize
+from homogenize.studies.rve_size import rve_size_study
+from homogenize.tables import BatchError
+from homogenize._stats import welch_permutation
+from homogenize.studies.chain import run_chain
 
 _BATCH_DOC = """\
 Run a study (TOML file: grid of conditions x random realizations) on Dask and write the
@@ -54,8 +69,6 @@ def _check_workers(args):
 
 
 def _cmd_batch(args) -> int:
-    from .tables import BatchError, run_batch
-    from ._study import load_study
     _check_workers(args)
     if args.retries < 0:
         raise InputError(f"--retries must be >= 0, got {args.retries}")
@@ -73,12 +86,10 @@ def _cmd_batch(args) -> int:
 
 def _print_force_summary(path, max_rows: int = 40) -> None:
     """f_eff (z) per grid point with its interval: a first look at the table."""
-    from .tables import read_table
     t = read_table(path)
     if "f_eff_N_m3" not in t.values or len(t.points) > max_rows:
         return
     vals = t.component_values("f_eff_N_m3", "z")
-    from ._stats import summarize
     varying = [a for a, v in t.axes.items() if len(v) > 1]
     lvl = f"{100 * t.confidence:g} %"
     print(f"{'point':>5}  {'  '.join(f'{a:>14}' for a in varying)}  {'f_eff_z [N/m^3]':>15}  "
@@ -90,9 +101,6 @@ def _print_force_summary(path, max_rows: int = 40) -> None:
 
 
 def _cmd_rve_size(args) -> int:
-    from ._rve_size import rve_size_study
-    from ._study import load_study
-    from .tables import BatchError
     _check_workers(args)
     study = load_study(args.study)
     if args.target is not None and not 0 < args.target < 1:
@@ -111,8 +119,6 @@ def _cmd_rve_size(args) -> int:
 
 
 def _cmd_compare(args) -> int:
-    from ._stats import welch_permutation
-    from .tables import read_table
     if args.permutations < 99:
         raise InputError(f"--permutations must be >= 99, got {args.permutations}")
     if not 0 < args.confidence < 1:
@@ -149,8 +155,6 @@ def _cmd_compare(args) -> int:
 
 
 def _cmd_chain(args) -> int:
-    from ._chain import run_chain
-    from .tables import BatchError
     _check_workers(args)
     try:
         res = run_chain(args.study, args.out, workers=args.workers, scheduler=args.scheduler,
@@ -191,7 +195,7 @@ def register(sub, formatter):
     p.add_argument("--clean", action="store_true",
                    help="delete the per-realization parts once the table is written "
                         "(default: keep them, so that a changed study reuses them)")
-    p.set_defaults(func=_cmd_batch)
+    p.set_defaults(func=_cmd_batch, outputs=("out",), inputs=("study",))
 
     p = sub.add_parser("rve-size", formatter_class=formatter, description=_RVE_SIZE_DOC,
                        help="representative volume: variance vs RVE size, realizations needed")
@@ -210,7 +214,7 @@ def register(sub, formatter):
                    help="fix grid axes to one of their values, e.g. \"phi=0.035,B_T=0.1\" "
                         "(default: every grid point of the study)")
     _add_cluster_options(p)
-    p.set_defaults(func=_cmd_rve_size)
+    p.set_defaults(func=_cmd_rve_size, output_dirs=("out",), inputs=("study",))
 
     p = sub.add_parser("compare", formatter_class=formatter, description=_COMPARE_DOC,
                        help="test whether two grid points of a table differ")
@@ -227,7 +231,7 @@ def register(sub, formatter):
                    help="resamples of the permutation test (exact test if all splits fit)")
     p.add_argument("--seed", type=int, default=0, help="seed of the permutation resampling")
     p.add_argument("--json", default=None, help="also write the result to this JSON file (default: none)")
-    p.set_defaults(func=_cmd_compare)
+    p.set_defaults(func=_cmd_compare, outputs=("json",), inputs=("table",))
 
     p = sub.add_parser("chain", formatter_class=formatter,
                        help="the whole chain: default study -> table -> seed cantilever vs B",
@@ -236,7 +240,7 @@ def register(sub, formatter):
                                    "seed's cantilever tip deflection with its interval as a "
                                    "function of B, next to the measured 4 mm.")
     p.add_argument("study", nargs="?", default=None,
-                   help="study file (default: examples/default_study.toml)")
+                   help="study file (default: the packaged homogenize/studies/default_study.toml)")
     p.add_argument("--out", default="results/chain", help="output directory")
     p.add_argument("--keep-parts", action="store_true",
                    help="keep the per-realization parts after the table is written (default: delete them)")
@@ -245,7 +249,7 @@ def register(sub, formatter):
                         "from its premise, 43.79 kN/m^3 -> 4 mm)")
     p.add_argument("--width", type=float, default=5e-3, help="assumed strip width [m]")
     _add_cluster_options(p)
-    p.set_defaults(func=_cmd_chain)
+    p.set_defaults(func=_cmd_chain, output_dirs=("out",), inputs=("study",))
 
 
 # --------------------------------------------------------------------------- mapsim beam --table
@@ -271,72 +275,30 @@ def add_beam_table_options(p) -> None:
                    help="use the table's E_eff (FEM) and its interval instead of --E-Pa")
 
 
-def _parse_at(text):
-    out = {}
-    for item in (text or "").split(","):
-        if not item.strip():
-            continue
-        if "=" not in item:
-            raise InputError(f"--at {text!r}: expected axis=value pairs separated by commas")
-        a, v = (x.strip() for x in item.split("=", 1))
-        try:
-            out[a] = float(v)
-        except ValueError:
-            out[a] = v
-    return out
-
-
 def beam_from_table(args) -> int:
     """``mapsim beam --table``: tip deflection with the interval propagated from the table."""
-    import math
-
-    from homogenize.macro.cantilever import Strip, solve_cantilever
-    from homogenize.macro.fem import Material
-    from micro._validate import check_positive
-
-    from .tables import body_force_from_table, modulus_from_table, read_table
     for name, v in (("--phi", args.phi), ("--B", args.B_T), ("--gradB", args.gradB_T_per_m)):
         if v is None:
             raise InputError(f"{name} is required with --table")
-    table = read_table(args.table)
-    others = _parse_at(args.table_at)
-    force = body_force_from_table(table, args.phi, args.B_T, args.gradB_T_per_m, **others)
-    E, E_est = args.E_Pa, None
-    if args.E_from_table:
-        E_est = modulus_from_table(table, args.phi, **{k: v for k, v in others.items()
-                                                       if k not in ("B_T", "gradB_T_per_m")})
-        if E_est is None:
-            raise InputError(f"--E-from-table: {args.table} has no E_eff (the study ran "
-                             f"without fem = true)")
-        E = E_est.mean
+    others = parse_at(args.table_at)
+    mat = effective_material_from_table(
+        read_table(args.table), args.phi, args.B_T, args.gradB_T_per_m, other_axes=others,
+        E_Pa=None if args.E_from_table else args.E_Pa, E_from_table=args.E_from_table,
+        nu=args.nu, density_kg_m3=args.density_kg_m3)
+    if args.E_from_table and mat.E_estimate is None:
+        raise InputError(f"--E-from-table: {args.table} has no E_eff (the study ran without "
+                         f"fem = true)")
     strip = Strip(args.length_m, args.width_m, args.thickness_m)
-    mat = Material(E, args.nu, args.density_kg_m3)
-    check_positive("nz", args.nz, "")
-    forces = {"mean": force.mean, "ci_low": force.ci_low, "ci_high": force.ci_high}
-    if force.ci_low < 0:
-        raise InputError(f"the force interval reaches below zero ({force.ci_low:g} N/m^3) at "
-                         f"B = {args.B_T:g} T: too few realizations for a deflection interval")
-    rows = []
-    for model in args.model:
-        tips = {}
-        for k, f in forces.items():
-            r = solve_cantilever(strip, mat, f, model=model, order=args.order, nz=args.nz,
-                                 gravity_m_s2=args.gravity_m_s2, n_steps=args.steps)
-            tips[k] = r.tip_m
-        lo, hi = tips["ci_low"], tips["ci_high"]
-        if E_est is not None and tips["mean"] > 0:
-            # deflection ~ 1/E: the modulus interval adds in quadrature (relative)
-            rel_E = (E_est.ci_high - E_est.ci_low) / (2 * E_est.mean)
-            m = tips["mean"]
-            lo = m * (1 - math.hypot(1 - lo / m, rel_E))
-            hi = m * (1 + math.hypot(hi / m - 1, rel_E))
-        rows.append({"model": model, "tip_m": tips["mean"], "ci_low_m": lo, "ci_high_m": hi})
+    rows = beam_with_interval(strip, mat, args.model, order=args.order, nz=args.nz,
+                              gravity_m_s2=args.gravity_m_s2, n_steps=args.steps)
+    force, E_est = mat.force, mat.E_estimate
     lvl = f"{100 * force.confidence:g} %"
     print(f"body force from {args.table} at phi = {args.phi:g}, B = {args.B_T:g} T, "
           f"dB/dz = {args.gradB_T_per_m:g} T/m: {force.mean:.6g} N/m^3, {lvl} interval "
           f"[{force.ci_low:.6g}, {force.ci_high:.6g}]")
-    print(f"E = {E:.6g} Pa" + ("" if E_est is None else
-                               f" (table, {lvl} interval [{E_est.ci_low:.6g}, {E_est.ci_high:.6g}])"))
+    print(f"E = {mat.E_Pa:.6g} Pa" + ("" if E_est is None else
+                                      f" (table, {lvl} interval [{E_est.ci_low:.6g}, "
+                                      f"{E_est.ci_high:.6g}])"))
     print(f"{'model':<12} {'tip [m]':>12} {lvl + ' interval [m]':>30}")
     for r in rows:
         print(f"{r['model']:<12} {r['tip_m']:12.6g}   [{r['ci_low_m']:.6g}, {r['ci_high_m']:.6g}]")
@@ -347,22 +309,18 @@ def beam_from_table(args) -> int:
               f"elastica differs from Euler-Bernoulli by "
               f"{100 * (small['elastica'] / small['eb'] - 1):+.1f} %; use it (or neo-hookean)")
     if args.json:
-        from micro._io import manifest, write_json
         write_json(args.json, {"table": str(args.table), "phi": args.phi, "B_T": args.B_T,
                                "gradB_T_per_m": args.gradB_T_per_m, "other_axes": others,
-                               "force_N_m3": vars(force), "E_Pa": E,
+                               "force_N_m3": vars(force), "E_Pa": mat.E_Pa,
                                "E_estimate_Pa": None if E_est is None else vars(E_est),
                                "strip": vars(strip), "results": rows,
-                               "manifest": manifest({k: v for k, v in vars(args).items()
-                                                     if k != "func"}, None)})
+                               "manifest": manifest(config_of(args), None)})
     return 0
 
 
 # --------------------------------------------------------------------------- mapsim export --table
 _EXPORT_NEEDS = (("body_force_N_m3", "--body-force-N-m3"), ("E_Pa", "--E-Pa"), ("nu", "--nu"),
                  ("density_kg_m3", "--density-kg-m3"))
-PDMS_DENSITY_KG_M3 = 1210.0     # seed paper
-PARTICLE_DENSITY_KG_M3 = 7870.0  # seed paper
 
 
 def add_export_table_options(p) -> None:
@@ -406,37 +364,20 @@ def wrap_export(func):
 
 
 def export_from_table(args) -> int:
-    from homogenize.macro._cli import write_snippet
-    from homogenize.macro.exporters import ExportSpec, export_text
-
-    from .tables import body_force_from_table, interpolate, modulus_from_table, read_table
     for name, v in (("--phi", args.phi), ("--B", args.B_T), ("--gradB", args.gradB_T_per_m)):
         if v is None:
             raise InputError(f"{name} is required with --table")
     if args.body_force_N_m3 is not None:
         raise InputError("give either --table or --body-force-N-m3, not both")
-    table = read_table(args.table)
-    others = _parse_at(args.table_at)
-    f = body_force_from_table(table, args.phi, args.B_T, args.gradB_T_per_m, **others)
+    others = parse_at(args.table_at)
+    mat = effective_material_from_table(read_table(args.table), args.phi, args.B_T,
+                                        args.gradB_T_per_m, other_axes=others, E_Pa=args.E_Pa,
+                                        nu=args.nu, density_kg_m3=args.density_kg_m3)
+    f = mat.force
     force = {"mean": f.mean, "low": f.ci_low, "high": f.ci_high}[args.bound]
     if force < 0:
         raise InputError(f"the {args.bound} body force is negative ({force:g} N/m^3)")
-    mech = {k: v for k, v in others.items() if k not in ("B_T", "gradB_T_per_m")}
-    E_est = modulus_from_table(table, args.phi, **mech)
-    E = args.E_Pa if args.E_Pa is not None else (2e6 if E_est is None else E_est.mean)
-    if args.nu is not None:
-        nu = args.nu
-    elif "nu_eff" in table.values:
-        coords = {"phi": args.phi, **mech}
-        for a in ("B_T", "gradB_T_per_m"):
-            if a in table.axes and len(table.axes[a]) > 1:
-                coords[a] = {"B_T": args.B_T, "gradB_T_per_m": args.gradB_T_per_m}[a]
-        nu = interpolate(table, "nu_eff", **coords).mean
-    else:
-        nu = 0.45
-    rho = args.density_kg_m3 if args.density_kg_m3 is not None else \
-        (1 - args.phi) * PDMS_DENSITY_KG_M3 + args.phi * PARTICLE_DENSITY_KG_M3
-    spec = ExportSpec(force, E, nu, rho, direction=args.direction,
+    spec = ExportSpec(force, mat.E_Pa, mat.nu, mat.density_kg_m3, direction=args.direction,
                       gravity_m_s2=args.gravity_m_s2, name=args.name, elset=args.elset,
                       index=args.index)
     c = "!" if args.to == "elmer" else "**"
@@ -445,7 +386,7 @@ def export_from_table(args) -> int:
             f"dB/dz = {args.gradB_T_per_m:g} T/m" + (f", {args.table_at}" if others else ""),
             f"{c} body force ({args.bound}) {force:.6g} N/m^3; mean {f.mean:.6g}, {lvl} interval "
             f"[{f.ci_low:.6g}, {f.ci_high:.6g}] N/m^3",
-            f"{c} E = {E:.6g} Pa ({'given' if args.E_Pa is not None else 'table E_eff' if E_est else 'PDMS'}), "
-            f"nu = {nu:.4g}, density = {rho:.6g} kg/m^3"]
+            f"{c} E = {mat.E_Pa:.6g} Pa ({mat.E_source}), nu = {mat.nu:.4g}, density = "
+            f"{mat.density_kg_m3:.6g} kg/m^3"]
     text = "\n".join(head) + "\n" + export_text(spec, args.to)
-    return write_snippet(text, args.out, args.to)
+    return write_snippet(text, args.out, f"{args.to} snippet")

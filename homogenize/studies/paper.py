@@ -22,6 +22,9 @@ from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.channel import ChannelGeometry, solve_channel
 from homogenize.macro.fem import Material
 from micro._validate import check_positive, check_range
+from micro._io import atomic_path
+from pathlib import Path
+from micro._io import atomic_write_text, manifest, write_json
 
 __all__ = ["SeedParameters", "seed_body_force", "run_paper", "write_paper", "GRAVITY_M_S2"]
 
@@ -405,7 +408,6 @@ def _figures(res: dict, out) -> list[str]:
     # matplotlib.figure.Figure needs no pyplot and no global backend state
     from matplotlib.figure import Figure
 
-    from micro._io import atomic_path
 
     names = []
 
@@ -643,9 +645,7 @@ Figures: {', '.join(figures)}.
 def write_paper(out_dir, json_path=None, *, quick=False, quiet=False, width_m=5e-3,
                 thickness_m=1e-3) -> dict:
     """Run :func:`run_paper` and write ``paper.json``, ``summary.md``, figures and manifest."""
-    from pathlib import Path
 
-    from micro._io import atomic_write_text, manifest, write_json
 
     out = Path(out_dir)
     res = run_paper(width_m, thickness_m, quick=quick, quiet=quiet)

@@ -23,12 +23,13 @@ import numpy as np
 from micro._io import atomic_path, atomic_write_text, manifest, write_json
 from micro._validate import InputError, check_positive
 
-from ._study import load_study
-from .tables import body_force_from_table, modulus_from_table, read_table, run_batch
+from homogenize._study import load_study
+from homogenize.tables import body_force_from_table, modulus_from_table, read_table, run_batch
+from homogenize.macro.closed_form import eb_tip_deflection_m, elastica_tip_deflection
 
 __all__ = ["run_chain", "seed_strip", "DEFAULT_STUDY", "SEED"]
 
-DEFAULT_STUDY = Path(__file__).resolve().parent.parent / "examples" / "default_study.toml"
+DEFAULT_STUDY = Path(__file__).resolve().parent / "default_study.toml"
 
 #: The seed paper's numbers (Table 1 and Sec. 3.1).
 SEED = {
@@ -57,7 +58,6 @@ def seed_strip(thickness_m: float = 1e-3, width_m: float = 5e-3) -> dict:
 
 
 def _deflections(f, strip, E):
-    from homogenize.macro.closed_form import eb_tip_deflection_m, elastica_tip_deflection
     f = np.clip(np.asarray(f, dtype=float), 0.0, None)
     eb = eb_tip_deflection_m(f, strip["length_m"], strip["width_m"], strip["thickness_m"], E)
     el, _h = elastica_tip_deflection(f, strip["length_m"], strip["width_m"],
@@ -110,12 +110,8 @@ def run_chain(study=None, out_dir="results/chain", *, workers=None, scheduler=No
         if E_est is not None:
             # deflection ~ f / E: the modulus interval widens the band (relative errors in
             # quadrature, an approximation good while both are small)
-            rel_E = (E_est.ci_high - E_est.ci_low) / (2 * E_est.mean)
             for lo, hi, mid in ((eb_lo, eb_hi, eb_mean), (el_lo, el_hi, el_mean)):
-                rel_f_lo = 1 - lo / np.where(mid > 0, mid, 1)
-                rel_f_hi = hi / np.where(mid > 0, mid, 1) - 1
-                lo[:] = mid * (1 - np.hypot(rel_f_lo, rel_E))
-                hi[:] = mid * (1 + np.hypot(rel_f_hi, rel_E))
+                lo[:], hi[:] = widen_in_quadrature(mid, lo, hi, E_est.rel_half_width)
         # the field at which the strip bends by the measured 4 mm (elastica, mean and band)
         B4 = {k: _crossing(B_fine, y, SEED["deflection_m"])
               for k, y in (("mean", el_mean), ("low_force", el_lo), ("high_force", el_hi))}

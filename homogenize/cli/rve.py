@@ -6,34 +6,26 @@ particle count, box edge, achieved volume fraction, size and cluster statistics.
 RVE to HDF5 (``--out``, with a run manifest beside it), the summary to JSON (``--json``), the
 particle surfaces to PLY/GLB (``--ply``/``--glb``) and a picture (``--png``).
 
-Magnetics hook: if ``micro.dipoles`` provides ``add_cli_arguments(parser)`` and
-``cli_summary(args, rve) -> dict``, its options are added to this command and its summary is
-printed and stored under the key ``"magnetics"``.
+With ``--B`` the magnetic stage (:func:`micro.dipoles.magnetize`) runs on the RVE and its
+summary is printed and stored under the key ``"magnetics"``.
 """
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 from pathlib import Path
 
+import numpy as np
+
 from micro._io import manifest, write_json
-from micro._validate import InputError
+from micro._validate import InputError, check_finite
+from micro.dipoles import METHODS, PME_ABOVE_N, SUMMATIONS, FieldConfig, magnetize
+from micro.magnetization import LAW_NAMES, get_law
+from micro.materials import FE, FE3O4, SEED
+from micro import particles as P
+from micro.particles import describe, generate_rve
 
 _DESCRIPTION = __doc__
-
-
-def _magnetics_module():
-    """``micro.dipoles`` if it offers the CLI hook functions, else None."""
-    try:
-        mod = importlib.import_module("micro.dipoles")
-    except ModuleNotFoundError as exc:
-        if exc.name == "micro.dipoles":
-            return None
-        raise
-    if hasattr(mod, "add_cli_arguments") and hasattr(mod, "cli_summary"):
-        return mod
-    return None
 
 
 def register(sub, formatter):
@@ -68,13 +60,13 @@ def register(sub, formatter):
     g = p.add_argument_group("core-shell composition")
     g.add_argument("--shell", type=float, default=0.0,
                    help="Fe3O4 shell thickness [m]; 0 = homogeneous particles with the seed's "
-                        "178 A m^2/kg")
-    g.add_argument("--core-density", type=float, default=7870.0, help="core density [kg/m^3]")
+                        f"{SEED.sigma_s_Am2_kg:g} A m^2/kg")
+    g.add_argument("--core-density", type=float, default=FE.density_kg_m3, help="core density [kg/m^3]")
     g.add_argument("--core-sigma", type=float, default=None,
-                   help="core specific saturation moment [A m^2/kg] (default 218 with a shell, "
-                        "178 without)")
-    g.add_argument("--shell-density", type=float, default=5170.0, help="shell density [kg/m^3]")
-    g.add_argument("--shell-sigma", type=float, default=92.0,
+                   help=f"core specific saturation moment [A m^2/kg] (default {FE.sigma_s_Am2_kg:g} "
+                        f"with a shell, {SEED.sigma_s_Am2_kg:g} without)")
+    g.add_argument("--shell-density", type=float, default=FE3O4.density_kg_m3, help="shell density [kg/m^3]")
+    g.add_argument("--shell-sigma", type=float, default=FE3O4.sigma_s_Am2_kg,
                    help="shell specific saturation moment [A m^2/kg]")
     g.add_argument("--calibrate-sigma", type=float, default=None,
                    help="measured mass-averaged specific moment of the powder [A m^2/kg]: "
@@ -117,16 +109,13 @@ def register(sub, formatter):
     g.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar on stderr (default: on for n >= 20000)")
 
-    # ---- magnetics hook: options of micro.dipoles (added when that module provides them) ----
-    mag = _magnetics_module()
-    if mag is not None:
-        mag.add_cli_arguments(p)
-    p.set_defaults(func=_cmd)
+    _add_magnetics_options(p)
+    p.set_defaults(func=_cmd, outputs=("out", "json", "ply", "glb", "png"),
+                   inputs=("load", "histogram"))
 
 
 def generator_kwargs(args) -> dict:
     """Keyword arguments of :func:`micro.particles.generate_rve` from parsed CLI options."""
-    from micro import particles as P
 
     kind = "histogram" if args.histogram else args.distribution
     if kind == "histogram":
@@ -197,7 +186,6 @@ def _fmt_summary(s: dict) -> str:
 
 
 def _cmd(args) -> int:
-    from micro.particles import describe, generate_rve
 
     _check_outputs(args)
     if args.load:
@@ -211,12 +199,9 @@ def _cmd(args) -> int:
         rve = generate_rve(args.phi, args.n, args.seed, progress=progress, **kw)
     summary = describe(rve)
 
-    # ---- magnetics hook: summary of micro.dipoles for this RVE (if that module offers it) ----
-    mag = _magnetics_module()
-    if mag is not None:
-        mag_summary = mag.cli_summary(args, rve)
-        if mag_summary:
-            summary["magnetics"] = mag_summary
+    mag_summary = _magnetics_summary(args, rve)
+    if mag_summary:
+        summary["magnetics"] = mag_summary
 
     print(_fmt_summary(summary))
     if "magnetics" in summary:
@@ -242,3 +227,86 @@ def _cmd(args) -> int:
         write_json(args.json, {"summary": summary, "manifest": manifest(config, rve.seed)})
         print(f"wrote {args.json}")
     return 0
+
+
+def _add_magnetics_options(parser) -> None:
+    """The magnetics options of ``mapsim rve``."""
+    g = parser.add_argument_group("magnetics (self-consistent dipoles; active when --B is given)")
+    g.add_argument("--B", dest="B_T", type=float, default=None,
+                   help="applied flux density mu0 H [T]; enables the magnetic solve "
+                        "(default: none, no magnetics)")
+    g.add_argument("--B-direction", dest="B_direction", type=float, nargs=3, default=None,
+                   metavar=("BX", "BY", "BZ"),
+                   help="direction of the applied field (any length) [-] (default: 0 0 1)")
+    g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=SEED.gradB_T_per_m,
+                   help="gradient of |B| along z [T/m] (default: 1.78, the seed paper)")
+    g.add_argument("--law", default="frohlich-kennelly", choices=LAW_NAMES,
+                   help="magnetization law of one particle (default: frohlich-kennelly)")
+    g.add_argument("--chi", type=float, default=None,
+                   help="linear law: intrinsic susceptibility [-] (default: inf, i.e. m = 3 V H)")
+    g.add_argument("--chi0", type=float, default=None,
+                   help="frohlich-kennelly: initial apparent susceptibility [-] (default: 3)")
+    g.add_argument("--T", dest="T_K", type=float, default=None,
+                   help="langevin: temperature [K] (default: 300)")
+    g.add_argument("--demag-factor", dest="demag_factor", type=float, default=None,
+                   help="specimen demagnetizing factor N in [0, 1] [-] (default: none = "
+                        "metallic boundary, internal field = applied field)")
+    g.add_argument("--tol", type=float, default=1e-8,
+                   help="relative residual of the self-consistent moments [-] (default: 1e-8)")
+    g.add_argument("--accuracy", type=float, default=1e-6,
+                   help="relative accuracy of the periodic dipole sums [-] (default: 1e-6)")
+    g.add_argument("--solver", dest="mag_method", default="anderson", choices=METHODS,
+                   help="nonlinear solver for the moments (default: anderson)")
+    g.add_argument("--summation", default="auto", choices=SUMMATIONS,
+                   help="periodic sum: plain Ewald, particle-mesh Ewald, or auto (PME above "
+                        f"{PME_ABOVE_N} particles) (default: auto)")
+    g.add_argument("--c-powder", dest="c_powder", type=float, default=SEED.c,
+                   help="the seed's powder concentration c for d_eff = phi_eff / c [-] "
+                        "(default: 0.035)")
+    g.add_argument("--rho-particle", dest="rho_kg_m3", type=float, default=SEED.particle_density_kg_m3,
+                   help="density of the saturated reference material in phi_eff [kg/m^3] "
+                        f"(default: {SEED.particle_density_kg_m3:g})")
+    g.add_argument("--sigma-s", dest="sigma_s_Am2_kg", type=float, default=SEED.sigma_s_Am2_kg,
+                   help="specific saturation moment of the reference material [A m^2/kg] "
+                        f"(default: {SEED.sigma_s_Am2_kg:g})")
+
+
+def _magnetics_summary(args, rve) -> dict:
+    """Solve the magnetics for the options ``args``; the JSON summary entries ({} without --B)."""
+    if getattr(args, "B_T", None) is None:
+        return {}
+    st = magnetize(rve, field_config(args))
+    return {
+        "B_applied_T": st.B_applied_T.tolist(),
+        "gradB_T_per_m": float(args.gradB_T_per_m),
+        "law": st.law,
+        "M_eff_A_per_m": st.M_eff_A_per_m.tolist(),
+        "f_eff_N_m3": st.f_eff_N_m3.tolist(),
+        "phi_eff": st.phi_eff,
+        "d_eff": st.d_eff,
+        "virial_stress_Pa": st.virial_stress_Pa.tolist(),
+        "iterations": st.iterations,
+        "residual": st.residual,
+        "field_evaluations": st.field_evaluations,
+        "dd_force_sum_rel": st.dd_force_sum_rel,
+        "summation": st.summation,
+    }
+
+
+def field_config(args) -> FieldConfig:
+    """The magnetic stage's configuration from the options of ``mapsim rve``."""
+    B = float(args.B_T)
+    if getattr(args, "B_direction", None) is not None:
+        d = np.asarray(args.B_direction, dtype=float)
+        check_finite("--B-direction", d)
+        if np.linalg.norm(d) == 0:
+            raise InputError("--B-direction must not be the zero vector")
+        B = tuple(B * d / np.linalg.norm(d))
+    params = tuple((k, v) for k, v in (("chi", args.chi), ("chi0", args.chi0), ("T_K", args.T_K))
+                   if v is not None)
+    get_law(args.law, **dict(params))          # unknown law parameters fail here, before work
+    return FieldConfig(B_T=B, gradB_T_per_m=args.gradB_T_per_m, law=args.law,
+                       law_params=params, demag_factor=args.demag_factor, tol=args.tol,
+                       accuracy=args.accuracy, method=args.mag_method, summation=args.summation,
+                       c_powder=args.c_powder, rho_kg_m3=args.rho_kg_m3,
+                       sigma_s_Am2_kg=args.sigma_s_Am2_kg)

@@ -7,10 +7,16 @@ from pathlib import Path
 from micro._io import manifest, write_json
 from micro._validate import InputError
 
+from homogenize.cli._common import check_outputs
+from homogenize.experiments.diagnose import diagnose
+from homogenize.experiments.io import load_experiment
+from homogenize.experiments.study import run_study, summarize, write_study
+from homogenize.experiments import tables as T
+
 __all__ = ["register"]
 
 _DIAGNOSE_DOC = """\
-Compare a measured experiment (TOML + CSV, see shared/spec/experiments.md) with the seed
+Compare a measured experiment (TOML + CSV, see examples/data/EXPERIMENT_FORMAT.md) with the seed
 model, name what it gets wrong from the causes' vocabulary, extend the model and measure the
 gain. Criterion: a cause is accepted only if it lowers the cross-validated RMSE (folds of whole
 specimens when there are >= 3) by >= 10 % AND a one-sided Wilcoxon signed-rank test on the
@@ -26,9 +32,8 @@ the median gain (study.json, confusion.csv, confusion.png, manifest.json in --ou
 
 
 def _diagnose(args) -> int:
-    from .diagnose import diagnose
-    from .io import load_experiment
     exp = load_experiment(args.experiment)
+    check_outputs([("--json", args.json)], [exp.data_path, args.experiment])
     d = diagnose(exp, progress=not args.quiet)
     res = d.as_dict()
     if args.json:
@@ -37,7 +42,7 @@ def _diagnose(args) -> int:
         write_json(out.with_name(out.stem + ".manifest.json"),
                    manifest({"experiment": str(args.experiment), "command": "diagnose"}, None))
     if args.report:
-        from .report import write_report
+        from homogenize.experiments.report import write_report
         discussion = None
         if args.discussion:
             try:
@@ -63,7 +68,6 @@ def _diagnose(args) -> int:
 
 
 def _study(args) -> int:
-    from .study import run_study, summarize, write_study
     if args.n < 1:
         raise InputError(f"--n must be >= 1 (number of synthetic cases), got {args.n}")
     records = run_study(args.n, seed=args.seed, progress=not args.quiet)
@@ -91,7 +95,6 @@ stiffness ~3-8 min at 24^3 voxels, resolution ~3 min, stress < 1 min, cell-stres
 
 
 def _tables(args) -> int:
-    from . import tables as T
     argv = ["mapsim", "diagnose-tables", "--only", args.only]
     if args.only in ("stiffness", "all"):
         argv += ["--voxels", str(args.voxels)]
@@ -125,7 +128,8 @@ def register(sub, formatter):
     p.add_argument("--discussion", default=None,
                    help="Markdown file appended to the report as its Discussion section")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_diagnose)
+    p.set_defaults(func=_diagnose, outputs=("json",), output_dirs=("report",),
+                   inputs=("experiment", "discussion"))
 
     q = sub.add_parser("diagnose-study", formatter_class=formatter, description=_STUDY_DOC,
                        help="recovery of hidden causes on synthetic experiments")
@@ -135,7 +139,7 @@ def register(sub, formatter):
                    help="output directory (study.json, confusion.csv/.png, manifest.json)")
     q.add_argument("--json", default=None, help="also write the study JSON to this file")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
-    q.set_defaults(func=_study)
+    q.set_defaults(func=_study, outputs=("json",), output_dirs=("out",))
 
     t = sub.add_parser("diagnose-tables", formatter_class=formatter, description=_TABLES_DOC,
                        help="re-make the RVE tables (FEM stiffness, dipolar stress) of diagnose")

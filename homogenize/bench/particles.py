@@ -14,54 +14,16 @@ import time
 
 import numpy as np
 
-__all__ = ["rsa_bodies_reference", "relax_step_reference", "bench_records"]
+from homogenize.bench.reference import relax_step_reference, rsa_bodies_reference
+from micro.particles import default_distribution
+from micro.particles import _place_bodies
+from micro import _kernels as K
+from micro.particles import generate_rve
 
-
-def relax_step_reference(centers, radii, gap, push_scale, box):
-    """All-pairs numpy twin of :func:`micro._kernels.placement_relax_step`: (disp, count)."""
-    d = centers[:, None, :] - centers[None, :, :]
-    d -= box * np.rint(d / box)
-    dist = np.sqrt(np.sum(d * d, axis=2))
-    lim = radii[:, None] + radii[None, :] + gap
-    over = (dist < lim) & ~np.eye(len(radii), dtype=bool)
-    f = np.where(over, 0.5 * (lim * push_scale - dist) / np.where(over, dist, 1.0), 0.0)
-    return (f[:, :, None] * d).sum(axis=1), int(over.sum() // 2)
-
-
-def rsa_bodies_reference(offsets, radii, body_start, candidates, gap, box, ncell, head, nxt,
-                         centers, state, max_attempts):
-    """Plain-numpy twin of :func:`micro._kernels.placement_rsa_bodies` (same signature and
-    results; the cell list ``head``/``nxt``/``ncell`` is ignored: every placed particle is
-    checked, which is what a cell list must reproduce)."""
-    nbody = body_start.shape[0] - 1
-    for m in range(candidates.shape[0]):
-        b = state[0]
-        if b >= nbody:
-            return 0
-        if state[1] >= max_attempts:
-            return 2
-        state[1] += 1
-        state[2] += 1
-        lo, hi = body_start[b], body_start[b + 1]
-        placed = body_start[b]        # bodies are placed in order: members 0..placed-1 are in
-        p = (candidates[m][None, :] + offsets[lo:hi]) % box
-        if placed:
-            d = centers[None, :placed, :] - p[:, None, :]
-            d -= box * np.rint(d / box)
-            s2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
-            lim = radii[lo:hi, None] + radii[None, :placed] + gap
-            if np.any(s2 < lim * lim):
-                continue
-        centers[lo:hi] = p
-        state[0] = b + 1
-        state[1] = 0
-    if state[0] >= nbody:
-        return 0
-    return 2 if state[1] >= max_attempts else 1
+__all__ = ["bench_records"]
 
 
 def _setup(n, phi, seed):
-    from micro.particles import default_distribution
 
     rng = np.random.default_rng(seed)
     r = np.sort(default_distribution().sample(n, rng))[::-1].copy()
@@ -70,7 +32,6 @@ def _setup(n, phi, seed):
 
 
 def _run(kernel, n, phi, seed):
-    from micro.particles import _place_bodies
 
     r, box, rng = _setup(n, phi, seed)
     off = np.zeros((n, 3))
@@ -84,8 +45,6 @@ def _run(kernel, n, phi, seed):
 
 
 def bench_records(quick: bool) -> list[dict]:
-    from micro import _kernels as K
-    from micro.particles import generate_rve
 
     phi = 0.2
     n_ref = 1500 if quick else 5000

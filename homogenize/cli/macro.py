@@ -6,11 +6,21 @@ import sys
 
 from micro._validate import InputError, check_positive
 
+from homogenize.cli._common import write_snippet
+from homogenize.cli.tables import (add_beam_table_options, add_export_table_options,
+                                   beam_from_table, wrap_export)
+from homogenize.studies.paper import write_paper
+from homogenize.macro.exporters import ExportSpec, export_text
+from homogenize.macro.cantilever import Strip, solve_cantilever
+from homogenize.macro.fem import Material
+from homogenize.macro.channel import ChannelGeometry, solve_channel
+from homogenize.macro.exporters import DIRECTIONS
+from homogenize.macro.cantilever import MODELS
+
 __all__ = ["register"]
 
 
 def _paper(args) -> int:
-    from homogenize.macro.paper import write_paper
     check_positive("width-m", args.width_m, "m")
     check_positive("thickness-m", args.thickness_m, "m")
     res = write_paper(args.out, args.json, quick=args.quick, quiet=args.quiet,
@@ -24,35 +34,15 @@ def _paper(args) -> int:
 
 
 def _export(args) -> int:
-    from homogenize.macro.exporters import ExportSpec, export_text
     spec = ExportSpec(args.body_force_N_m3, args.E_Pa, args.nu, args.density_kg_m3,
                       direction=args.direction, gravity_m_s2=args.gravity_m_s2, name=args.name,
                       elset=args.elset, index=args.index)
-    return write_snippet(export_text(spec, args.to), args.out, args.to)
-
-
-def write_snippet(text: str, out: str, to: str) -> int:
-    """Write an exported snippet to ``out`` (``-`` = stdout) atomically; return exit code 0."""
-    from pathlib import Path
-
-    from micro._io import atomic_write_text
-    if out == "-":
-        sys.stdout.write(text)
-        return 0
-    path = Path(out)
-    if path.is_dir():
-        raise InputError(f"--out {path} is a directory; give a file name")
-    atomic_write_text(path, text)
-    print(f"wrote {to} snippet to {path}")
-    return 0
+    return write_snippet(export_text(spec, args.to), args.out, f"{args.to} snippet")
 
 
 def _beam(args) -> int:
     if getattr(args, "table", None):   # --table: force + interval from a batch table (tables)
-        from homogenize._cli_tables import beam_from_table
         return beam_from_table(args)
-    from homogenize.macro.cantilever import Strip, solve_cantilever
-    from homogenize.macro.fem import Material
     strip = Strip(args.length_m, args.width_m, args.thickness_m)
     mat = Material(args.E_Pa, args.nu, args.density_kg_m3)
     check_positive("nz", args.nz, "")
@@ -74,8 +64,6 @@ def _beam(args) -> int:
 
 
 def _channel(args) -> int:
-    from homogenize.macro.channel import ChannelGeometry, solve_channel
-    from homogenize.macro.fem import Material
     geo = ChannelGeometry(args.a_m, args.b_m, args.c_m, args.d_m, args.wall_m)
     mat = Material(args.E_Pa, args.nu, args.density_kg_m3)
     check_positive("nc", args.nc, "")
@@ -118,9 +106,8 @@ def register(sub, formatter) -> None:
     p.add_argument("--quick", action="store_true",
                    help="small meshes and sweeps (seconds; for tests, numbers indicative)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_paper)
+    p.set_defaults(func=_paper, outputs=("json",), output_dirs=("out",))
 
-    from homogenize.macro.exporters import DIRECTIONS
     p = sub.add_parser(
         "export", formatter_class=formatter,
         help="write an Elmer or Abaqus material + body-force snippet",
@@ -144,11 +131,9 @@ def register(sub, formatter) -> None:
     p.add_argument("--elset", default="EALL", help="Abaqus element set of the *DLOAD")
     p.add_argument("--index", type=int, default=1, help="Elmer Material / Body Force number")
     p.add_argument("--out", required=True, help="output file ('-' for stdout)")
-    from homogenize._cli_tables import add_export_table_options, wrap_export   # --table ...
     add_export_table_options(p)
-    p.set_defaults(func=wrap_export(_export))
+    p.set_defaults(func=wrap_export(_export), outputs=("out",), inputs=("table",))
 
-    from homogenize.macro.cantilever import MODELS
     p = sub.add_parser(
         "beam", formatter_class=formatter, help="tip deflection of a clamped strip",
         description="Tip deflection of a strip clamped at one end under a uniform transverse "
@@ -170,9 +155,8 @@ def register(sub, formatter) -> None:
                    help="element layers through the thickness (FEM models)")
     p.add_argument("--steps", type=int, default=4, help="load increments (neo-hookean)")
     p.add_argument("--json", default=None, help="write the results to this JSON file")
-    from homogenize._cli_tables import add_beam_table_options   # --table --phi --B --gradB
     add_beam_table_options(p)
-    p.set_defaults(func=_beam)
+    p.set_defaults(func=_beam, outputs=("json",), inputs=("table",))
 
     p = sub.add_parser(
         "channel", formatter_class=formatter, help="ceiling deflection of a microchannel",
@@ -192,4 +176,4 @@ def register(sub, formatter) -> None:
     p.add_argument("--order", type=int, default=2, choices=(1, 2), help="tetrahedron degree")
     p.add_argument("--nc", type=int, default=2, help="element layers through the ceiling")
     p.add_argument("--json", default=None, help="write the result to this JSON file")
-    p.set_defaults(func=_channel)
+    p.set_defaults(func=_channel, outputs=("json",))

@@ -17,9 +17,11 @@ import numpy as np
 from micro._io import atomic_path, manifest, write_json
 from micro._validate import InputError
 
-from ._stats import fit_power_law, realizations_needed
-from ._study import Study, load_study
-from .tables import _dask_client, read_table, run_batch
+from homogenize._stats import fit_power_law, realizations_needed
+from homogenize._study import Study, load_study
+from homogenize.tables import _dask_client, read_table, run_batch
+from micro._io import atomic_write_text
+import textwrap
 
 __all__ = ["rve_size_study", "restrict_grid"]
 
@@ -134,7 +136,6 @@ def _write_markdown(path: Path, res: dict) -> None:
                          f"{s['realizations_needed_fit']} |")
         lines.append("")
     text = "\n".join(lines) + "\n"
-    from micro._io import atomic_write_text
     atomic_write_text(path, text)
 
 
@@ -166,7 +167,6 @@ def _plot(path: Path, res: dict) -> None:
     ax.set_xlabel("RVE volume V [m$^3$]")
     ax.set_ylabel(f"variance of {res['quantity']} ({res['component']}) [({res['unit']})$^2$]")
     fixed = ", ".join(f"{a}={v}" for a, v in pts[0].items() if a not in varying)
-    import textwrap
     ax.set_title(f"Variance across {R} realizations vs RVE volume (Kanit et al. 2003)\n"
                  + "\n".join(textwrap.wrap(fixed, 90)), fontsize=8)
     ax.legend(fontsize=7, title="fit var ~ V$^{-alpha}$; bars: 95 % interval", title_fontsize=7)

@@ -8,6 +8,10 @@ import numpy as np
 
 from micro._io import manifest, write_json
 from micro._validate import InputError, check_finite, check_positive
+from micro.rve import RVE
+from homogenize.cell import homogenize_rve
+from homogenize.studies.cell_studies import phi_study, plot_phi_study
+from homogenize.studies.cell_studies import dilute_convergence_study, plot_dilute_convergence
 
 _DESCRIPTION = """\
 Periodic voxel FEM of an RVE (HDF5 written by `mapsim rve`): effective stiffness C_eff (6x6
@@ -37,9 +41,7 @@ def _parse_vec(text: str | None, name: str, unit: str):
 
 
 def _cmd(args) -> int:
-    from micro.rve import RVE
 
-    from .cell import homogenize_rve
 
     rve = RVE.load(args.rve)
     forces = virial = None
@@ -49,7 +51,7 @@ def _cmd(args) -> int:
         B = _parse_vec(args.B, "B", "T")
         G = _parse_vec(args.gradB if args.gradB is not None else "0", "gradB", "T/m")
         state = solve(rve, B, G, args.law)
-        forces = np.asarray(state.force_ext_N) + np.asarray(state.force_dd_N)
+        forces = state.total_force_N
         virial = np.asarray(state.virial_stress_Pa)
         mag = {"B_T": B, "gradB_T_per_m": G, "law": args.law,
                "virial_stress_Pa": virial, "f_eff_dipoles_N_m3": np.asarray(state.f_eff_N_m3),
@@ -70,10 +72,10 @@ def _cmd(args) -> int:
               if k != "func"}
     out["manifest"] = manifest(config, getattr(rve, "seed", None))
     if args.vtu:
-        from ._cell_output import write_vtu
+        from homogenize._cell_output import write_vtu
         write_vtu(args.vtu, res, "magnetic" if forces is not None else "e11")
     if args.png:
-        from ._cell_output import plot_slice
+        from homogenize._cell_output import plot_slice
         plot_slice(args.png, res, "magnetic" if forces is not None else "e11")
     write_json(args.json, out)
     write_json(Path(args.json).with_name(Path(args.json).stem + ".manifest.json"), out["manifest"])
@@ -85,7 +87,6 @@ def _cmd(args) -> int:
 
 
 def _cmd_phi_study(args) -> int:
-    from ._cell_study import phi_study, plot_phi_study
     phis = [float(v) for v in args.phi.split(",")]
     for v in phis:
         if not 0.0 < v <= 0.45:
@@ -99,7 +100,6 @@ def _cmd_phi_study(args) -> int:
 
 
 def _cmd_dilute_study(args) -> int:
-    from ._cell_study import dilute_convergence_study, plot_dilute_convergence
     try:
         ns = [int(v) for v in args.voxels.split(",")]
     except ValueError:
@@ -136,7 +136,7 @@ def register(sub, formatter):
     d.add_argument("--json", required=True, type=Path, help="result JSON file")
     d.add_argument("--png", type=Path, default=None, help="plot file (PNG)")
     d.add_argument("--quiet", action="store_true", help="no progress bar")
-    d.set_defaults(func=_cmd_dilute_study)
+    d.set_defaults(func=_cmd_dilute_study, outputs=("json", "png"))
 
     q = sub.add_parser("cell-phi-study", formatter_class=formatter,
                        help="E_eff vs phi: voxel FEM against dilute, Mori-Tanaka, Guth-Gold",
@@ -148,7 +148,7 @@ def register(sub, formatter):
     q.add_argument("--json", required=True, type=Path, help="result JSON file")
     q.add_argument("--png", type=Path, default=None, help="plot file (PNG)")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
-    q.set_defaults(func=_cmd_phi_study)
+    q.set_defaults(func=_cmd_phi_study, outputs=("json", "png"))
 
     p = sub.add_parser("homogenize", formatter_class=formatter, description=_DESCRIPTION,
                        help="FEM homogenization of an RVE: C_eff, E_eff, f_eff, magnetic stress")
@@ -182,4 +182,4 @@ def register(sub, formatter):
                    help="write local fields (displacement, stress, von Mises, phase) as VTU")
     p.add_argument("--png", type=Path, default=None, help="write a slice figure (PNG)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and summary on stderr")
-    p.set_defaults(func=_cmd)
+    p.set_defaults(func=_cmd, outputs=("json", "vtu", "png"), inputs=("rve",))

@@ -10,8 +10,12 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
+from homogenize._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
                                mori_tanaka, young_poisson)
+from homogenize.cell import homogenize_rve
+from micro._io import atomic_path
+from homogenize.cell import Material, homogenize_mesh
+from homogenize.mesh import voxelize
 
 __all__ = ["phi_study", "plot_phi_study", "dilute_convergence_study", "plot_dilute_convergence"]
 
@@ -19,7 +23,6 @@ __all__ = ["phi_study", "plot_phi_study", "dilute_convergence_study", "plot_dilu
 def phi_study(phis=(0.01, 0.05, 0.1, 0.2, 0.3), voxels: int = 24, *, matrix_E_Pa=2e6,
               matrix_nu=0.45, particle_E_Pa=211e9, particle_nu=0.29, progress=False) -> dict:
     """E_eff [Pa] of a simple cubic array of spheres by FEM and by the closed forms, per phi."""
-    from .cell import homogenize_rve
     Km, Gm = bulk_shear(matrix_E_Pa, matrix_nu)
     Kp, Gp = bulk_shear(particle_E_Pa, particle_nu)
     rows = []
@@ -49,7 +52,6 @@ def plot_phi_study(path, study: dict) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from micro._io import atomic_path
     rows = study["rows"]
     pv = np.array([r["phi_voxel"] for r in rows])
     Em = study["matrix_E_Pa"]
@@ -81,8 +83,6 @@ def dilute_convergence_study(voxels=(8, 16, 24, 32, 48, 64), phi: float = 0.01, 
     resolution, the observed rate ``p`` of ``|c - c_dilute|`` between the finest grids, and a
     Richardson extrapolation ``c_inf`` from the three finest with that rate.
     """
-    from .cell import Material, homogenize_mesh
-    from .mesh import voxelize
     mat, par = Material(matrix_E_Pa, matrix_nu), Material(particle_E_Pa, particle_nu)
     Km, Gm = mat.bulk_shear_Pa
     Kp, Gp = par.bulk_shear_Pa
@@ -127,7 +127,6 @@ def plot_dilute_convergence(path, study: dict) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from micro._io import atomic_path
     rows = study["rows"]
     ns = np.array([r["voxels"] for r in rows], dtype=float)
     fig = Figure(figsize=(10, 4))

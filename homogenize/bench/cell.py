@@ -12,6 +12,13 @@ import resource
 import time
 
 import numpy as np
+import os
+from homogenize import _assembly as A
+from homogenize.bench.reference import skfem_reference
+from micro.particles import generate_rve
+from homogenize.cell import homogenize_rve
+from homogenize.cell import Material, homogenize_mesh
+from homogenize.mesh import voxelize
 
 
 SOLVER_CONFIG = ("CG, relative residual tol 1e-8, deflated by the 6 rigid-body modes of every stiff "
@@ -23,7 +30,6 @@ SOLVER_CONFIG = ("CG, relative residual tol 1e-8, deflated by the 6 rigid-body m
 
 
 def _machine() -> dict:
-    import os
 
     import numba
     return {"load_average_1_5_15min": list(os.getloadavg()), "cpu_count": os.cpu_count(),
@@ -35,7 +41,6 @@ def _peak_rss_GB() -> float:
 
 
 def _assembly_record(n: int) -> dict:
-    from . import _assembly as A
 
     rng = np.random.default_rng(0)
     h = 1e-8
@@ -53,7 +58,7 @@ def _assembly_record(n: int) -> dict:
     t_blas = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    P, Ks, _mesh = A.skfem_reference(lam, mu, h, sri=True)
+    P, Ks, _mesh = skfem_reference(lam, mu, h, sri=True)
     Kref = (P.T @ Ks @ P).tocsr()
     t_ref = time.perf_counter() - t0
     err = abs(K.tocsr() - Kref).max() / abs(Kref).max()
@@ -66,7 +71,6 @@ def _assembly_record(n: int) -> dict:
 
 
 def _rve(voxels: int, seed: int = 1):
-    from micro.particles import generate_rve
     # seed-paper distribution (mean 25 nm in [10, 50] nm) at 3.5 vol%; the number of particles
     # is chosen so that the mean particle radius is ~2.5 voxels
     n_part = max(8, int(round(0.035 * (voxels / 2.5) ** 3 / (4.0 / 3.0 * np.pi) / 1.4)))
@@ -74,7 +78,6 @@ def _rve(voxels: int, seed: int = 1):
 
 
 def _full_record(voxels: int) -> dict:
-    from .cell import homogenize_rve
     rve = _rve(voxels)
     rng = np.random.default_rng(2)
     forces = None
@@ -82,7 +85,7 @@ def _full_record(voxels: int) -> dict:
     try:
         from micro.dipoles import solve
         st = solve(rve, 0.1, 1.78, "frohlich-kennelly")
-        forces = np.asarray(st.force_ext_N) + np.asarray(st.force_dd_N)
+        forces = st.total_force_N
         virial = np.asarray(st.virial_stress_Pa)
     except ModuleNotFoundError:
         forces = rng.normal(size=(rve.n, 3)) * 1e-15
@@ -100,8 +103,6 @@ def _full_record(voxels: int) -> dict:
 
 
 def _contrast_records(voxels: int) -> list[dict]:
-    from .cell import Material, homogenize_mesh
-    from .mesh import voxelize
     rve = _rve(voxels, seed=3)
     mesh = voxelize(rve, voxels)
     out = []

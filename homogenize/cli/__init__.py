@@ -1,0 +1,76 @@
+"""The ``mapsim`` command: argparse and printing only.
+
+Each module of this package adds the parsers of one group of commands (``register(sub,
+formatter)``, with ``set_defaults(func=...)``); ``func(args)`` builds the library's frozen
+configurations from the options, calls the library and prints. No physics lives here.
+
+Exit codes (documented in the README):
+
+* 0 -- done;
+* 1 -- some batch realizations failed (the others are kept);
+* 2 -- unusable input (:class:`micro.InputError`: one line naming the parameter, file, row or
+  column and the allowed range), also argparse's own usage errors;
+* 3 -- a numerical solve did not converge (:class:`micro.ConvergenceError`, with the last
+  residuals in the message);
+* 130 -- interrupted (Ctrl-C).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from micro._validate import EXIT_CONVERGENCE, EXIT_INPUT, ConvergenceError, InputError
+
+from homogenize.cli import bench, cell, experiments, macro, rve, tables
+from homogenize.cli._common import Formatter, check_output_dir, check_outputs
+
+__all__ = ["main", "build_parser"]
+
+# Command groups, in the order their commands appear in --help.
+_GROUPS = (macro, rve, cell, tables, experiments, bench)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="mapsim", formatter_class=Formatter,
+        description="Particle-resolved micromechanics of magnetic active polymers. "
+                    "All quantities in SI units (m, Pa, T, A/m, N/m^3). Exit codes: 0 done, "
+                    "1 some batch realizations failed, 2 bad input, 3 a solve did not "
+                    "converge, 130 interrupted.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for group in _GROUPS:
+        group.register(sub, Formatter)
+    return parser
+
+
+def _flag(dest: str) -> str:
+    return "--" + dest.replace("_", "-")
+
+
+def _check_paths(args) -> None:
+    """Outputs that are inputs, devices, directories or unwritable are refused before any work
+    (each command declares its ``outputs``, ``output_dirs`` and ``inputs`` by option name)."""
+    inputs = [getattr(args, d, None) for d in getattr(args, "inputs", ())]
+    check_outputs([(_flag(d), getattr(args, d, None)) for d in getattr(args, "outputs", ())],
+                  inputs)
+    for d in getattr(args, "output_dirs", ()):
+        check_output_dir(_flag(d), getattr(args, d, None))
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        _check_paths(args)
+        return int(args.func(args) or 0)
+    except InputError as exc:
+        print(f"mapsim {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except ConvergenceError as exc:
+        print(f"mapsim {args.command}: did not converge: {exc}", file=sys.stderr)
+        return EXIT_CONVERGENCE
+    except KeyboardInterrupt:
+        print(f"mapsim {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
