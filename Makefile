@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test venv bench clean
+.PHONY: run test venv bench clean peers
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,10 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/mapsim bench --json results/bench/bench.json
+
+# Third-party solvers the tests use when present (Debian): CalculiX runs the exported decks.
+peers:
+	apt-get update && apt-get install -y calculix-ccx
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -83,7 +83,8 @@ def write_vtu(path, result, case: str = "magnetic", *, B_T=None, gradB_T_per_m=N
     path : path -- output ``.vtu``
     result : CellResult -- computed with ``keep_fields=True``
     case : str -- one of :func:`all_cases` ``(result)``
-    B_T : float or array_like, shape (3,), optional -- applied flux density [T] (a scalar is along z)
+    B_T : float or array_like, shape (3,), optional -- applied flux density [T] (a scalar
+        is along z)
     gradB_T_per_m : float or array_like, shape (3,), optional -- field gradient dB_z/dx_i [T/m]
     law : str, optional -- magnetization law of the particles
     """
