@@ -21,6 +21,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _kernels as kn
+from scipy.linalg import cho_factor, cho_solve
+from scipy.sparse.linalg import splu
 
 __all__ = ["BSROp", "BlockVCycle", "block_cg", "grid_colours", "greedy_colours"]
 
@@ -144,11 +146,9 @@ class BlockVCycle:
         if Ac.shape[0] <= 4000:
             # the coarsest matrix of smoothed aggregation is nearly dense: dense Cholesky (LAPACK,
             # multithreaded) beats sparse LU, and one solve handles all columns
-            from scipy.linalg import cho_factor, cho_solve
             fac = cho_factor(Ac.toarray())
             self.coarse_solve = lambda B: cho_solve(fac, B)
         else:
-            from scipy.sparse.linalg import splu
             self.coarse_solve = splu(sp.csc_matrix(Ac)).solve
         self.sweeps = int(sweeps)
         self.shape = lv[0].A.shape

@@ -19,6 +19,9 @@ import functools
 
 import numpy as np
 import scipy.sparse as sp
+from skfem import Basis, BilinearForm, ElementHex1, ElementVector, MeshHex
+from skfem.helpers import ddot, sym_grad, trace
+from homogenize import _kernels as kn
 
 __all__ = ["CORNERS", "OFFSETS", "reference_matrices", "node_coefficients", "assemble_bsr",
            "affine_load", "body_force_load", "element_mean_strain",
@@ -42,8 +45,6 @@ def _unit_reference_matrices(sri: bool = True) -> tuple[np.ndarray, np.ndarray]:
     locks volumetrically near incompressibility (PDMS: nu = 0.45, and rigid particles force an
     almost isochoric flow around them), which inflates the stiffening by a large factor.
     """
-    from skfem import Basis, BilinearForm, ElementHex1, ElementVector, MeshHex
-    from skfem.helpers import ddot, sym_grad, trace
 
     mesh = MeshHex()   # the unit cube, one element
     basis = Basis(mesh, ElementVector(ElementHex1()))
@@ -161,7 +162,6 @@ def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float, *, method: str = "nu
         raise ValueError(f"method must be 'numba' or 'blas', got {method!r}")
     G = _stencil_blocks(h)
     if method == "numba":
-        from . import _kernels as kn
         voxel_stencil_blocks = (kn.voxel_stencil_blocks if n ** 3 >= kn.PARALLEL_MIN_ROWS
                                 else kn.voxel_stencil_blocks_serial)
         idx_dtype = np.int32 if 27 * n ** 3 < 2 ** 31 else np.int64

@@ -15,6 +15,9 @@ import scipy.sparse as sp
 from micro._validate import InputError
 from homogenize._effective_media import lame
 from homogenize.cell import voigt_to_tensor
+from scipy.sparse.linalg import splu
+from skfem import Basis, BilinearForm, ElementTetP2, ElementVector, LinearForm, MeshTet
+from skfem.helpers import ddot, sym_grad, trace
 
 __all__ = ["conforming_tet_mesh", "homogenize_conforming"]
 
@@ -84,9 +87,6 @@ def conforming_tet_mesh(box_m: float, centers_m, radii_m, mesh_size_m: float):
 def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(2e6, 0.45),
                           particle=(211e9, 0.29)) -> dict:
     """C_eff (6x6 Voigt, Pa) of the periodic cell with P2 tetrahedra on a conforming gmsh mesh."""
-    from scipy.sparse.linalg import splu
-    from skfem import Basis, BilinearForm, ElementTetP2, ElementVector, LinearForm, MeshTet
-    from skfem.helpers import ddot, sym_grad, trace
 
 
     pts, tets, phase = conforming_tet_mesh(box_m, centers_m, radii_m, mesh_size_m)

@@ -34,6 +34,7 @@ import itertools
 from micro.dipoles import solve
 from micro.magnetization import get_law
 from micro.particles import generate_rve
+from homogenize.cell import homogenize_rve
 
 __all__ = ["QUANTITIES", "get_evaluator", "RVEEvaluator", "SyntheticEvaluator", "synthetic_truth"]
 
@@ -351,7 +352,6 @@ class RVEEvaluator:
                "M_eff_A_per_m": state.M_eff_A_per_m, "virial_stress_Pa": state.virial_stress_Pa,
                "volume_m3": rve.volume_m3, "phi_rve": rve.phi}
         if s["fem"]:
-            from homogenize.cell import homogenize_rve
             forces = state.total_force_N
             cell = homogenize_rve(rve, s["voxels"], forces_N=forces,
                                   virial_stress_Pa=state.virial_stress_Pa, **s["cell"])

@@ -47,6 +47,8 @@ from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_sht
 from .mesh import VoxelMesh, voxelize
 from homogenize._amg import BlockVCycle, BSROp, grid_colours
 from homogenize._amg import block_cg
+import pyamg
+from scipy.sparse.linalg import splu
 
 __all__ = ["Material", "CellConfig", "homogenize", "CellResult", "homogenize_rve", "homogenize_mesh", "isotropic_projection",
            "anisotropy_index", "voigt_to_tensor", "tensor_to_voigt",
@@ -177,7 +179,6 @@ class _CellSolver:
 
     def __init__(self, mesh: VoxelMesh, lam, mu, *, deflate: bool, stiff_mask, tol: float,
                  maxiter: int, solver: str = "fast"):
-        import pyamg
 
 
         if solver not in SOLVERS:
@@ -225,7 +226,6 @@ class _CellSolver:
         if self.Z is not None:
             self.KZ = (K @ self.Z).tocsc()
             Ec = (self.Z.T @ self.KZ).tocsc()
-            from scipy.sparse.linalg import splu
             self.Esolve = splu(Ec).solve
         t["deflation_setup"] = time.perf_counter() - t0
         self.timings = t

@@ -72,6 +72,11 @@ from micro._validate import InputError
 from ._evaluate import QUANTITIES, get_evaluator
 from ._stats import summarize, t_half_width
 from ._study import Study, Task, _unit_of, load_study
+from tqdm import tqdm
+import shutil
+import h5py
+from micro._io import open_hdf5
+import itertools
 
 __all__ = ["run_batch", "aggregate", "read_table", "Table", "Estimate", "BatchError",
            "parts_dir_for", "interpolate", "body_force_from_table", "modulus_from_table",
@@ -196,7 +201,6 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
     n_done = len(tasks) - len(todo)
     failures = []
     if todo:
-        from tqdm import tqdm
         ctx = contextlib.nullcontext(client) if client is not None else \
             _dask_client(scheduler, workers, processes)
         with ctx as cl, tqdm(total=len(tasks), initial=n_done, desc=f"batch {study.name}",
@@ -246,7 +250,6 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
     write_table(out, study, data, man, evaluator.id)
     write_json(out.with_name(out.stem + ".manifest.json"), man)
     if clean:
-        import shutil
         shutil.rmtree(parts, ignore_errors=True)
     return out
 
@@ -285,7 +288,6 @@ def aggregate(study: Study, parts: Path, evaluator_id: str) -> dict:
 
 
 def _str_array(values):
-    import h5py
     return np.array(values, dtype=h5py.string_dtype())
 
 
@@ -300,7 +302,6 @@ def write_table(out, study: Study, data: dict, man: dict, evaluator_id: str) -> 
     Arrays in ``data`` are indexed by the flat grid point (C order over the grid axes); they
     are stored reshaped to one dimension per grid axis.
     """
-    import h5py
     R = study.realizations
     grid_shape = tuple(study.grid_shape)
     axis_names = study.axis_names
@@ -475,7 +476,6 @@ def read_table(path) -> Table:
     the file layout: version 2 files store one dimension per grid axis, version 1 files a flat
     ``point`` dimension.
     """
-    from micro._io import open_hdf5
     path = Path(path)
     with open_hdf5(path, "table") as h:
         if h.attrs.get("format") != FORMAT:
@@ -491,7 +491,6 @@ def read_table(path) -> Table:
             cols = {a: _decode_axis(h[a][()]) for a in axes}
             points = tuple({a: cols[a][i] for a in axes} for i in range(P))
         else:
-            import itertools
             cols = {a: _decode_axis(h[a][()]) for a in axes}
             points = tuple(dict(zip(axes, combo))
                            for combo in itertools.product(*(cols[a] for a in axes)))
@@ -590,7 +589,6 @@ def interpolate(table, quantity: str, *, component: str | None = None,
     shape = tuple(len(v) for v in table.axes.values())
     vals = table.component_values(quantity, component)
     q = table.resolve_quantity(quantity)
-    import itertools
     mean = 0.0
     var_terms = []
     for combo in itertools.product(*per_axis):
@@ -652,7 +650,6 @@ def modulus_from_table(table, phi: float, *, confidence: float | None = None,
     coords = {"phi": phi, **other_axes}
     ests = []
     field_axes = [a for a in ("B_T", "gradB_T_per_m") if a in table.axes and a not in coords]
-    import itertools
     for combo in itertools.product(*(table.axes[a] for a in field_axes)):
         ests.append(interpolate(table, "E_eff_Pa", confidence=confidence, **coords,
                                 **dict(zip(field_axes, combo))))

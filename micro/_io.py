@@ -12,6 +12,8 @@ import tempfile
 from importlib import metadata
 from pathlib import Path
 from micro._validate import InputError
+import h5py
+import numpy as np
 
 __all__ = ["atomic_path", "atomic_write_text", "write_json", "manifest", "git_revision",
            "open_hdf5"]
@@ -74,7 +76,6 @@ def open_hdf5(path, what: str):
 
     A missing file or one that is not HDF5 raises :class:`micro.InputError`, never a traceback.
     """
-    import h5py
 
     path = Path(path)
     if not path.is_file():
@@ -86,7 +87,6 @@ def open_hdf5(path, what: str):
 
 
 def _default(o):
-    import numpy as np
     if isinstance(o, np.ndarray):
         return o.tolist()
     if isinstance(o, (np.floating, np.integer, np.bool_)):

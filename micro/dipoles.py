@@ -44,6 +44,12 @@ from ._validate import ConvergenceError, InputError, check_choice, check_finite,
 from .magnetization import LAW_NAMES, MagnetizationLaw, get_law
 from .materials import SEED
 from .rve import minimum_image
+from scipy.spatial import cKDTree
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.optimize import NoConvergence, newton_krylov
+from scipy.sparse.linalg import LinearOperator
+from scipy.constants import k as KB
 
 __all__ = ["MagneticState", "ConvergenceError", "solve", "applied_gradient", "DipoleSum",
            "langevin_coupling", "LANGEVIN_LAMBDA_MAX",
@@ -321,7 +327,6 @@ class _NearFieldPreconditioner:
     factor = 1.25            # pairs with gaps below a quarter of the contact distance
 
     def __init__(self, centers_m, box_m, radii_m, law, m_sat, vol):
-        from scipy.spatial import cKDTree
         n = centers_m.shape[0]
         self.law, self.m_sat, self.vol = law, m_sat, vol
         self.n = n
@@ -348,7 +353,6 @@ class _NearFieldPreconditioner:
                                (2 * len(i), 3, 3))
         cols = np.broadcast_to(3 * np.r_[j, i][:, None, None] + np.arange(3)[None, None, :],
                                (2 * len(i), 3, 3))
-        import scipy.sparse as sp
         self.T = sp.csr_matrix((np.concatenate([blk, blk]).ravel(),
                                 (rows.ravel(), cols.ravel())), shape=(3 * n, 3 * n))
         self.n_pairs = len(i)
@@ -360,8 +364,6 @@ class _NearFieldPreconditioner:
 
     def update(self, H_A_m):
         """Factorise ``P = I - D(H) T_near`` at the local fields ``H_A_m`` (N, 3)."""
-        import scipy.sparse as sp
-        import scipy.sparse.linalg as spla
         D = _law_jacobian(self.law, H_A_m, self.m_sat, self.vol)
         n = self.n
         Dm = sp.bsr_matrix((D, np.arange(n), np.arange(n + 1)), shape=(3 * n, 3 * n))
@@ -441,8 +443,6 @@ def _fixed_point(g, x0, tol, max_iter, damping=1.0):
 
 
 def _newton_krylov(g, x0, tol, max_iter, precond=None):
-    from scipy.optimize import NoConvergence, newton_krylov
-    from scipy.sparse.linalg import LinearOperator
     hist = []
 
     def resid(x):
@@ -478,8 +478,6 @@ def langevin_coupling(centers_m, box_m, m_sat_Am2, T_K):
     ``lambda_i = mu0 m_i m_j / (4 pi r_ij^3 k_B T)`` [-]: the ratio of the largest dipolar
     pair energy to the thermal energy. Returns ``(lambda (N,), nearest index (N,))``.
     """
-    from scipy.constants import k as KB
-    from scipy.spatial import cKDTree
     n = centers_m.shape[0]
     lam_img = MU0 * m_sat_Am2 ** 2 / (4 * math.pi * box_m ** 3 * KB * T_K)
     if n < 2:
@@ -507,7 +505,6 @@ def _check_langevin_coupling(c, box, m_sat, T_K):
     i = int(np.argmax(lam))
     if lam[i] < LANGEVIN_LAMBDA_MAX:
         return
-    from scipy.constants import k as KB
     # moment at which lambda = 3/2 for this pair distance (m_i m_j -> m^2)
     ratio = math.sqrt(LANGEVIN_LAMBDA_MAX / lam[i])
     dist = float((MU0 * m_sat[i] * m_sat[j[i]] / (4 * math.pi * lam[i] * KB * T_K)) ** (1 / 3))

@@ -32,6 +32,11 @@ from scipy import special
 from . import _kernels as K
 from ._validate import InputError, check_positive, check_range, check_choice
 from .rve import RVE, minimum_image
+from scipy.optimize import brentq
+from scipy.spatial.transform import Rotation
+from scipy.spatial.distance import pdist
+from tqdm import tqdm
+from scipy.spatial import cKDTree
 
 __all__ = ["ParticleConfig", "place", "LogNormal", "Histogram", "Monodisperse", "CoreShell", "default_distribution",
            "generate_rve", "describe", "cluster_packing_density", "pair_correlation",
@@ -130,7 +135,6 @@ class LogNormal(_Distribution):
     @classmethod
     def from_mean(cls, mean_m: float, gsd: float, r_min_m: float, r_max_m: float) -> "LogNormal":
         """The truncated lognormal whose mean (after truncation) is ``mean_m`` [m]."""
-        from scipy.optimize import brentq
 
         check_positive("mean radius", mean_m, "m")
         check_range("gsd (geometric standard deviation)", gsd, 1.0, 10.0, "", lo_open=True)
@@ -544,7 +548,6 @@ def _compact_cluster(r, density, gap, rng):
 
 def _random_rotation(rng):
     """A uniformly random rotation matrix (normalised Gaussian quaternion)."""
-    from scipy.spatial.transform import Rotation
 
     q = rng.normal(size=4)
     return Rotation.from_quat(q / np.linalg.norm(q)).as_matrix()
@@ -659,7 +662,6 @@ def _span(x):
     """Largest distance between two centres of a body [m] (0 for a single particle)."""
     if len(x) < 2:
         return 0.0
-    from scipy.spatial.distance import pdist
     return float(pdist(x).max())
 
 
@@ -684,7 +686,6 @@ def _place_bodies(offsets, radii, body_start, box, gap, rng, max_attempts, kerne
     state = np.zeros(3, dtype=np.int64)
     bar = None
     if progress:
-        from tqdm import tqdm
         bar = tqdm(total=nbody, desc="placing", unit="body", file=sys.stderr)
     try:
         while True:
@@ -747,7 +748,6 @@ def _compress(radii, box, gap, rng, max_attempts, progress=False):
     L0 = L
     bar = None
     if progress and L0 > box:
-        from tqdm import tqdm
         bar = tqdm(total=100, desc="compressing", unit="%", file=sys.stderr)
     try:
         while L > box:
@@ -993,7 +993,6 @@ def _unwrap(centers, box):
 
 def pair_distances(rve: RVE, r_max_m: float):
     """All centre pairs whose minimum-image distance is below ``r_max_m``: (i, j, d [m])."""
-    from scipy.spatial import cKDTree
 
     if rve.n < 2:
         return np.zeros(0, int), np.zeros(0, int), np.zeros(0)

@@ -21,6 +21,7 @@ import numpy as np
 from ._io import atomic_path
 from ._validate import InputError
 from micro._io import open_hdf5
+import h5py
 
 __all__ = ["RVE", "minimum_image", "FORMAT_VERSION"]
 
@@ -212,7 +213,6 @@ class RVE:
     # ------------------------------------------------------------------ HDF5 I/O
     def save(self, path) -> Path:
         """Write the RVE to HDF5 at ``path`` atomically (units as attributes); return the path."""
-        import h5py
 
         path = Path(path)
         with atomic_path(path) as tmp:

@@ -19,6 +19,7 @@ from micro.particles import generate_rve
 from homogenize.cell import homogenize_rve
 from homogenize.cell import Material, homogenize_mesh
 from homogenize.mesh import voxelize
+import numba
 
 
 SOLVER_CONFIG = ("CG, relative residual tol 1e-8, deflated by the 6 rigid-body modes of every stiff "
@@ -31,7 +32,6 @@ SOLVER_CONFIG = ("CG, relative residual tol 1e-8, deflated by the 6 rigid-body m
 
 def _machine() -> dict:
 
-    import numba
     return {"load_average_1_5_15min": list(os.getloadavg()), "cpu_count": os.cpu_count(),
             "numba_threads": numba.get_num_threads()}
 

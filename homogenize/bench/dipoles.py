@@ -43,6 +43,7 @@ from micro.particles import generate_rve
 import shutil
 import subprocess
 import tempfile
+import numba
 
 _L = 1e-6
 
@@ -79,7 +80,6 @@ def _rec_direct(quick):
     src = rng.random((ns, 3)) * _L
     mom = rng.normal(size=(ns, 3)) * 1e-16
     obs = rng.random((no, 3)) * _L + [2 * _L, 0, 0]
-    import numba
     dipole_field_direct(src[:10], mom[:10], obs[:10], parallel=False)      # compile / load
     dipole_field_direct(src[:10], mom[:10], obs[:10], parallel=True)
     t, H = _best(lambda: dipole_field_direct(src, mom, obs, parallel=False), repeat=3)
@@ -119,7 +119,6 @@ def _simd_counts():
     """Packed double-precision instructions in the direct kernel's machine code (compiled
     again without the cache: numba does not keep the assembly of cached functions)."""
 
-    import numba
     fn = numba.njit(K._dipole_field_direct_impl)
     a = np.zeros((3, 4))
     fn(a, a, a + 1.0, np.empty((3, 4)))
@@ -472,7 +471,6 @@ def _rec_lammps(quick):
 
 
 def _nb_threads():
-    import numba
     return numba.get_num_threads()
 
 

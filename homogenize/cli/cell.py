@@ -12,6 +12,9 @@ from micro.rve import RVE
 from homogenize.cell import homogenize_rve
 from homogenize.studies.cell_studies import phi_study, plot_phi_study
 from homogenize.studies.cell_studies import dilute_convergence_study, plot_dilute_convergence
+from micro.dipoles import solve
+from homogenize._cell_output import write_vtu
+from homogenize._cell_output import plot_slice
 
 _DESCRIPTION = """\
 Periodic voxel FEM of an RVE (HDF5 written by `mapsim rve`): effective stiffness C_eff (6x6
@@ -47,7 +50,6 @@ def _cmd(args) -> int:
     forces = virial = None
     mag = None
     if args.B is not None:
-        from micro.dipoles import solve
         B = _parse_vec(args.B, "B", "T")
         G = _parse_vec(args.gradB if args.gradB is not None else "0", "gradB", "T/m")
         state = solve(rve, B, G, args.law)
@@ -72,10 +74,8 @@ def _cmd(args) -> int:
               if k != "func"}
     out["manifest"] = manifest(config, getattr(rve, "seed", None))
     if args.vtu:
-        from homogenize._cell_output import write_vtu
         write_vtu(args.vtu, res, "magnetic" if forces is not None else "e11")
     if args.png:
-        from homogenize._cell_output import plot_slice
         plot_slice(args.png, res, "magnetic" if forces is not None else "e11")
     write_json(args.json, out)
     write_json(Path(args.json).with_name(Path(args.json).stem + ".manifest.json"), out["manifest"])

@@ -12,6 +12,7 @@ from homogenize.experiments.diagnose import diagnose
 from homogenize.experiments.io import load_experiment
 from homogenize.experiments.study import run_study, summarize, write_study
 from homogenize.experiments import tables as T
+from homogenize.experiments.report import write_report
 
 __all__ = ["register"]
 
@@ -42,7 +43,6 @@ def _diagnose(args) -> int:
         write_json(out.with_name(out.stem + ".manifest.json"),
                    manifest({"experiment": str(args.experiment), "command": "diagnose"}, None))
     if args.report:
-        from homogenize.experiments.report import write_report
         discussion = None
         if args.discussion:
             try:

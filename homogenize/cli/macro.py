@@ -16,6 +16,7 @@ from homogenize.macro.fem import Material
 from homogenize.macro.channel import ChannelGeometry, solve_channel
 from homogenize.macro.exporters import DIRECTIONS
 from homogenize.macro.cantilever import MODELS
+from micro._io import manifest, write_json
 
 __all__ = ["register"]
 
@@ -52,7 +53,6 @@ def _beam(args) -> int:
                              nz=args.nz, gravity_m_s2=args.gravity_m_s2, n_steps=args.steps)
         rows.append(r.to_dict())
     if args.json:
-        from micro._io import manifest, write_json
         write_json(args.json, {"strip": vars(strip), "material": vars(mat), "results": rows,
                                "manifest": manifest(vars(args) | {"func": None}, None)})
     print(f"{'model':<12} {'tip [m]':>12} {'horizontal [m]':>15} {'dofs':>8}  mesh")
@@ -70,7 +70,6 @@ def _channel(args) -> int:
     r = solve_channel(geo, mat, args.body_force_N_m3, order=args.order, nc=args.nc,
                       gravity_m_s2=args.gravity_m_s2)
     if args.json:
-        from micro._io import manifest, write_json
         write_json(args.json, {"result": r.to_dict(),
                                "manifest": manifest(vars(args) | {"func": None}, None)})
     print(json.dumps({k: v for k, v in r.to_dict().items()}, indent=1))

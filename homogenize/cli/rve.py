@@ -24,6 +24,9 @@ from micro.magnetization import LAW_NAMES, get_law
 from micro.materials import FE, FE3O4, SEED
 from micro import particles as P
 from micro.particles import describe, generate_rve
+from micro.rve import RVE
+from micro._viz import export_mesh
+from micro._viz import save_picture
 
 _DESCRIPTION = __doc__
 
@@ -189,7 +192,6 @@ def _cmd(args) -> int:
 
     _check_outputs(args)
     if args.load:
-        from micro.rve import RVE
         rve = RVE.load(args.load)
         dist = None
     else:
@@ -214,13 +216,11 @@ def _cmd(args) -> int:
         write_json(out.with_name(out.stem + ".manifest.json"), manifest(config, rve.seed))
         print(f"wrote {args.out}")
     if args.ply or args.glb:
-        from micro._viz import export_mesh
         for f in (args.ply, args.glb):
             if f:
                 export_mesh(rve, f)
                 print(f"wrote {f}")
     if args.png:
-        from micro._viz import save_picture
         save_picture(rve, args.png, dist)
         print(f"wrote {args.png}")
     if args.json:

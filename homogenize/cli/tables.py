@@ -20,6 +20,7 @@ from homogenize.studies.rve_size import rve_size_study
 from homogenize.tables import BatchError
 from homogenize._stats import welch_permutation
 from homogenize.studies.chain import run_chain
+from micro._io import manifest, write_json
 
 _BATCH_DOC = """\
 Run a study (TOML file: grid of conditions x random realizations) on Dask and write the
@@ -145,7 +146,6 @@ def _cmd_compare(args) -> int:
     print(f"  permutation test ({res.n_resamples} resamples): p = {res.p_permutation:.3g}")
     print(f"  Hedges' g = {res.hedges_g:.3g}")
     if args.json:
-        from micro._io import manifest, write_json
         write_json(args.json, {"quantity": q, "component": args.component, "unit": unit,
                                "point_a": {"index": a, **table.points[a]},
                                "point_b": {"index": b, **table.points[b]},

@@ -37,6 +37,9 @@ from homogenize.experiments.tables import Unavailable, filler_stiffness_ratio
 from homogenize.macro import closed_form
 from micro._io import atomic_write_text
 from micro._validate import InputError
+from micro._validate import InputError
+from scipy.interpolate import CubicSpline
+from scipy.constants import k as kB
 
 __all__ = ["local_field_factor", "dipolar_local_field_point", "Unavailable", "cylinder_demag_factor", "shape_stress_coefficient", "uniaxial_stress_Pa", "HYPERELASTIC_FORMS",
            "eb_compliance_m4_N", "elastica_ratio", "LAWS", "particle_magnetization_A_per_m",
@@ -82,7 +85,6 @@ def cylinder_demag_factor(aspect_ratio):
     """
     a = np.asarray(aspect_ratio, dtype=float)
     if np.any(~np.isfinite(a)) or np.any(a <= 0):
-        from micro._validate import InputError
         raise InputError(f"aspect_ratio must be finite and > 0, got {aspect_ratio!r}")
     out = np.array([_demag_scalar(float(x)) for x in a.ravel()]).reshape(a.shape)
     return float(out) if out.ndim == 0 else out
@@ -241,7 +243,6 @@ _HEAVY_LOAD = 2.0 - math.sqrt(2.0)
 
 @functools.lru_cache(maxsize=1)
 def _spline():
-    from scipy.interpolate import CubicSpline
     la, ratio = _elastica_table()
     return CubicSpline(la, ratio)
 
@@ -276,7 +277,6 @@ def langevin_moment_Am2(chi0: float, Ms_A_per_m: float) -> float:
 
     ``chi0 = mu0 m Ms / (3 k_B T)`` (the slope of ``Ms L(mu0 m H / k_B T)`` at H = 0).
     """
-    from scipy.constants import k as kB
     return 3.0 * kB * _LANGEVIN_T_K * chi0 / (mu_0 * Ms_A_per_m)
 
 

@@ -55,6 +55,7 @@ import numpy as np
 from . import _physics as P
 from .io import Experiment
 from homogenize.experiments.tables import microstructure_stress_coefficient
+from homogenize.experiments.tables import microstructure_stress_coefficient
 
 __all__ = ["CAUSES", "DESCRIPTIONS", "VARIANTS", "ModelSpec", "Param", "parameters",
            "predict", "applicable", "LORENTZ_FACTOR"]
@@ -166,7 +167,6 @@ def _probe(cause, exp):
     if cause == "dipolar_interaction":
         P.local_field_factor(0.1)
         if exp.kind == "magnetostriction":
-            from .tables import microstructure_stress_coefficient
             microstructure_stress_coefficient(0.1, 1.0)
     if cause == "oxide_shell":
         P.core_shell_moment_ratio(np.array([20e-9]), 1e-9, 25e-9, 7870.0, 178.0)

@@ -44,6 +44,8 @@ from .io import Experiment
 from homogenize.experiments.causes import composite_magnetization_A_per_m, predicted_stress_coefficients
 from dataclasses import replace as _replace
 from dataclasses import replace
+from homogenize.experiments.causes import default_params
+from tqdm import tqdm
 
 __all__ = ["Diagnosis", "FitResult", "diagnose", "make_folds", "fit", "cross_validate",
            "covariates", "MIN_GAIN", "ALPHA"]
@@ -276,7 +278,6 @@ def cross_validate(spec: ModelSpec, exp: Experiment, folds, full: FitResult | No
     """Held-out predictions of every row, and the full-data fit."""
     full = full or fit(spec, exp)
     if folds is None:
-        from .causes import default_params
         return predict(spec, exp, default_params(spec, exp)), full
     pred = np.empty(exp.n_rows)
     all_idx = np.arange(exp.n_rows)
@@ -369,7 +370,6 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
     steps, rounds, round_bases = [], [], []
     bar = None
     if progress:
-        from tqdm import tqdm
         bar = tqdm(desc=f"diagnose {exp.kind}", unit="model", file=sys.stderr, leave=False)
     remaining = [c for c in CAUSES if applicable(c, exp)[0]]
     if folds is None:

@@ -67,6 +67,9 @@ from homogenize.cell import bulk_shear, eshelby_dilute, homogenize_rve, young_po
 from micro.dipoles import solve
 from micro._validate import InputError
 from micro._io import atomic_write_text, manifest, write_json
+from tqdm import tqdm
+from micro._io import manifest, write_json
+from scipy.interpolate import PchipInterpolator
 
 __all__ = ["STIFFNESS_PHIS", "STIFFNESS_SEEDS", "STIFFNESS_VOXELS", "RADIUS_VOXELS", "GAP_VOXELS",
            "stiffness_point", "build_stiffness_table", "stiffness_resolution_study", "stiffness_table",
@@ -137,7 +140,6 @@ def build_stiffness_table(phis=STIFFNESS_PHIS, seeds=STIFFNESS_SEEDS, voxels=STI
     rows = []
     it = jobs
     if progress:
-        from tqdm import tqdm
         it = tqdm(jobs, desc="stiffness table (FEM)", unit="RVE", file=sys.stderr)
     t0 = time.perf_counter()
     for p, s in it:
@@ -182,7 +184,6 @@ def stiffness_resolution_study(phi: float = 0.02, voxels=(12, 16, 24, 32, 40), p
     out = {"phi": phi, "rows": rows,
            "rate_of_relative_excess_vs_h": float(np.polyfit(np.log(h), np.log(np.abs(rel)), 1)[0])}
     if path is not None:
-        from micro._io import manifest, write_json
         out["manifest"] = manifest({"function": "homogenize.experiments.tables."
                                     "stiffness_resolution_study", "phi": phi,
                                     "voxels": list(voxels)}, None,
@@ -222,7 +223,6 @@ def filler_stiffness_ratio(phi):
     """
     x, y = _stiffness_interp_nodes()
     p = np.asarray(phi, dtype=float)
-    from scipy.interpolate import PchipInterpolator
     f = PchipInterpolator(x, y, extrapolate=False)
     out = np.where(p <= x[-1], f(np.clip(p, 0.0, x[-1])), 0.0)
     slope = (y[-1] - y[-2]) / (x[-1] - x[-2])
@@ -281,7 +281,6 @@ def build_stress_table(phis=STRESS_PHIS, seeds=STRESS_SEEDS, fields=STRESS_FIELD
     jobs = [(p, s, h) for p in phis for s in seeds for h in fields]
     it = jobs
     if progress:
-        from tqdm import tqdm
         it = tqdm(jobs, desc="dipolar stress table", unit="RVE", file=sys.stderr)
     t0 = time.perf_counter()
     rows = [stress_point(p, s, h) for p, s, h in it]
@@ -388,7 +387,6 @@ def build_cell_stress_table(phis=CELL_PHIS, voxels=CELL_VOXELS, path=None, progr
     t0 = time.perf_counter()
     bar = None
     if progress:
-        from tqdm import tqdm
         bar = tqdm(total=len(phis) * CELL_PER_PHI, desc="cell magnetic stress (FEM)",
                    unit="RVE", file=sys.stderr)
     for p in phis:

@@ -23,6 +23,9 @@ from skfem import (Basis, ElementTetP1, ElementTetP2, ElementVector, LinearForm,
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from micro._validate import InputError, check_choice, check_finite, check_positive, check_range
+import pyamg
+from skfem import BilinearForm
+from skfem.helpers import ddot, grad
 
 __all__ = ["Material", "FEMSolution", "box_mesh", "vector_basis", "load_vector", "linear_solve",
            "neo_hookean_solve", "rigid_body_modes", "probe_displacement"]
@@ -165,7 +168,6 @@ def _solve_free(K, rhs, fixed, solver, rtol, basis):
     if solver == "direct":
         u[I] = spla.spsolve(Kc.tocsc(), fc)
         return u, "direct", 0, ()
-    import pyamg
     B = rigid_body_modes(basis, I)
     ml = pyamg.smoothed_aggregation_solver(Kc.tocsr(), B=B, symmetry="symmetric",
                                            strength=("symmetric", {"theta": 0.0}),
@@ -358,8 +360,6 @@ def _skfem_neo_hookean(basis, u, lam, mu):
 
     Same material law, independent assembly (scikit-fem's own loops, quadrature and dof maps).
     """
-    from skfem import BilinearForm
-    from skfem.helpers import ddot, grad
 
     def pointwise(w):
         H = np.moveaxis(np.asarray(grad(w["prev"])), (0, 1), (-2, -1))

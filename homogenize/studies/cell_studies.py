@@ -16,6 +16,7 @@ from homogenize.cell import homogenize_rve
 from micro._io import atomic_path
 from homogenize.cell import Material, homogenize_mesh
 from homogenize.mesh import voxelize
+from tqdm import tqdm
 
 __all__ = ["phi_study", "plot_phi_study", "dilute_convergence_study", "plot_dilute_convergence"]
 
@@ -28,7 +29,6 @@ def phi_study(phis=(0.01, 0.05, 0.1, 0.2, 0.3), voxels: int = 24, *, matrix_E_Pa
     rows = []
     it = phis
     if progress:
-        from tqdm import tqdm
         it = tqdm(phis, desc="phi study", unit="phi", leave=False)
     for phi in it:
         a = (3.0 * phi / (4.0 * np.pi)) ** (1.0 / 3.0)
@@ -92,7 +92,6 @@ def dilute_convergence_study(voxels=(8, 16, 24, 32, 48, 64), phi: float = 0.01, 
     rows = []
     it = voxels
     if progress:
-        from tqdm import tqdm
         it = tqdm(voxels, desc="dilute sphere refinement", unit="grid", leave=False)
     for n in it:
         # centre slightly off the grid symmetry so no voxel face cuts the sphere symmetrically

@@ -25,6 +25,7 @@ from micro._validate import check_positive, check_range
 from micro._io import atomic_path
 from pathlib import Path
 from micro._io import atomic_write_text, manifest, write_json
+from tqdm import tqdm
 
 __all__ = ["SeedParameters", "seed_body_force", "run_paper", "write_paper", "GRAVITY_M_S2"]
 
@@ -115,7 +116,6 @@ def _richardson(t_a, t_b, k_a, k_b, p):
 def _progress(total, quiet):
     if quiet:
         return None
-    from tqdm import tqdm
     return tqdm(total=total, desc="mapsim paper", file=sys.stderr, unit="step")
 
 

@@ -22,6 +22,7 @@ from homogenize._study import Study, load_study
 from homogenize.tables import _dask_client, read_table, run_batch
 from micro._io import atomic_write_text
 import textwrap
+from scipy import stats
 
 __all__ = ["rve_size_study", "restrict_grid"]
 
@@ -142,7 +143,6 @@ def _write_markdown(path: Path, res: dict) -> None:
 def _plot(path: Path, res: dict) -> None:
     from matplotlib.figure import Figure
     from matplotlib.ticker import NullFormatter
-    from scipy import stats
     fig = Figure(figsize=(6.0, 4.2), layout="constrained")
     ax = fig.add_subplot()
     pts = [row["point"] for row in res["points"]]
