@@ -8,13 +8,16 @@ import numpy as np
 
 from micro._io import manifest, write_json
 from micro._validate import InputError, check_finite, check_positive
-from micro.rve import RVE
-from homogenize.cell import homogenize_rve
-from homogenize.studies.cell_studies import phi_study, plot_phi_study
-from homogenize.studies.cell_studies import dilute_convergence_study, plot_dilute_convergence
 from micro.dipoles import solve
-from homogenize._cell_output import write_vtu
-from homogenize._cell_output import plot_slice
+from micro.magnetization import get_law
+from micro.materials import ElasticMaterial as Material
+from micro.rve import RVE
+
+from homogenize._cell_output import plot_slice, write_pvd
+from homogenize.cell import CellConfig, homogenize
+from homogenize.cli._common import config_of
+from homogenize.studies.cell_studies import (dilute_convergence_study, phi_study,
+                                             plot_dilute_convergence, plot_phi_study)
 
 _DESCRIPTION = """\
 Periodic voxel FEM of an RVE (HDF5 written by `mapsim rve`): effective stiffness C_eff (6x6
@@ -44,39 +47,43 @@ def _parse_vec(text: str | None, name: str, unit: str):
 
 
 def _cmd(args) -> int:
-
-
-    rve = RVE.load(args.rve)
-    forces = virial = None
-    mag = None
+    cfg = CellConfig(voxels=args.voxels, matrix=Material(args.matrix_E, args.matrix_nu),
+                     particle=Material(args.particle_E, args.particle_nu), rigid=args.rigid,
+                     method=args.method, tol=args.tol)
+    field = None
     if args.B is not None:
         B = _parse_vec(args.B, "B", "T")
         G = _parse_vec(args.gradB if args.gradB is not None else "0", "gradB", "T/m")
-        state = solve(rve, B, G, args.law)
-        forces = state.total_force_N
-        virial = np.asarray(state.virial_stress_Pa)
-        mag = {"B_T": B, "gradB_T_per_m": G, "law": args.law,
-               "virial_stress_Pa": virial, "f_eff_dipoles_N_m3": np.asarray(state.f_eff_N_m3),
-               "dipole_iterations": state.iterations}
+        get_law(args.law)
+        field = (B, G)
     elif args.gradB is not None:
         raise InputError("--gradB needs --B (the applied flux density [T])")
-    res = homogenize_rve(rve, args.voxels, forces_N=forces, virial_stress_Pa=virial,
-                         matrix_E_Pa=args.matrix_E, matrix_nu=args.matrix_nu,
-                         particle_E_Pa=args.particle_E, particle_nu=args.particle_nu,
-                         rigid=args.rigid, method=args.method, tol=args.tol,
-                         keep_fields=bool(args.vtu or args.png), progress=not args.quiet)
+    rve = RVE.load(args.rve)
+    state = mag = None
+    if field is not None:
+        B, G = field
+        state = solve(rve, B, G, args.law)
+        mag = {"B_T": B, "gradB_T_per_m": G, "law": state.law,
+               "virial_stress_Pa": np.asarray(state.virial_stress_Pa),
+               "f_eff_dipoles_N_m3": np.asarray(state.f_eff_N_m3),
+               "dipole_iterations": state.iterations}
+    res = homogenize(rve, state, cfg, keep_fields=bool(args.vtu or args.png),
+                     progress=not args.quiet)
     out = res.summary()
     out["rve_file"] = str(args.rve)
     out["phi_rve"] = float(rve.phi)
     if mag is not None:
         out["magnetics"] = mag
-    config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
-              if k != "func"}
-    out["manifest"] = manifest(config, getattr(rve, "seed", None))
+    out["manifest"] = manifest(config_of(args), getattr(rve, "seed", None))
+    case = "magnetic" if state is not None else "e11"
     if args.vtu:
-        write_vtu(args.vtu, res, "magnetic" if forces is not None else "e11")
+        extra = {} if mag is None else {"B_T": mag["B_T"], "gradB_T_per_m": mag["gradB_T_per_m"],
+                                        "law": mag["law"]}
+        for f in write_pvd(args.vtu, res, **extra):
+            if not args.quiet:
+                print(f"wrote {f}", file=sys.stderr)
     if args.png:
-        plot_slice(args.png, res, "magnetic" if forces is not None else "e11")
+        plot_slice(args.png, res, case)
     write_json(args.json, out)
     write_json(Path(args.json).with_name(Path(args.json).stem + ".manifest.json"), out["manifest"])
     if not args.quiet:
@@ -179,7 +186,9 @@ def register(sub, formatter):
                         "stress_mag are variational: their error is ~ tol^2)")
     p.add_argument("--json", required=True, type=Path, help="result JSON file (written atomically)")
     p.add_argument("--vtu", type=Path, default=None,
-                   help="write local fields (displacement, stress, von Mises, phase) as VTU")
+                   help="write the local fields (displacement, stress in VTK order XX YY ZZ XY "
+                        "YZ XZ, von Mises, phase) of every load case: FILE.pvd (a ParaView "
+                        "collection, one step per load case) and FILE_<case>.vtu beside it")
     p.add_argument("--png", type=Path, default=None, help="write a slice figure (PNG)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and summary on stderr")
     p.set_defaults(func=_cmd, outputs=("json", "vtu", "png"), inputs=("rve",))

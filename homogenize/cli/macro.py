@@ -3,22 +3,39 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 from micro._validate import InputError, check_positive
 
-from homogenize.cli._common import write_snippet
+import numpy as np
+from scipy.constants import mu_0 as MU0
+
+from micro.demag import prism_demag_factors
+from micro.materials import SEED
+
+from homogenize.cli._common import config_of, float_in, int_in, parse_at, write_snippet
 from homogenize.cli.tables import (add_beam_table_options, add_export_table_options,
                                    beam_from_table, wrap_export)
 from homogenize.studies.paper import write_paper
-from homogenize.macro.exporters import ExportSpec, export_text
+from homogenize.macro.exporters import ExportSpec, export_text, write_deck
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.fem import Material
 from homogenize.macro.channel import ChannelGeometry, solve_channel
+from homogenize.macro.flow import (BLOOD_PLASMA, CeilingModel, Liquid, field_for_target_gap,
+                                   plot_channel_flow, solve_channel_flow)
 from homogenize.macro.exporters import DIRECTIONS
 from homogenize.macro.cantilever import MODELS
-from micro._io import manifest, write_json
+from homogenize.macro.convergence import converged_tip
+from homogenize.macro.magnets import (Coil, PermanentMagnet, body_force_along_strip,
+                                      linear_magnetization, tabulated_magnetization)
+from homogenize.tables import interpolate, read_table
+from micro._io import atomic_path, manifest, write_json
 
 __all__ = ["register"]
+
+#: the strip length for which the converged 3D FEM bends 4 mm at the Abaqus value 40 kN/m^3
+#: (``mapsim paper``; t = 1 mm, w = 5 mm assumed)
+SEED_STRIP_LENGTH_M = 0.019369
 
 
 def _paper(args) -> int:
@@ -38,44 +55,168 @@ def _export(args) -> int:
     spec = ExportSpec(args.body_force_N_m3, args.E_Pa, args.nu, args.density_kg_m3,
                       direction=args.direction, gravity_m_s2=args.gravity_m_s2, name=args.name,
                       elset=args.elset, index=args.index)
-    return write_snippet(export_text(spec, args.to), args.out, f"{args.to} snippet")
+    if args.deck is None:
+        return write_snippet(export_text(spec, args.to), args.out, f"{args.to} snippet")
+    if args.out == "-":
+        raise InputError("--deck writes files: give --out FILE (.inp for abaqus, .sif for elmer)")
+    if args.deck == "cantilever":
+        geometry = Strip(args.length_m, args.width_m, args.thickness_m)
+    else:
+        geometry = ChannelGeometry(args.a_m, args.b_m, args.c_m, args.d_m, args.wall_m)
+    deck = write_deck(args.deck, args.to, spec, geometry, args.out, element=args.element,
+                      nz=args.deck_nz)
+    for f in deck.files:
+        print(f"wrote {f}")
+    if args.to == "abaqus":
+        print(f"run it with CalculiX: ccx -i {Path(deck.path).with_suffix('')} "
+              f"(tip node {deck.mesh.tip_node + 1}, set NTIP)")
+    return 0
+
+
+def _magnet_source(args):
+    """The permanent magnet or coil of ``--magnet`` (None without it)."""
+    if args.magnet is None:
+        return None
+    size = tuple(args.magnet_size or ())
+    if args.magnet_position is None:
+        raise InputError("--magnet needs --magnet-position X Y Z [m] (the strip occupies "
+                         "[0, L] x [0, w] x [0, t])")
+    if args.magnet == "coil":
+        if len(size) != 2:
+            raise InputError("--magnet coil needs --magnet-size RADIUS LENGTH [m]")
+        if args.current_A is None or args.turns is None:
+            raise InputError("--magnet coil needs --current-A and --turns")
+        return Coil(size[0], size[1], args.turns, args.current_A, args.magnet_position,
+                    tuple(args.magnet_axis))
+    want = 3 if args.magnet == "cuboid" else 2
+    if len(size) != want:
+        what = "A B C (edges)" if want == 3 else "DIAMETER HEIGHT"
+        raise InputError(f"--magnet {args.magnet} needs --magnet-size {what} [m]")
+    if args.remanence_T is None:
+        raise InputError(f"--magnet {args.magnet} needs --remanence-T [T]")
+    return PermanentMagnet(args.magnet, size, args.remanence_T, args.magnet_position,
+                           tuple(args.magnet_direction), tuple(args.magnet_axis))
+
+
+def _magnet_law(args):
+    """M_eff(H) of the composite: from a batch table (interpolated in B_T, no extrapolation)
+    or, without one, demagnetization-limited soft spheres, M = min(3 phi H / (1 - phi),
+    phi Ms) (Clausius-Mossotti for chi -> inf, capped at the saturated particles)."""
+    phi = args.phi if args.phi is not None else SEED.c * SEED.d
+    if args.table:
+        t = read_table(args.table)
+        if "B_T" not in t.axes or len(t.axes["B_T"]) < 2:
+            raise InputError(f"{args.table}: --magnet needs a table with at least two B_T values")
+        B = np.asarray(t.axes["B_T"], dtype=float)
+        others = parse_at(args.table_at)
+        M = [interpolate(t, "M_eff_A_per_m", component="z", phi=phi, B_T=b,
+                         **{k: v for k, v in others.items() if k != "B_T"}).mean for b in B]
+        return tabulated_magnetization(np.concatenate([[0.0], B / MU0]),
+                                       np.concatenate([[0.0], M])), phi, "table"
+    chi = 3.0 * phi / (1.0 - phi)
+    return linear_magnetization(chi, phi * SEED.Ms_A_m), phi, "soft spheres (dilute)"
 
 
 def _beam(args) -> int:
-    if getattr(args, "table", None):   # --table: force + interval from a batch table (tables)
-        return beam_from_table(args)
+    if getattr(args, "table", None) and args.magnet is None:
+        return beam_from_table(args)       # uniform force + interval from a batch table
     strip = Strip(args.length_m, args.width_m, args.thickness_m)
     mat = Material(args.E_Pa, args.nu, args.density_kg_m3)
-    check_positive("nz", args.nz, "")
+    source = _magnet_source(args)
+    force, magnet = args.body_force_N_m3, None
+    if source is not None:
+        M_of_H, phi, law = _magnet_law(args)
+        N = args.demag_factor if args.demag_factor is not None else \
+            prism_demag_factors(strip.length_m, strip.width_m, strip.thickness_m)[2]
+        bf = body_force_along_strip(source, strip, M_of_H, n_points=args.stations,
+                                    demag_factor=N)
+        force = bf.profile()
+        magnet = {"source": vars(source) | {"kind": args.magnet}, "phi": phi,
+                  "magnetization": law, "demag_factor": N, "x_m": bf.x_m,
+                  "B_T": np.einsum("c,nci->ni", bf.weights, bf.B_T),
+                  "body_force_N_m3": bf.transverse_N_m3, "total_force_N": bf.total_force_N}
+        print(f"magnet: {args.magnet} at {tuple(source.position_m)} m; M_eff(H) from {law}, "
+              f"phi = {phi:g}, strip demagnetizing factor N = {N:.4f}; body force "
+              f"{bf.transverse_N_m3.min():.4g} .. {bf.transverse_N_m3.max():.4g} N/m^3 along the "
+              f"strip, net {bf.total_force_N[2]:.4g} N along z")
     rows = []
     for model in args.model:
-        r = solve_cantilever(strip, mat, args.body_force_N_m3, model=model, order=args.order,
-                             nz=args.nz, gravity_m_s2=args.gravity_m_s2, n_steps=args.steps)
+        if model == "fem" and args.nz is None:
+            if source is not None:
+                raise InputError("--magnet with --model fem needs --nz (the converged-mesh "
+                                 "estimate takes a uniform force)")
+            c = converged_tip(strip, mat, force, order=args.order, gravity_m_s2=args.gravity_m_s2)
+            fine = c.meshes[-1]
+            rows.append({"model": "fem", "tip_m": c.tip_m, "tip_horizontal_m": None,
+                         "n_dof": fine[2], "divisions": list(fine[0]), "order": args.order,
+                         "discretization_error_estimate_m": c.error_estimate_m,
+                         "extrapolated_tip_m": c.extrapolated_m,
+                         "meshes": [{"divisions": list(d), "tip_m": u, "n_dof": n}
+                                    for d, u, n in c.meshes]})
+            continue
+        r = solve_cantilever(strip, mat, force, model=model, order=args.order,
+                             nz=args.nz if args.nz is not None else 2,
+                             gravity_m_s2=args.gravity_m_s2, n_steps=args.steps)
         rows.append(r.to_dict())
     if args.json:
         write_json(args.json, {"strip": vars(strip), "material": vars(mat), "results": rows,
-                               "manifest": manifest(vars(args) | {"func": None}, None)})
+                               "magnet": magnet,
+                               "manifest": manifest(config_of(args), None)})
     print(f"{'model':<12} {'tip [m]':>12} {'horizontal [m]':>15} {'dofs':>8}  mesh")
     for r in rows:
-        mesh = "" if r["divisions"] is None else f"{r['divisions']} P{r['order']}"
-        print(f"{r['model']:<12} {r['tip_m']:12.6g} {r['tip_horizontal_m']:15.6g} "
-              f"{r['n_dof']:8d}  {mesh}")
+        mesh = "" if r.get("divisions") is None else f"{tuple(r['divisions'])} P{r['order']}"
+        hor = "-" if r.get("tip_horizontal_m") is None else f"{r['tip_horizontal_m']:.6g}"
+        print(f"{r['model']:<12} {r['tip_m']:12.6g} {hor:>15} {r['n_dof'] or 0:8d}  {mesh}"
+              + (f"  (discretization error ~ {r['discretization_error_estimate_m']:+.2e} m, "
+                 f"Richardson)" if "discretization_error_estimate_m" in r else ""))
     return 0
 
 
 def _channel(args) -> int:
     geo = ChannelGeometry(args.a_m, args.b_m, args.c_m, args.d_m, args.wall_m)
     mat = Material(args.E_Pa, args.nu, args.density_kg_m3)
-    check_positive("nc", args.nc, "")
+    operating = (args.flow_rate_m3_s, args.pressure_drop_Pa)
+    if args.target_gap_m is not None and operating == (None, None):
+        raise InputError("--target-gap-m needs --flow-rate-m3-s or --pressure-drop-Pa")
+    if None not in operating:
+        raise InputError("give either --flow-rate-m3-s or --pressure-drop-Pa, not both")
     r = solve_channel(geo, mat, args.body_force_N_m3, order=args.order, nc=args.nc,
                       gravity_m_s2=args.gravity_m_s2)
-    if args.json:
-        write_json(args.json, {"result": r.to_dict(),
-                               "manifest": manifest(vars(args) | {"func": None}, None)})
-    print(json.dumps({k: v for k, v in r.to_dict().items()}, indent=1))
+    out = {"result": r.to_dict()}
+    print(json.dumps({k: v for k, v in r.to_dict().items()
+                      if not isinstance(v, (list, tuple))}, indent=1))
     if r.closes:
-        print("warning: the linear deflection exceeds the channel height b; the channel would "
-              "close (contact is not modelled)", file=sys.stderr)
+        print("note: the linear ceiling deflection exceeds the channel height b: the channel "
+              "closes (contact); the linear solution beyond contact is not physical",
+              file=sys.stderr)
+    if operating != (None, None):
+        liquid = Liquid("given", args.viscosity_Pa_s, "--viscosity-Pa-s") \
+            if args.viscosity_Pa_s is not None else BLOOD_PLASMA
+        ceiling = CeilingModel.from_fem(geo, mat, nc=max(args.nc, 3), order=args.order)
+        op = {"flow_rate_m3_s": args.flow_rate_m3_s, "pressure_drop_Pa": args.pressure_drop_Pa,
+              "outlet_pressure_Pa": args.outlet_pressure_Pa, "liquid": liquid}
+        if args.target_gap_m is not None:
+            t = field_for_target_gap(ceiling, geo.d_m, args.target_gap_m, **op)
+            flow = t.flow
+            out["target_gap"] = t.to_dict()
+            print(f"target smallest gap {args.target_gap_m:.4g} m: body force "
+                  f"{t.body_force_N_m3:.4g} N/m^3, reached at x = {t.x_target_m:.4g} m")
+        else:
+            flow = solve_channel_flow(ceiling, geo.d_m, body_force_N_m3=args.body_force_N_m3,
+                                      **op)
+        out["flow"] = flow.to_dict()
+        print(f"flow: Q = {flow.flow_rate_m3_s:.4g} m^3/s at pressure drop "
+              f"{flow.pressure_drop_Pa:.4g} Pa ({liquid.name}, {liquid.viscosity_Pa_s:g} Pa s); "
+              f"rigid channel {flow.rigid_flow_rate_m3_s:.4g} m^3/s; smallest gap "
+              f"{flow.min_gap_overall_m:.4g} m at x = {flow.x_min_gap_m:.4g} m"
+              + ("; the channel CLOSES (contact)" if flow.closed else ""))
+        if args.png:
+            fig = plot_channel_flow(flow, target_gap_m=args.target_gap_m)
+            with atomic_path(args.png) as tmp:
+                fig.savefig(tmp, format="png", dpi=120)
+    if args.json:
+        out["manifest"] = manifest(config_of(args), None)
+        write_json(args.json, out)
     return 0
 
 
@@ -130,6 +271,33 @@ def register(sub, formatter) -> None:
     p.add_argument("--elset", default="EALL", help="Abaqus element set of the *DLOAD")
     p.add_argument("--index", type=int, default=1, help="Elmer Material / Body Force number")
     p.add_argument("--out", required=True, help="output file ('-' for stdout)")
+    g = p.add_argument_group(
+        "complete input deck",
+        "With --deck, a runnable deck instead of a snippet: mesh, material, clamped end (the "
+        "strip's root face, or the channel block on glass), static step with the body force "
+        "and gravity, nodal displacements U requested (*NODE FILE/*NODE PRINT). abaqus: one "
+        ".inp that CalculiX runs (ccx -i STEM; checked against mapsim beam --model fem on the "
+        "same mesh to 1e-8); elmer: .sif plus an ElmerGrid mesh directory (checked against "
+        "Elmer's documented keywords only: ElmerSolver is not installable here).")
+    g.add_argument("--deck", choices=("cantilever", "channel"), default=None,
+                   help="write a complete deck of this model (default: none, a snippet)")
+    g.add_argument("--element", choices=("C3D10", "C3D20R"), default="C3D10",
+                   help="abaqus element type of the deck")
+    g.add_argument("--deck-nz", dest="deck_nz", type=int_in("--deck-nz", 1, 16), default=2,
+                   help="element layers through the strip thickness")
+    g.add_argument("--length-m", dest="length_m", type=float, default=SEED_STRIP_LENGTH_M,
+                   help="cantilever free length [m]")
+    g.add_argument("--width-m", dest="width_m", type=float, default=5e-3,
+                   help="cantilever width [m]")
+    g.add_argument("--thickness-m", dest="thickness_m", type=float, default=1e-3,
+                   help="cantilever thickness [m]")
+    g.add_argument("--a-m", dest="a_m", type=float, default=5e-3, help="channel width a [m]")
+    g.add_argument("--b-m", dest="b_m", type=float, default=50e-6, help="channel height b [m]")
+    g.add_argument("--c-m", dest="c_m", type=float, default=0.5e-3,
+                   help="polymer above the channel c [m]")
+    g.add_argument("--d-m", dest="d_m", type=float, default=10e-3, help="channel length d [m]")
+    g.add_argument("--wall-m", dest="wall_m", type=float, default=None,
+                   help="side-wall width [m] (default max(a/2, 2 (b + c)))")
     add_export_table_options(p)
     p.set_defaults(func=wrap_export(_export), outputs=("out",), inputs=("table",))
 
@@ -150,11 +318,45 @@ def register(sub, formatter) -> None:
                    choices=MODELS, help="models to evaluate")
     p.add_argument("--order", type=int, default=2, choices=(1, 2),
                    help="tetrahedron degree of the FEM models")
-    p.add_argument("--nz", type=int, default=3,
-                   help="element layers through the thickness (FEM models)")
-    p.add_argument("--steps", type=int, default=4, help="load increments (neo-hookean)")
+    p.add_argument("--nz", type=int_in("--nz", 1, 16), default=None,
+                   help="element layers through the thickness (FEM models). Default: 'fem' "
+                        "runs two nested meshes (P2: 31x4x2 and 62x8x4 on the half width for "
+                        "the seed strip), reports the fine one (within 0.5 %% of converged) and "
+                        "a Richardson estimate of its discretization error; 'neo-hookean' uses 2")
+    p.add_argument("--steps", type=int_in("--steps", 1, 200), default=4,
+                   help="load increments (neo-hookean)")
     p.add_argument("--json", default=None, help="write the results to this JSON file")
     add_beam_table_options(p)
+    g = p.add_argument_group(
+        "a real magnet (magpylib)",
+        "The body force f(x) = mu0 M_eff(H_in) grad|H_a| varies along the strip: B and "
+        "grad|B| of the source are sampled over the strip (strip frame: [0, L] x [0, w] x "
+        "[0, t], clamp at x = 0), H_in = H_a - N M with the strip's demagnetizing factor N. "
+        "M_eff(H) comes from --table at --phi (interpolated along B_T, never extrapolated) or, "
+        "without a table, from demagnetization-limited soft spheres.")
+    g.add_argument("--magnet", choices=("cuboid", "cylinder", "coil"), default=None,
+                   help="field source (default: none, uniform --body-force-N-m3)")
+    g.add_argument("--magnet-size", type=float, nargs="+", default=None, metavar="M",
+                   help="cuboid: A B C edges; cylinder: DIAMETER HEIGHT; coil: RADIUS LENGTH [m]")
+    g.add_argument("--magnet-position", type=float, nargs=3, default=None,
+                   metavar=("X", "Y", "Z"), help="centre of the source in the strip frame [m]")
+    g.add_argument("--magnet-direction", type=float, nargs=3, default=(0.0, 0.0, 1.0),
+                   metavar=("X", "Y", "Z"), help="magnetization direction of a permanent magnet")
+    g.add_argument("--magnet-axis", type=float, nargs=3, default=(0.0, 0.0, 1.0),
+                   metavar=("X", "Y", "Z"), help="axis of a cylinder or coil (cuboid: its C edge)")
+    g.add_argument("--remanence-T", dest="remanence_T", type=float, default=None,
+                   help="remanent polarization B_r of a permanent magnet [T] (NdFeB ~1.2-1.4)")
+    g.add_argument("--current-A", dest="current_A", type=float, default=None,
+                   help="coil current [A] (the seed's electromagnet: 1.5 A)")
+    g.add_argument("--turns", type=int_in("--turns", 1, 100000), default=None,
+                   help="coil turns")
+    g.add_argument("--demag-factor", dest="demag_factor",
+                   type=float_in("--demag-factor", 0.0, 1.0), default=None,
+                   help="specimen demagnetizing factor for the field direction (default: "
+                        "Aharoni's prism factor of the strip through its thickness, 0.771 for "
+                        "19.4 x 5 x 1 mm)")
+    g.add_argument("--stations", type=int_in("--stations", 3, 2001), default=101,
+                   help="stations along the strip where the field is sampled")
     p.set_defaults(func=_beam, outputs=("json",), inputs=("table",))
 
     p = sub.add_parser(
@@ -173,6 +375,31 @@ def register(sub, formatter) -> None:
                    help="side-wall width [m] (default max(a/2, 2 (b + c)))")
     _material_options(p)
     p.add_argument("--order", type=int, default=2, choices=(1, 2), help="tetrahedron degree")
-    p.add_argument("--nc", type=int, default=2, help="element layers through the ceiling")
+    p.add_argument("--nc", type=int_in("--nc", 1, 12), default=2,
+                   help="element layers through the ceiling")
+    g = p.add_argument_group(
+        "flow through the deformed channel",
+        "Lubrication along the channel, the liquid's pressure lifting the ceiling while the "
+        "body force pulls it down (Gervais et al. 2006, Lab Chip 6, 500); the section's "
+        "conductance from the 2D Poiseuille problem on the deformed cross-section (scikit-fem); "
+        "the ceiling's compliances from the 3D FEM. A gap that closes is reported as closure.")
+    g.add_argument("--flow-rate-m3-s", dest="flow_rate_m3_s",
+                   type=float_in("--flow-rate-m3-s", 0.0, 1.0, "m^3/s", lo_open=True),
+                   default=None, help="imposed flow rate [m^3/s] (default: none)")
+    g.add_argument("--pressure-drop-Pa", dest="pressure_drop_Pa",
+                   type=float_in("--pressure-drop-Pa", 0.0, 1e8, "Pa", lo_open=True),
+                   default=None, help="imposed pressure drop inlet - outlet [Pa] (default: none)")
+    g.add_argument("--outlet-pressure-Pa", dest="outlet_pressure_Pa",
+                   type=float_in("--outlet-pressure-Pa", -1e5, 1e8, "Pa"), default=0.0,
+                   help="gauge pressure at the outlet [Pa]")
+    g.add_argument("--viscosity-Pa-s", dest="viscosity_Pa_s",
+                   type=float_in("--viscosity-Pa-s", 0.0, 1e3, "Pa s", lo_open=True),
+                   default=None, help="liquid viscosity [Pa s] (default: blood plasma at 37 C, "
+                                      "1.2e-3 Pa s)")
+    g.add_argument("--target-gap-m", dest="target_gap_m",
+                   type=float_in("--target-gap-m", 0.0, 1.0, "m", lo_open=True), default=None,
+                   help="find the body force that brings the smallest gap to this height [m] "
+                        "(e.g. 10e-6 to 20e-6 to hold back cells) (default: none)")
+    g.add_argument("--png", default=None, help="plot of gap and pressure along the channel")
     p.add_argument("--json", default=None, help="write the result to this JSON file")
-    p.set_defaults(func=_channel, outputs=("json",))
+    p.set_defaults(func=_channel, outputs=("json", "png"))

@@ -128,6 +128,10 @@ class _VaryingLoad:
         else:
             inner = np.empty(0)
         edges = np.union1d(np.linspace(0.0, L, _N_PANELS + 1), inner)
+        # profile nodes that coincide with a panel edge up to round-off would make empty panels
+        # (and a spline on repeated abscissae): keep one of each such pair
+        edges = edges[np.concatenate([[True], np.diff(edges) > 1e-9 * L])]
+        edges[-1] = L
         self.L, self.edges = L, edges
         h = 0.5 * np.diff(edges)
         mid = 0.5 * (edges[1:] + edges[:-1])

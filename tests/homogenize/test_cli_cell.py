@@ -19,7 +19,7 @@ def rve_file(tmp_path_factory):
 def test_homogenize_writes_results(rve_file, tmp_path):
     out = tmp_path / "cell.json"
     rc = main(["homogenize", str(rve_file), "--voxels", "8", "--json", str(out),
-               "--vtu", str(tmp_path / "cell.vtu"), "--png", str(tmp_path / "cell.png"), "--quiet"])
+               "--vtu", str(tmp_path / "cell.pvd"), "--png", str(tmp_path / "cell.png"), "--quiet"])
     assert rc == 0
     d = json.loads(out.read_text())
     for k in ("C_eff_Pa", "E_eff_Pa", "nu_eff", "f_eff_N_m3", "stress_mag_Pa", "strain_mag",
@@ -28,8 +28,10 @@ def test_homogenize_writes_results(rve_file, tmp_path):
     assert d["n_dof"] == 3 * 8 ** 3 and d["E_eff_Pa"] > 2e6
     assert (tmp_path / "cell.manifest.json").is_file()
     import meshio
-    m = meshio.read(tmp_path / "cell.vtu")
+    m = meshio.read(tmp_path / "cell_e11.vtu")          # one file per load case + a .pvd
     assert m.cells[0].data.shape == (512, 8) and "von_mises_Pa" in m.cell_data
+    pvd = (tmp_path / "cell.pvd").read_text()
+    assert all(f"cell_{c}.vtu" in pvd for c in ("e11", "e22", "e33", "g23", "g13", "g12"))
     assert (tmp_path / "cell.png").read_bytes()[:4] == b"\x89PNG"
 
 
