@@ -14,9 +14,13 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
+# per-run facts (git revision, times, machine) go to an ignored log, so that `make run` on the
+# same code reproduces the committed results byte for byte
+RUNLOG := MAPSIM_RUN_LOG=results/run_log.jsonl
+
 run: $(STAMP)
-	$(BIN)/mapsim paper --out results/paper --json results/paper/paper.json
-	$(BIN)/mapsim chain --out results/chain
+	$(RUNLOG) $(BIN)/mapsim paper --out results/paper --json results/paper/paper.json
+	$(RUNLOG) $(BIN)/mapsim chain --out results/chain
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import micro
+from micro import magnetization
 from micro._validate import InputError
 from micro.particles import CoreShell, LogNormal, Monodisperse
 import itertools
@@ -188,7 +189,7 @@ class SyntheticEvaluator:
 
 # --------------------------------------------------------------------------- real chain
 _FIELD_AXES = ("phi", "B_T", "gradB_T_per_m", "law")
-DEFAULT_LAW = "frohlich-kennelly"
+DEFAULT_LAW = magnetization.DEFAULT_LAW
 # Study keys that build the size distribution and the composition passed to generate_rve
 # (they may be grid axes or [rve] keys). Defaults: the seed paper's powder.
 _DIST_KEYS = {"distribution": "lognormal", "mean_radius_m": 25e-9, "gsd": 1.4,
@@ -254,7 +255,8 @@ class RVEEvaluator:
     """particles -> dipoles -> (FEM): one random RVE at one grid point.
 
     Grid axes ``phi``, ``B_T``, ``gradB_T_per_m`` are required, ``law`` is optional
-    (default Froehlich-Kennelly). The size distribution (``distribution`` = lognormal or
+    (default: :data:`micro.magnetization.DEFAULT_LAW`, each particle the intrinsic law of its
+    regime). The size distribution (``distribution`` = lognormal or
     monodisperse, ``mean_radius_m``, ``gsd``, ``r_min_m``, ``r_max_m``; default the seed's
     powder: mean 25 nm in [10, 50] nm, gsd 1.4), the composition (``shell_thickness_m``,
     ``core_sigma_Am2_kg``, ``calibrate_sigma_Am2_kg``, ...; see :class:`micro.particles.CoreShell`)

@@ -16,7 +16,7 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
     phi = [0.0175, 0.035]          # particle volume fraction [1]
     B_T = [0.005, 0.05, 0.5]       # applied flux density mu0 H along z [T]
     gradB_T_per_m = 1.78           # d|B|/dz [T/m]
-    law = "frohlich-kennelly"      # magnetization law of one particle
+    law = "regime"                 # magnetization law of one particle (micro.magnetization)
     arrangement = ["dispersed", "clusters"]    # any keyword of micro.particles.generate_rve
 
     [rve]        # fixed keywords of micro.particles.generate_rve

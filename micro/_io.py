@@ -116,23 +116,43 @@ def git_revision() -> str:
     return rev + ("-dirty" if dirty else "")
 
 
+#: Environment variable naming a run log (JSON lines). When it is set, the per-run facts of
+#: every manifest (git revision, times, machine, command line) go to that log instead of the
+#: manifest, so that re-running a committed study on the same code reproduces its files byte
+#: for byte (``make run`` sets it to the ignored ``results/run_log.jsonl``).
+RUN_LOG_ENV = "MAPSIM_RUN_LOG"
+
+
 def manifest(config: dict | None = None, seed=None, **extra) -> dict:
-    """A run manifest: configuration, seed, package versions, git revision, time, machine."""
+    """A run manifest: configuration, seed, package versions, git revision, time, machine.
+
+    Extra keywords are added; those ending in ``_utc`` are per-run facts like the time. With
+    the environment variable :data:`RUN_LOG_ENV` set, the per-run facts are appended to that
+    log and the manifest keeps only what determines the numbers (config, seed, versions).
+    """
     versions = {}
     for name in _PACKAGES:
         try:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             versions[name] = None
-    out = {
-        "config": config or {},
-        "seed": seed,
-        "versions": versions,
+    out = {"config": config or {}, "seed": seed, "versions": versions}
+    run = {
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "git_revision": git_revision(),
         "written_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "argv": sys.argv,
     }
-    out.update(extra)
+    for k, v in extra.items():
+        (run if k.endswith("_utc") else out)[k] = v
+    log = os.environ.get(RUN_LOG_ENV)
+    if log:
+        out["run"] = f"per-run facts (git revision, times, machine) in the run log {Path(log).name}"
+        Path(log).parent.mkdir(parents=True, exist_ok=True)
+        with open(log, "a", encoding="utf-8") as fh:
+            fh.write(json.dumps({"config": config or {}, "seed": seed, **run},
+                                default=_default) + "\n")
+    else:
+        out.update(run)
     return out

@@ -41,7 +41,7 @@ from scipy.constants import mu_0 as MU0
 from . import _kernels as K
 from ._ewald import PeriodicSum
 from ._validate import ConvergenceError, InputError, check_choice, check_finite, check_positive, check_range
-from .magnetization import LAW_NAMES, MagnetizationLaw, get_law
+from .magnetization import DEFAULT_LAW, LAW_NAMES, MagnetizationLaw, get_law
 from .materials import SEED
 from .rve import minimum_image
 from scipy.spatial import cKDTree
@@ -516,7 +516,7 @@ def _check_langevin_coupling(c, box, m_sat, T_K):
         f"equations of a near pair turn spontaneously magnetised and lose their unique "
         f"solution. Particles this strongly coupled are not independent superparamagnets (Fe "
         f"is thermally blocked above ~8 nm radius: Neel time >> 100 s): use law "
-        f"'frohlich-kennelly' or 'linear', or moments below {ratio * m_sat[i]:.3g} A m^2 at "
+        f"'regime' or 'linear', or moments below {ratio * m_sat[i]:.3g} A m^2 at "
         f"this spacing (e.g. smaller or oxide cores), or a higher T_K.")
 
 
@@ -531,7 +531,7 @@ def _rve_arrays(rve):
     return box, c, ms, vol
 
 
-def solve(rve, B_T, gradB_T_per_m, law="frohlich-kennelly", *, demag_factor=None, tol=1e-8,
+def solve(rve, B_T, gradB_T_per_m, law=DEFAULT_LAW, *, demag_factor=None, tol=1e-8,
           accuracy=1e-6, method="anderson", summation="auto", max_iter=500, damping=1.0,
           precondition=True,
           rho_kg_m3=SEED.particle_density_kg_m3, sigma_s_Am2_kg=SEED.sigma_s_Am2_kg, c_powder=SEED.c,
@@ -685,7 +685,7 @@ class FieldConfig:
 
     B_T: float | tuple = 0.1
     gradB_T_per_m: float = SEED.gradB_T_per_m
-    law: str = "frohlich-kennelly"
+    law: str = DEFAULT_LAW
     law_params: tuple = ()
     demag_factor: float | None = None
     tol: float = 1e-8

@@ -9,7 +9,7 @@ import numpy as np
 from micro._io import manifest, write_json
 from micro._validate import InputError, check_finite, check_positive
 from micro.dipoles import solve
-from micro.magnetization import get_law
+from micro.magnetization import DEFAULT_LAW, LAW_NAMES, get_law
 from micro.materials import ElasticMaterial as Material
 from micro.rve import RVE
 
@@ -167,8 +167,7 @@ def register(sub, formatter):
     p.add_argument("--gradB", default=None,
                    help="field gradient [T/m]: d|B|/dz scalar or 9 numbers dB_a/dx_b row-major "
                         "(default: 0 when --B is given)")
-    p.add_argument("--law", default="frohlich-kennelly",
-                   choices=("saturated", "linear", "frohlich-kennelly", "langevin"),
+    p.add_argument("--law", default=DEFAULT_LAW, choices=LAW_NAMES,
                    help="magnetization law of one particle")
     p.add_argument("--matrix-E", dest="matrix_E", type=float, default=2e6,
                    help="matrix Young's modulus [Pa]")

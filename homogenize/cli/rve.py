@@ -20,7 +20,7 @@ import numpy as np
 from micro._io import manifest, write_json
 from micro._validate import InputError, check_finite
 from micro.dipoles import METHODS, PME_ABOVE_N, SUMMATIONS, FieldConfig, magnetize
-from micro.magnetization import LAW_NAMES, get_law
+from micro.magnetization import DEFAULT_LAW, LAW_NAMES, get_law
 from micro.materials import FE, FE3O4, SEED
 from micro import particles as P
 from micro.particles import describe, generate_rve
@@ -240,14 +240,27 @@ def _add_magnetics_options(parser) -> None:
                    help="direction of the applied field (any length) [-] (default: 0 0 1)")
     g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=SEED.gradB_T_per_m,
                    help="gradient of |B| along z [T/m] (default: 1.78, the seed paper)")
-    g.add_argument("--law", default="frohlich-kennelly", choices=LAW_NAMES,
-                   help="magnetization law of one particle (default: frohlich-kennelly)")
+    g.add_argument("--law", default=DEFAULT_LAW, choices=LAW_NAMES,
+                   help=f"magnetization law of one particle (default: {DEFAULT_LAW}: each particle "
+                        "the intrinsic law of its regime from its core radius -- Langevin "
+                        "(superparamagnetic), Stoner-Wohlfarth (single-domain), soft ferromagnet "
+                        "with the anisotropy approach to saturation (multi-domain), all behind "
+                        "the sphere's demagnetization N = 1/3). 'apparent-fk' (alias "
+                        "'frohlich-kennelly') is the former APPARENT law applied to the local "
+                        "field: its chi0 = 3 also sets the approach to saturation, which halves "
+                        "the force near 0.6 T; kept for comparison only")
     g.add_argument("--chi", type=float, default=None,
                    help="linear law: intrinsic susceptibility [-] (default: inf, i.e. m = 3 V H)")
     g.add_argument("--chi0", type=float, default=None,
-                   help="frohlich-kennelly: initial apparent susceptibility [-] (default: 3)")
+                   help="apparent-fk: initial apparent susceptibility [-] (default: 3)")
+    g.add_argument("--chi-i", dest="chi_i", type=float, default=None,
+                   help="regime, approach, soft-fk: intrinsic susceptibility of the particle "
+                        "material [-] (default: inf for regime/approach, 1000 for soft-fk)")
     g.add_argument("--T", dest="T_K", type=float, default=None,
-                   help="langevin: temperature [K] (default: 300)")
+                   help="langevin, stoner-wohlfarth, regime: temperature [K] (default: 300)")
+    g.add_argument("--measurement-time", dest="measurement_time_s", type=float, default=None,
+                   help="regime: measurement time of the Neel-Brown blocking criterion [s] "
+                        "(default: 100)")
     g.add_argument("--demag-factor", dest="demag_factor", type=float, default=None,
                    help="specimen demagnetizing factor N in [0, 1] [-] (default: none = "
                         "metallic boundary, internal field = applied field)")
@@ -302,7 +315,9 @@ def field_config(args) -> FieldConfig:
         if np.linalg.norm(d) == 0:
             raise InputError("--B-direction must not be the zero vector")
         B = tuple(B * d / np.linalg.norm(d))
-    params = tuple((k, v) for k, v in (("chi", args.chi), ("chi0", args.chi0), ("T_K", args.T_K))
+    params = tuple((k, v) for k, v in (("chi", args.chi), ("chi0", args.chi0), ("T_K", args.T_K),
+                                       ("chi_i", args.chi_i),
+                                       ("measurement_time_s", args.measurement_time_s))
                    if v is not None)
     get_law(args.law, **dict(params))          # unknown law parameters fail here, before work
     return FieldConfig(B_T=B, gradB_T_per_m=args.gradB_T_per_m, law=args.law,
