@@ -8,12 +8,12 @@ from pathlib import Path
 from micro._validate import InputError, check_positive
 
 import numpy as np
-from scipy.constants import mu_0 as MU0
 
 from micro.demag import prism_demag_factors
 from micro.materials import SEED
 
-from homogenize.cli._common import config_of, float_in, int_in, parse_at, write_snippet
+from homogenize.cli._common import (check_memory, config_of, float_in, int_in, parse_at,
+                                    write_snippet)
 from homogenize.cli.tables import (add_beam_table_options, add_export_table_options,
                                    beam_from_table, wrap_export)
 from homogenize.studies.paper import write_paper
@@ -26,9 +26,9 @@ from homogenize.macro.flow import (BLOOD_PLASMA, CeilingModel, Liquid, field_for
 from homogenize.macro.exporters import DIRECTIONS
 from homogenize.macro.cantilever import MODELS
 from homogenize.macro.convergence import converged_tip
-from homogenize.macro.magnets import (Coil, PermanentMagnet, body_force_along_strip,
-                                      linear_magnetization, tabulated_magnetization)
-from homogenize.tables import interpolate, read_table
+from homogenize.macro.effective import magnetization_from_table, soft_sphere_magnetization
+from homogenize.macro.magnets import Coil, PermanentMagnet, body_force_along_strip
+from homogenize.tables import read_table
 from micro._io import atomic_path, manifest, write_json
 
 __all__ = ["register"]
@@ -99,25 +99,16 @@ def _magnet_source(args):
 
 
 def _magnet_law(args):
-    """M_eff(H) of the composite: from a batch table (interpolated in B_T, no extrapolation)
-    or, without one, demagnetization-limited soft spheres, M = min(3 phi H / (1 - phi),
-    phi Ms) (Clausius-Mossotti for chi -> inf, capped at the saturated particles)."""
+    """M_eff(H) of the composite: from --table at --phi, or demagnetization-limited spheres."""
     phi = args.phi if args.phi is not None else SEED.c * SEED.d
     if args.table:
-        t = read_table(args.table)
-        if "B_T" not in t.axes or len(t.axes["B_T"]) < 2:
-            raise InputError(f"{args.table}: --magnet needs a table with at least two B_T values")
-        B = np.asarray(t.axes["B_T"], dtype=float)
-        others = parse_at(args.table_at)
-        M = [interpolate(t, "M_eff_A_per_m", component="z", phi=phi, B_T=b,
-                         **{k: v for k, v in others.items() if k != "B_T"}).mean for b in B]
-        return tabulated_magnetization(np.concatenate([[0.0], B / MU0]),
-                                       np.concatenate([[0.0], M])), phi, "table"
-    chi = 3.0 * phi / (1.0 - phi)
-    return linear_magnetization(chi, phi * SEED.Ms_A_m), phi, "soft spheres (dilute)"
+        return (magnetization_from_table(read_table(args.table), phi,
+                                         **parse_at(args.table_at)), phi, "table")
+    return soft_sphere_magnetization(phi), phi, "soft spheres (dilute)"
 
 
 def _beam(args) -> int:
+    _check_beam_size(args)
     if getattr(args, "table", None) and args.magnet is None:
         return beam_from_table(args)       # uniform force + interval from a batch table
     strip = Strip(args.length_m, args.width_m, args.thickness_m)
@@ -173,6 +164,7 @@ def _beam(args) -> int:
 
 
 def _channel(args) -> int:
+    _check_channel_size(args)
     geo = ChannelGeometry(args.a_m, args.b_m, args.c_m, args.d_m, args.wall_m)
     mat = Material(args.E_Pa, args.nu, args.density_kg_m3)
     operating = (args.flow_rate_m3_s, args.pressure_drop_Pa)
@@ -220,13 +212,53 @@ def _channel(args) -> int:
     return 0
 
 
+# Ranges of the options (checked at parse time, exit 2): wide enough for any real specimen,
+# narrow enough that nothing overflows or runs away (a 1e30 N/m^3 force is a typo).
+_E = float_in("--E-Pa", 1e2, 1e13, "Pa")
+_NU = float_in("--nu", -1.0, 0.5, lo_open=True, hi_open=True)
+_RHO = float_in("--density-kg-m3", 0.0, 3e4, "kg/m^3")
+_G = float_in("--gravity-m-s2", 0.0, 1e4, "m/s^2")
+_F = float_in("--body-force-N-m3", -1e9, 1e9, "N/m^3")
+_F_EXPORT = float_in("--body-force-N-m3", 0.0, 1e9, "N/m^3")
+
+
+def _length(opt: str, hi: float = 10.0):
+    return float_in(opt, 0.0, hi, "m", lo_open=True)
+
+
+#: memory of the FEM per degree of freedom [bytes]: measured peak RSS of `mapsim beam --model
+#: fem` at nz = 2 and 4 (P2, direct solver) is 17-24 kB/DOF above the interpreter; 20 kB keeps
+#: the estimate on the safe side for the AMG path too
+_FEM_BYTES_PER_DOF = 20e3
+
+
+def _check_beam_size(args) -> None:
+    """Refuse a beam mesh whose memory estimate exceeds the machine, before meshing."""
+    if args.nz is None or not {"fem", "neo-hookean"} & set(args.model or ()):
+        return
+    from homogenize.macro.cantilever import beam_divisions
+    nx, ny, nz = beam_divisions(Strip(args.length_m, args.width_m, args.thickness_m), args.nz)
+    dof = 3 * (args.order * nx + 1) * (args.order * ny + 1) * (args.order * nz + 1)
+    check_memory(f"--nz {args.nz} ({nx} x {ny} x {nz} hexahedra, {dof:.3g} DOF)",
+                 dof * _FEM_BYTES_PER_DOF, "use fewer layers --nz or a shorter strip")
+
+
+def _check_channel_size(args) -> None:
+    from homogenize.macro.channel import _divisions
+    geo = ChannelGeometry(args.a_m, args.b_m, args.c_m, args.d_m, args.wall_m)
+    nd, nw, na, nb, nc = _divisions(geo, args.nc, 4.0)
+    dof = 3 * (args.order * nd + 1) * (args.order * (nw + na) + 1) * (args.order * (nb + nc) + 1)
+    check_memory(f"--nc {args.nc} ({dof:.3g} DOF)", dof * _FEM_BYTES_PER_DOF,
+                 "use fewer layers --nc")
+
+
 def _material_options(p):
-    p.add_argument("--E-Pa", dest="E_Pa", type=float, default=2.0e6,
+    p.add_argument("--E-Pa", dest="E_Pa", type=_E, default=2.0e6,
                    help="Young's modulus of the composite [Pa]")
-    p.add_argument("--nu", type=float, default=0.45, help="Poisson ratio [-], in (-1, 0.5)")
-    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=float, default=1210.0,
+    p.add_argument("--nu", type=_NU, default=0.45, help="Poisson ratio [-], in (-1, 0.5)")
+    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=_RHO, default=1210.0,
                    help="mass density [kg/m^3] (self-weight, with --gravity-m-s2)")
-    p.add_argument("--gravity-m-s2", dest="gravity_m_s2", type=float, default=0.0,
+    p.add_argument("--gravity-m-s2", dest="gravity_m_s2", type=_G, default=0.0,
                    help="gravity along the body force [m/s^2]; 0 = no self-weight")
 
 
@@ -239,10 +271,10 @@ def register(sub, formatter) -> None:
                     "PNG figures and manifest.json to --out. Takes a few minutes.")
     p.add_argument("--out", default="results/paper", help="output directory")
     p.add_argument("--json", default=None, help="also write the JSON results to this file")
-    p.add_argument("--width-m", dest="width_m", type=float, default=5e-3,
+    p.add_argument("--width-m", dest="width_m", type=_length("--width-m", 1.0), default=5e-3,
                    help="assumed strip width [m]")
-    p.add_argument("--thickness-m", dest="thickness_m", type=float, default=1e-3,
-                   help="assumed strip thickness [m]")
+    p.add_argument("--thickness-m", dest="thickness_m", type=_length("--thickness-m", 1.0),
+                   default=1e-3, help="assumed strip thickness [m]")
     p.add_argument("--quick", action="store_true",
                    help="small meshes and sweeps (seconds; for tests, numbers indicative)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -255,21 +287,22 @@ def register(sub, formatter) -> None:
                     ".sif Material/Body Force section or an Abaqus *MATERIAL/*DLOAD snippet. "
                     "SI units throughout.")
     p.add_argument("--to", required=True, choices=("elmer", "abaqus"), help="target solver")
-    p.add_argument("--body-force-N-m3", dest="body_force_N_m3", type=float, required=True,
+    p.add_argument("--body-force-N-m3", dest="body_force_N_m3", type=_F_EXPORT, required=True,
                    help="magnitude of the magnetic body force [N/m^3]")
-    p.add_argument("--E-Pa", dest="E_Pa", type=float, required=True,
+    p.add_argument("--E-Pa", dest="E_Pa", type=_E, required=True,
                    help="Young's modulus [Pa]")
-    p.add_argument("--nu", type=float, required=True, help="Poisson ratio [-], in (-1, 0.5)")
-    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=float, required=True,
+    p.add_argument("--nu", type=_NU, required=True, help="Poisson ratio [-], in (-1, 0.5)")
+    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=_RHO, required=True,
                    help="mass density [kg/m^3]")
     p.add_argument("--direction", default="-z", choices=tuple(DIRECTIONS),
                    help="direction of the body force (and of gravity)")
-    p.add_argument("--gravity-m-s2", dest="gravity_m_s2", type=float, default=0.0,
+    p.add_argument("--gravity-m-s2", dest="gravity_m_s2", type=_G, default=0.0,
                    help="self-weight acceleration [m/s^2]; Abaqus: GRAV line, Elmer: added to "
                         "the body force")
     p.add_argument("--name", default="MAP_PDMS", help="material name")
     p.add_argument("--elset", default="EALL", help="Abaqus element set of the *DLOAD")
-    p.add_argument("--index", type=int, default=1, help="Elmer Material / Body Force number")
+    p.add_argument("--index", type=int_in("--index", 1, 10 ** 6), default=1,
+                   help="Elmer Material / Body Force number")
     p.add_argument("--out", required=True, help="output file ('-' for stdout)")
     g = p.add_argument_group(
         "complete input deck",
@@ -285,18 +318,19 @@ def register(sub, formatter) -> None:
                    help="abaqus element type of the deck")
     g.add_argument("--deck-nz", dest="deck_nz", type=int_in("--deck-nz", 1, 16), default=2,
                    help="element layers through the strip thickness")
-    g.add_argument("--length-m", dest="length_m", type=float, default=SEED_STRIP_LENGTH_M,
-                   help="cantilever free length [m]")
-    g.add_argument("--width-m", dest="width_m", type=float, default=5e-3,
+    g.add_argument("--length-m", dest="length_m", type=_length("--length-m"),
+                   default=SEED_STRIP_LENGTH_M, help="cantilever free length [m]")
+    g.add_argument("--width-m", dest="width_m", type=_length("--width-m", 1.0), default=5e-3,
                    help="cantilever width [m]")
-    g.add_argument("--thickness-m", dest="thickness_m", type=float, default=1e-3,
+    g.add_argument("--thickness-m", dest="thickness_m", type=_length("--thickness-m", 1.0),
+                   default=1e-3,
                    help="cantilever thickness [m]")
-    g.add_argument("--a-m", dest="a_m", type=float, default=5e-3, help="channel width a [m]")
-    g.add_argument("--b-m", dest="b_m", type=float, default=50e-6, help="channel height b [m]")
-    g.add_argument("--c-m", dest="c_m", type=float, default=0.5e-3,
+    g.add_argument("--a-m", dest="a_m", type=_length("--a-m", 1.0), default=5e-3, help="channel width a [m]")
+    g.add_argument("--b-m", dest="b_m", type=_length("--b-m", 1.0), default=50e-6, help="channel height b [m]")
+    g.add_argument("--c-m", dest="c_m", type=_length("--c-m", 1.0), default=0.5e-3,
                    help="polymer above the channel c [m]")
-    g.add_argument("--d-m", dest="d_m", type=float, default=10e-3, help="channel length d [m]")
-    g.add_argument("--wall-m", dest="wall_m", type=float, default=None,
+    g.add_argument("--d-m", dest="d_m", type=_length("--d-m", 1.0), default=10e-3, help="channel length d [m]")
+    g.add_argument("--wall-m", dest="wall_m", type=_length("--wall-m", 1.0), default=None,
                    help="side-wall width [m] (default max(a/2, 2 (b + c)))")
     add_export_table_options(p)
     p.set_defaults(func=wrap_export(_export), outputs=("out",), inputs=("table",))
@@ -306,19 +340,20 @@ def register(sub, formatter) -> None:
         description="Tip deflection of a strip clamped at one end under a uniform transverse "
                     "body force: Euler-Bernoulli ('eb', 'eb-plate'), Timoshenko, elastica "
                     "(large deflection, 1D), 3D linear FEM ('fem') and 3D neo-Hookean FEM.")
-    p.add_argument("--body-force-N-m3", dest="body_force_N_m3", type=float, default=40e3,
+    p.add_argument("--body-force-N-m3", dest="body_force_N_m3", type=_F, default=40e3,
                    help="transverse body force [N/m^3]")
-    p.add_argument("--length-m", dest="length_m", type=float, default=20e-3,
+    p.add_argument("--length-m", dest="length_m", type=_length("--length-m"), default=20e-3,
                    help="free length [m]")
-    p.add_argument("--width-m", dest="width_m", type=float, default=5e-3, help="width [m]")
-    p.add_argument("--thickness-m", dest="thickness_m", type=float, default=1e-3,
-                   help="thickness, along the force [m]")
+    p.add_argument("--width-m", dest="width_m", type=_length("--width-m", 1.0), default=5e-3,
+                   help="width [m]")
+    p.add_argument("--thickness-m", dest="thickness_m", type=_length("--thickness-m", 1.0),
+                   default=1e-3, help="thickness, along the force [m]")
     _material_options(p)
     p.add_argument("--model", nargs="+", default=["eb", "timoshenko", "elastica", "fem"],
                    choices=MODELS, help="models to evaluate")
     p.add_argument("--order", type=int, default=2, choices=(1, 2),
                    help="tetrahedron degree of the FEM models")
-    p.add_argument("--nz", type=int_in("--nz", 1, 16), default=None,
+    p.add_argument("--nz", type=int_in("--nz", 1, 128), default=None,
                    help="element layers through the thickness (FEM models). Default: 'fem' "
                         "runs two nested meshes (P2: 31x4x2 and 62x8x4 on the half width for "
                         "the seed strip), reports the fine one (within 0.5 %% of converged) and "
@@ -336,17 +371,24 @@ def register(sub, formatter) -> None:
         "without a table, from demagnetization-limited soft spheres.")
     g.add_argument("--magnet", choices=("cuboid", "cylinder", "coil"), default=None,
                    help="field source (default: none, uniform --body-force-N-m3)")
-    g.add_argument("--magnet-size", type=float, nargs="+", default=None, metavar="M",
+    g.add_argument("--magnet-size", type=_length("--magnet-size"), nargs="+", default=None,
+                   metavar="M",
                    help="cuboid: A B C edges; cylinder: DIAMETER HEIGHT; coil: RADIUS LENGTH [m]")
-    g.add_argument("--magnet-position", type=float, nargs=3, default=None,
+    g.add_argument("--magnet-position", type=float_in("--magnet-position", -10.0, 10.0, "m"),
+                   nargs=3, default=None,
                    metavar=("X", "Y", "Z"), help="centre of the source in the strip frame [m]")
-    g.add_argument("--magnet-direction", type=float, nargs=3, default=(0.0, 0.0, 1.0),
+    g.add_argument("--magnet-direction", type=float_in("--magnet-direction", -1e6, 1e6), nargs=3,
+                   default=(0.0, 0.0, 1.0),
                    metavar=("X", "Y", "Z"), help="magnetization direction of a permanent magnet")
-    g.add_argument("--magnet-axis", type=float, nargs=3, default=(0.0, 0.0, 1.0),
+    g.add_argument("--magnet-axis", type=float_in("--magnet-axis", -1e6, 1e6), nargs=3,
+                   default=(0.0, 0.0, 1.0),
                    metavar=("X", "Y", "Z"), help="axis of a cylinder or coil (cuboid: its C edge)")
-    g.add_argument("--remanence-T", dest="remanence_T", type=float, default=None,
+    g.add_argument("--remanence-T", dest="remanence_T", type=float_in("--remanence-T", 0.0, 3.0,
+                                                                       "T", lo_open=True),
+                   default=None,
                    help="remanent polarization B_r of a permanent magnet [T] (NdFeB ~1.2-1.4)")
-    g.add_argument("--current-A", dest="current_A", type=float, default=None,
+    g.add_argument("--current-A", dest="current_A", type=float_in("--current-A", -1e5, 1e5, "A"),
+                   default=None,
                    help="coil current [A] (the seed's electromagnet: 1.5 A)")
     g.add_argument("--turns", type=int_in("--turns", 1, 100000), default=None,
                    help="coil turns")
@@ -364,18 +406,18 @@ def register(sub, formatter) -> None:
         description="A PDMS block bonded to glass with a channel (width a, height b, ceiling "
                     "thickness c, length d) under a body force towards the glass: maximum "
                     "ceiling deflection and relative cross-section reduction (3D linear FEM).")
-    p.add_argument("--body-force-N-m3", dest="body_force_N_m3", type=float, default=40e3,
+    p.add_argument("--body-force-N-m3", dest="body_force_N_m3", type=_F, default=40e3,
                    help="body force towards the glass [N/m^3]")
-    p.add_argument("--a-m", dest="a_m", type=float, default=5e-3, help="channel width a [m]")
-    p.add_argument("--b-m", dest="b_m", type=float, default=50e-6, help="channel height b [m]")
-    p.add_argument("--c-m", dest="c_m", type=float, default=0.5e-3,
+    p.add_argument("--a-m", dest="a_m", type=_length("--a-m", 1.0), default=5e-3, help="channel width a [m]")
+    p.add_argument("--b-m", dest="b_m", type=_length("--b-m", 1.0), default=50e-6, help="channel height b [m]")
+    p.add_argument("--c-m", dest="c_m", type=_length("--c-m", 1.0), default=0.5e-3,
                    help="polymer thickness above the channel c [m]")
-    p.add_argument("--d-m", dest="d_m", type=float, default=10e-3, help="channel length d [m]")
-    p.add_argument("--wall-m", dest="wall_m", type=float, default=None,
+    p.add_argument("--d-m", dest="d_m", type=_length("--d-m", 1.0), default=10e-3, help="channel length d [m]")
+    p.add_argument("--wall-m", dest="wall_m", type=_length("--wall-m", 1.0), default=None,
                    help="side-wall width [m] (default max(a/2, 2 (b + c)))")
     _material_options(p)
     p.add_argument("--order", type=int, default=2, choices=(1, 2), help="tetrahedron degree")
-    p.add_argument("--nc", type=int_in("--nc", 1, 12), default=2,
+    p.add_argument("--nc", type=int_in("--nc", 1, 64), default=2,
                    help="element layers through the ceiling")
     g = p.add_argument_group(
         "flow through the deformed channel",

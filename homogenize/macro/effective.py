@@ -13,16 +13,19 @@ import numpy as np
 
 from micro._validate import check_choice
 from micro._validate import InputError
-from micro.materials import FE, PDMS, ElasticMaterial, mixture_density_kg_m3
+from micro.materials import FE, PDMS, SEED, ElasticMaterial, mixture_density_kg_m3
+from scipy.constants import mu_0 as MU0
 
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.closed_form import eb_tip_deflection_m, elastica_tip_deflection
+from homogenize.macro.magnets import linear_magnetization, tabulated_magnetization
 from homogenize._stats import widen_in_quadrature
 from homogenize.tables import (Estimate, Table, body_force_from_table, interpolate,
                                modulus_from_table, read_table)
 
 __all__ = ["TipDeflection", "tip_deflection_from_table", "EffectiveMaterial",
-           "effective_material_from_table", "beam_with_interval"]
+           "effective_material_from_table", "beam_with_interval",
+           "magnetization_from_table", "soft_sphere_magnetization"]
 
 
 @dataclass(frozen=True)
@@ -165,3 +168,35 @@ def beam_with_interval(strip: Strip, material: EffectiveMaterial, models, *, ord
             lo, hi = widen_in_quadrature(tips["mean"], lo, hi, material.E_estimate.rel_half_width)
         rows.append({"model": model, "tip_m": tips["mean"], "ci_low_m": lo, "ci_high_m": hi})
     return rows
+
+
+def magnetization_from_table(table, phi: float, *, bound: str = "mean", **other_axes):
+    """The composite's ``M_eff(H)`` [A/m] from a batch table at ``phi``, for the macro solvers.
+
+    The table's RVEs have a metallic boundary, so its ``B_T`` axis is ``mu0 H`` of the field
+    inside the specimen; ``M_eff`` (z component, along the field) is interpolated in the table
+    and linearly between its ``B_T`` values, with ``M(0) = 0``. Fields beyond the table's largest
+    ``B_T`` are refused (:class:`micro.InputError`), never extrapolated. ``bound``: "mean",
+    "low" or "high" (ends of the confidence interval of each grid value).
+    """
+    check_choice("bound", bound, ("mean", "low", "high"))
+    if not isinstance(table, Table):
+        table = read_table(table)
+    if "B_T" not in table.axes or len(table.axes["B_T"]) < 2:
+        raise InputError("M_eff(H) from a table needs at least two B_T values in the table")
+    B = np.array(sorted(float(b) for b in table.axes["B_T"]))
+    others = {k: v for k, v in other_axes.items() if k != "B_T"}
+    if "gradB_T_per_m" in table.axes and "gradB_T_per_m" not in others:
+        others["gradB_T_per_m"] = table.axes["gradB_T_per_m"][0]
+    attr = {"mean": "mean", "low": "ci_low", "high": "ci_high"}[bound]
+    M = [getattr(interpolate(table, "M_eff_A_per_m", component="z", phi=phi, B_T=b, **others),
+                 attr) for b in B]
+    return tabulated_magnetization(np.concatenate([[0.0], B / MU0]),
+                                   np.concatenate([[0.0], np.maximum(M, 0.0)]))
+
+
+def soft_sphere_magnetization(phi: float, Ms_A_m: float = SEED.Ms_A_m):
+    """``M_eff(H) = min(3 phi H / (1 - phi), phi Ms)``: demagnetization-limited soft spheres at
+    volume fraction ``phi`` (Clausius-Mossotti for an infinite intrinsic susceptibility),
+    capped at saturated particles. An analytic estimate where no table is at hand."""
+    return linear_magnetization(3.0 * phi / (1.0 - phi), phi * Ms_A_m)

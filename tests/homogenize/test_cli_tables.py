@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+from scipy.constants import mu_0
 import pytest
 
 from homogenize.cli import main
@@ -179,8 +180,17 @@ def test_chain_reduced_real_rves(scheduler, tmp_path):
             # ... the elastica is below it (a dead load bends less at large rotation) ...
             assert g["deflection_elastica_m"] <= g["deflection_eb_m"] * (1 + 1e-9)
             # ... and the force at a grid point is that point's mean in the table
-            i = t_tab.select(f"phi={c['phi']!r},B_T={g['B_T']!r}")
+            i = t_tab.select(f"phi={c['phi']!r},B_T={g['B_internal_T']!r}")
             assert np.isclose(g["f_eff_N_m3"], t_tab.values["f_eff_N_m3"][i, :, 2].mean())
+            # ... and the applied field exceeds the internal one by mu0 N M_eff (strip demag)
+            assert np.isclose(g["B_applied_T"] - g["B_internal_T"],
+                              mu_0 * res["demag_factor"] * g["M_eff_A_per_m"], rtol=1e-9)
+        # the magnet experiment: the closer the magnet, the larger the deflection
+        tips = [r["deflection_elastica_m"] for r in c["magnet_sweep"] if "outside_table" not in r]
+        assert len(tips) >= 3 and all(a > b for a, b in zip(tips, tips[1:]))
+    # Aharoni's factor of the 19.4 x 5 x 1 mm strip through its thickness (0.771)
+    assert 0.76 < res["demag_factor"] < 0.78 and res["law"] == "regime"
+    assert (out / "deflection_vs_magnet_gap.png").stat().st_size > 1000
     # dilute limit: the force per particle volume hardly depends on phi (interactions at
     # 1.75-3.5 vol% change it by a few %), so doubling phi doubles the force within 10 %
     f = {c["phi"]: c["grid"][0]["f_eff_N_m3"] for c in res["curves"]}
