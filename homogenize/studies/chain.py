@@ -403,12 +403,16 @@ def _summary(res: dict, study) -> str:
                 lines.append(f"| {1e3 * r['gap_m']:g} | field beyond the table's B range "
                              "(not extrapolated) | | | | |")
                 continue
+            touch = " (reaches the magnet)" if r["deflection_elastica_m"] >= r["gap_m"] else ""
             lines.append(f"| {1e3 * r['gap_m']:g} | {r['B_tip_T']:.3f} | "
                          f"{r['f_tip_N_m3'] / 1e3:.2f} | {r['f_root_N_m3'] / 1e3:.3f} | "
-                         f"{1e3 * r['deflection_elastica_m']:.3f} | "
+                         f"{1e3 * r['deflection_elastica_m']:.3f}{touch} | "
                          f"[{1e3 * r['deflection_ci_m'][0]:.3f}, "
                          f"{1e3 * r['deflection_ci_m'][1]:.3f}] |")
-        lines.append("")
+        lines += ["", "The body force is evaluated on the undeformed strip (a dead load): a tip "
+                  "that bends towards the magnet meets a stronger field, so the deflections at "
+                  "small gaps are lower bounds, and a deflection larger than the gap means the "
+                  "strip reaches the magnet.", ""]
     lines += [
         "d_eff is the packing density the seed's formula would have needed (with saturated "
         "particles) to give the computed force: the seed's d = 0.5 stands for the combined "
