@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from scipy.constants import mu_0 as MU0
 
-from ._validate import check_positive, check_range
+from ._validate import InputError, check_positive, check_range
 
 __all__ = ["ElasticMaterial", "Constituent", "FE", "FE3O4", "PDMS", "SeedParameters", "SEED", "GRAVITY_M_S2",
            "mixture_density_kg_m3", "elastic"]
@@ -86,6 +86,21 @@ class Constituent:
     A_J_m: float = 0.0
     anisotropy: str = "none"
     sources: str = ""
+
+    def __post_init__(self):
+        check_positive("density_kg_m3", self.density_kg_m3, "kg/m^3")
+        # iron's 218 A m^2/kg is the largest of any element at room temperature; 300 bounds
+        # every real magnetic material with margin
+        check_range("sigma_s_Am2_kg", self.sigma_s_Am2_kg, 0.0, 300.0, "A m^2/kg")
+        check_range("K1_J_m3", self.K1_J_m3, -1e8, 1e8, "J/m^3")
+        check_range("A_J_m", self.A_J_m, 0.0, 1e-9, "J/m")
+        if not math.isnan(self.E_Pa):
+            check_positive("E_Pa", self.E_Pa, "Pa")
+        if not math.isnan(self.nu):
+            check_range("nu", self.nu, -1.0, 0.5, "", lo_open=True, hi_open=True)
+        if self.anisotropy not in ("cubic", "uniaxial", "none"):
+            raise InputError(f"anisotropy must be one of cubic, uniaxial, none; got "
+                             f"{self.anisotropy!r}")
 
     @property
     def Ms_A_m(self) -> float:
