@@ -31,6 +31,7 @@ from scipy import special
 
 from . import _kernels as K
 from ._validate import InputError, check_positive, check_range, check_choice
+from .materials import FE, FE3O4, SEED
 from .rve import RVE, minimum_image
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
@@ -52,22 +53,14 @@ PLACEMENTS = ("auto", "rsa", "compress")
 #: reported with the phi actually reached.
 PHI_MAX = 0.6
 
-# Material constants (room temperature).
-#: Density of alpha-iron [kg/m^3]; CRC Handbook of Chemistry and Physics (97th ed., 2016),
-#: "Physical constants of inorganic compounds": 7.874 g/cm^3; the seed paper uses 7870.
-FE_DENSITY_KG_M3 = 7870.0
-#: Specific saturation magnetisation of iron at room temperature [A m^2/kg]; Crangle & Goodman,
-#: Proc. R. Soc. Lond. A 321 (1971) 477: 217.6 A m^2/kg at 293 K (Cullity & Graham,
-#: "Introduction to Magnetic Materials", 2nd ed., Table 4.2: 218 emu/g).
-FE_SIGMA_AM2_KG = 218.0
-#: Density of magnetite Fe3O4 [kg/m^3]; Cornell & Schwertmann, "The Iron Oxides", 2nd ed.
-#: (Wiley-VCH 2003), Table 2.1: 5.18 g/cm^3; CRC Handbook: 5.17 g/cm^3.
-FE3O4_DENSITY_KG_M3 = 5170.0
-#: Specific saturation magnetisation of bulk magnetite at room temperature [A m^2/kg];
-#: Cornell & Schwertmann (2003), Table 6.1: 92-100 A m^2/kg; Cullity & Graham Table 4.2: 92.
-FE3O4_SIGMA_AM2_KG = 92.0
+# Material constants: taken from micro.materials (their sources are there), under the names
+# this module has always exported.
+FE_DENSITY_KG_M3 = FE.density_kg_m3
+FE_SIGMA_AM2_KG = FE.sigma_s_Am2_kg
+FE3O4_DENSITY_KG_M3 = FE3O4.density_kg_m3
+FE3O4_SIGMA_AM2_KG = FE3O4.sigma_s_Am2_kg
 #: Specific saturation moment of the NANOFER powder used by the seed paper [A m^2/kg].
-SEED_SIGMA_AM2_KG = 178.0
+SEED_SIGMA_AM2_KG = SEED.sigma_s_Am2_kg
 
 
 # =============================================================================================
