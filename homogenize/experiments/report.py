@@ -19,6 +19,26 @@ X_AXIS = {"deflection": ("gradB_T_per_m", "dB/dz [T/m]"), "magnetization": ("H_A
           "magnetostriction": ("B_T", "mu0 H [T]"), "tensile": ("strain", "engineering strain [-]")}
 
 
+#: axis labels of the columns and covariates: quantity name and unit, never a raw column name
+LABELS = {"deflection_m": "tip deflection [m]", "stress_Pa": "nominal tensile stress [Pa]",
+          "M_A_per_m": "magnetization M [A/m]", "strain_mag": "magnetostrictive strain [-]",
+          "B_T": "applied flux density mu0 H [T]", "gradB_T_per_m": "field gradient dB/dz [T/m]",
+          "phi": "particle volume fraction phi [-]", "length_m": "strip length [m]",
+          "width_m": "strip width [m]", "thickness_m": "strip thickness [m]",
+          "radius_mean_m": "mean particle radius [m]", "H_A_per_m": "applied field H [A/m]",
+          "aspect_ratio": "specimen aspect ratio [-]", "strain": "engineering strain [-]",
+          "deflection/length": "tip deflection / length [-]",
+          "L^4/t^2 [m^2]": "L^4 / t^2 [m^2]", "branch (down=1)": "branch (0 rising, 1 falling)",
+          "prediction": "prediction"}
+
+
+def _label(name: str, unit: str | None = None) -> str:
+    """A readable axis label with its unit for a column or covariate name."""
+    if name in LABELS:
+        return LABELS[name]
+    return f"{name.replace('_', ' ')}" + (f" [{unit}]" if unit else "")
+
+
 def _fmt(v):
     if isinstance(v, str):
         return v
@@ -38,12 +58,37 @@ def _params_table(params: dict) -> str:
     return "\n".join(rows)
 
 
-def _plot_data(d: Diagnosis, path: Path):
-    import matplotlib
-    from matplotlib.figure import Figure
+def _plot_single_point(d: Diagnosis, path: Path):
+    """One measured point: what it can show is the measurement against each model's value."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    _ = matplotlib
+    from matplotlib.figure import Figure
     exp = d.exp
+    unit = UNITS[exp.kind]
+    vals = [("measured", float(exp.y[0]), "k")]
+    vals.append(("seed model", float(d.baseline.fit.prediction[0]), "C3"))
+    for c in d.rounds[0] if d.rounds else ():
+        vals.append((f"+ {c.cause.replace('_', ' ')}", float(c.cv_pred[0]), "C0"))
+    fig = Figure(figsize=(7.5, 0.45 * len(vals) + 1.4))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    y = np.arange(len(vals))[::-1]
+    ax.barh(y, [v for _, v, _c in vals], color=[c for _n, _v, c in vals], height=0.6)
+    ax.set_yticks(y, [n for n, _v, _c in vals], fontsize=8)
+    ax.axvline(vals[0][1], color="k", lw=0.8, ls="--")
+    ax.set_xlabel(_label(exp.measured_name, unit))
+    ax.set_title("one measured point: the measurement and what each model predicts for it "
+                 "(nothing fitted)", fontsize=9)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+
+
+def _plot_data(d: Diagnosis, path: Path):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    exp = d.exp
+    if exp.n_rows == 1:
+        return _plot_single_point(d, path)
     xname, xlabel = X_AXIS[exp.kind]
     x = exp.columns[xname]
     fig = Figure(figsize=(11, 4.5))
@@ -63,7 +108,7 @@ def _plot_data(d: Diagnosis, path: Path):
             ax1.plot(x[m][o], d.baseline.fit.prediction[m][o], ":", color=colors[g], lw=1)
             ax1.plot(x[m][o], d.final.fit.prediction[m][o], "-", color=colors[g], lw=1.2)
     ax1.set_xlabel(xlabel)
-    ax1.set_ylabel(f"{exp.measured_name} [{UNITS[exp.kind]}]")
+    ax1.set_ylabel(_label(exp.measured_name, UNITS[exp.kind]))
     ax1.set_title("data (o), seed model (dotted), extended model (solid)", fontsize=9)
     if int(groups.max()) < 8:
         ax1.legend(fontsize=7)
@@ -74,8 +119,8 @@ def _plot_data(d: Diagnosis, path: Path):
              label=f"seed (cv_rmse {d.baseline.cv_rmse:.3g})")
     ax2.plot(exp.y, d.final.cv_pred, "o", ms=4, color="C0",
              label=f"extended (cv_rmse {d.final.cv_rmse:.3g})")
-    ax2.set_xlabel(f"measured [{UNITS[exp.kind]}]")
-    ax2.set_ylabel("held-out prediction")
+    ax2.set_xlabel(f"measured {_label(exp.measured_name, UNITS[exp.kind])}")
+    ax2.set_ylabel(f"held-out prediction [{UNITS[exp.kind]}]")
     ax2.legend(fontsize=8)
     ax2.set_title("held-out predictions against data", fontsize=9)
     fig.tight_layout()
@@ -102,7 +147,7 @@ def _plot_residuals(d: Diagnosis, path: Path):
         ax.axhline(0, color="k", lw=0.6)
         ax.plot(v, r0, "s", ms=3.5, mfc="none", color="C3", label="seed")
         ax.plot(v, r1, "o", ms=3.5, color="C0", label="extended")
-        ax.set_xlabel(name)
+        ax.set_xlabel(_label(name))
         ax.set_ylabel(f"held-out residual [{UNITS[exp.kind]}]", fontsize=8)
     axes[0].legend(fontsize=8)
     for ax in axes[n:]:
@@ -120,7 +165,11 @@ def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Pat
     exp = d.exp
     res = d.as_dict()
     _plot_data(d, out / "data.png")
-    _plot_residuals(d, out / "residuals.png")
+    single = exp.n_rows == 1
+    if single:                 # a residual plot of one point says nothing: none is drawn
+        (out / "residuals.png").unlink(missing_ok=True)
+    else:
+        _plot_residuals(d, out / "residuals.png")
     unit = UNITS[exp.kind]
     lines = [f"# Diagnosis: {exp.title or exp.kind}", ""]
     src = f"`{Path(exp.toml_path).name}`" if exp.toml_path else "in-memory experiment"
@@ -184,8 +233,13 @@ def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Pat
         for k in c0:
             lines.append(f"| {k} | {c0[k]:+.2f} | {c1.get(k, float('nan')):+.2f} |")
         lines.append("")
-    lines += ["![data, seed and extended model](data.png)", "",
-              "![held-out residuals against every covariate](residuals.png)", ""]
+    if single:
+        lines += ["![the measured point and each model's prediction](data.png)", "",
+                  "(One point: no residual plot; residuals against covariates need several "
+                  "rows.)", ""]
+    else:
+        lines += ["![data, seed and extended model](data.png)", "",
+                  "![held-out residuals against every covariate](residuals.png)", ""]
     if discussion:
         lines += ["## Discussion", "", discussion.strip(), ""]
     md = out / "report.md"

@@ -83,6 +83,15 @@ def summarize(records: list[dict]) -> dict:
         rs = [r for r in usable if c in r["expected"]]
         if rs:
             per_cause[c] = {"cases": len(rs), "recovered": sum(c in r["found"] for r in rs)}
+    outcomes = {}
+    for c in CAUSES:
+        hid = [c in r["expected"] for r in usable]
+        nam = [c in r["found"] for r in usable]
+        o = {"hidden_and_named": sum(h and n for h, n in zip(hid, nam)),
+             "hidden_not_named": sum(h and not n for h, n in zip(hid, nam)),
+             "named_not_hidden": sum(n and not h for h, n in zip(hid, nam))}
+        if any(o.values()):
+            outcomes[c] = o
     gains = [r["gain"] for r in with_cause]
     return {
         "n_cases": len(records) + len(errors),
@@ -96,6 +105,7 @@ def summarize(records: list[dict]) -> dict:
                                   if any(not r["expected"] for r in usable) else None),
         "median_gain": float(np.median(gains)) if gains else None,
         "per_cause_recovery": per_cause,
+        "per_cause_outcomes": outcomes,
         "confusion_labels": list(LABELS),
         "confusion": conf.tolist(),
     }
@@ -111,30 +121,49 @@ def write_study(records, summary, out_dir, config) -> None:
     lines = ["expected \\ named," + ",".join(lab)]
     lines += [lab[i] + "," + ",".join(str(v) for v in conf[i]) for i in range(len(lab))]
     atomic_write_text(out / "confusion.csv", "\n".join(lines) + "\n")
-    _plot_confusion(conf, lab, summary, out / "confusion.png")
+    oc = summary["per_cause_outcomes"]
+    rows = ["cause,hidden_and_named,hidden_not_named,named_not_hidden"]
+    rows += [f"{c},{o['hidden_and_named']},{o['hidden_not_named']},{o['named_not_hidden']}"
+             for c, o in oc.items()]
+    atomic_write_text(out / "per_cause.csv", "\n".join(rows) + "\n")
+    _plot_confusion(oc, summary, out / "confusion.png")
     write_json(out / "manifest.json", manifest(config, config.get("seed")))
 
 
-def _plot_confusion(conf, lab, summary, path):
-    from matplotlib.figure import Figure
+def _plot_confusion(outcomes, summary, path):
+    """Per cause, each case counted once: hidden and named, hidden but missed, named though not
+    hidden (a false cause). A case with several hidden causes appears once in each of their
+    rows, never off a diagonal as in a cause-by-cause matrix."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    fig = Figure(figsize=(8.5, 7.5))
+    from matplotlib.figure import Figure
+    causes = list(outcomes)
+    cols = ("hidden_and_named", "hidden_not_named", "named_not_hidden")
+    heads = ("hidden and named\n(recovered)", "hidden, not named\n(missed)",
+             "named, not hidden\n(false cause)")
+    M = np.array([[outcomes[c][k] for k in cols] for c in causes], dtype=int).reshape(-1, 3)
+    fig = Figure(figsize=(7.5, 0.42 * max(len(causes), 1) + 2.2))
     FigureCanvasAgg(fig)
     ax = fig.subplots()
-    ax.imshow(conf, cmap="Blues")
-    ax.set_xticks(range(len(lab)), lab, rotation=60, ha="right", fontsize=8)
-    ax.set_yticks(range(len(lab)), lab, fontsize=8)
-    for i in range(len(lab)):
-        for j in range(len(lab)):
-            if conf[i, j]:
-                ax.text(j, i, str(conf[i, j]), ha="center", va="center", fontsize=7,
-                        color="white" if conf[i, j] > conf.max() / 2 else "black")
-    ax.set_xlabel("cause named by diagnose")
-    ax.set_ylabel("cause hidden in the data (with its prerequisites)")
+    if not causes:              # no case had or named a cause: an empty table, said so
+        M = np.zeros((1, 3), dtype=int)
+        causes = ["(no cause hidden or named)"]
+    colours = np.zeros(M.shape + (3,)) + 1.0
+    tint = np.array([[0.75, 0.9, 0.75], [1.0, 0.85, 0.6], [1.0, 0.7, 0.7]])
+    for j in range(3):
+        w = M[:, j] / max(M.max(), 1)
+        colours[:, j, :] = 1.0 - w[:, None] * (1.0 - tint[j])
+    ax.imshow(colours, aspect="auto")
+    ax.set_xticks(range(3), heads, fontsize=8)
+    ax.set_yticks(range(len(causes)), causes, fontsize=8)
+    for i in range(len(causes)):
+        for j in range(3):
+            ax.text(j, i, str(M[i, j]), ha="center", va="center", fontsize=8)
+    ax.set_xlabel("number of synthetic cases (each case counted once per cause)")
     fr = summary["false_cause_rate"]
     g = summary["median_gain"]
-    ax.set_title(f"{summary['n_used']} synthetic cases: exact {summary['exact_recovery_rate']:.1%}, "
-                 f"false causes {fr:.1%}, median gain {g:.3g}" if fr is not None and g is not None
+    ax.set_title(f"{summary['n_used']} synthetic cases: exact recovery "
+                 f"{summary['exact_recovery_rate']:.1%}, cases with a false cause {fr:.1%}, "
+                 f"median gain {g:.3g}" if fr is not None and g is not None
                  else "diagnose-study", fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
