@@ -59,7 +59,10 @@ def _check_paths(args) -> None:
 
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:          # usage errors (2) and --help (0): return, do not exit
+        return int(exc.code or 0)
     try:
         _check_paths(args)
         return int(args.func(args) or 0)
