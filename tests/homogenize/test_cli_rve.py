@@ -52,7 +52,7 @@ def test_core_shell_and_histogram_options(tmp_path, capsys):
     (["--phi", "0"], ["phi"]),
     (["--phi", "0.9"], ["phi", "0.6"]),
     (["--r-min", "6e-8"], ["r_min", "r_max"]),
-    (["--shell=-1e-9"], ["shell thickness"]),
+    (["--shell=-1e-9"], ["--shell", "[0, 0.001] m"]),      # option range, at parse time
     (["--shell", "2e-8"], ["shell thickness", "smallest particle radius"]),
     (["--histogram", "nope.csv"], ["nope.csv", "does not exist"]),
     (["--out", "x.txt"], ["--out", ".h5"]),
@@ -60,8 +60,11 @@ def test_core_shell_and_histogram_options(tmp_path, capsys):
 ])
 def test_bad_input_exit_2_one_line_no_files(tmp_path, capsys, monkeypatch, argv, words):
     monkeypatch.chdir(tmp_path)
-    rc = main(["rve", "--n", "100", "--out", "r.h5", "--json", "s.json"] + argv
-              if "--out" not in argv else ["rve", "--n", "100"] + argv)
+    try:        # option ranges are argparse types (SystemExit 2), the rest InputError (return 2)
+        rc = main(["rve", "--n", "100", "--out", "r.h5", "--json", "s.json"] + argv
+                  if "--out" not in argv else ["rve", "--n", "100"] + argv)
+    except SystemExit as exc:
+        rc = exc.code
     assert rc == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("mapsim rve: error:") and "\n" not in err
@@ -71,17 +74,13 @@ def test_bad_input_exit_2_one_line_no_files(tmp_path, capsys, monkeypatch, argv,
 
 
 def test_argparse_errors_exit_2(capsys):
-    with pytest.raises(SystemExit) as exc:
-        main(["rve", "--arrangement", "rods"])
-    assert exc.value.code == 2
-    with pytest.raises(SystemExit) as exc:
-        main(["rve", "--n", "ten"])
-    assert exc.value.code == 2
+    # main() returns argparse's usage-error code instead of raising SystemExit
+    assert main(["rve", "--arrangement", "rods"]) == 2
+    assert main(["rve", "--n", "ten"]) == 2
 
 
 def test_help_states_units_and_defaults(capsys):
-    with pytest.raises(SystemExit):
-        main(["rve", "--help"])
+    assert main(["rve", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     for opt in ("--phi", "--mean-radius", "--shell", "--gap", "--cluster-density"):
         assert opt in text
