@@ -44,6 +44,7 @@ import hashlib
 import itertools
 import json
 import math
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,7 +53,10 @@ import numpy as np
 
 from micro._validate import InputError
 import dataclasses
+from micro.dipoles import METHODS, SUMMATIONS
+from micro.magnetization import LAW_ALIASES, LAW_NAMES
 from homogenize import _evaluate
+from homogenize._budget import check_memory
 
 __all__ = ["Study", "Task", "load_study", "parse_study", "AXIS_ORDER"]
 
@@ -73,6 +77,99 @@ _TABLES = ("study", "grid", "rve", "law", "magnetics", "cell", "rve_size", "synt
 _RVE_SIZE_KEYS = {"n_particles": list, "realizations": int, "quantity": str, "component": str,
                   "target_rel_precision": float}
 EVALUATORS = ("rve", "synthetic")
+
+
+# Value rules of the known keys of [rve], [magnetics], [cell], [law] (and of the same keys as
+# grid axes), checked at parse time so that no worker ever starts on a value that cannot run:
+# key -> ("enum", choices) | ("bool",) | ("int", lo, hi) | ("float", lo, hi, unit, lo_open)
+#        | ("vec3",)
+_R = ("float", 1e-10, 1e-3, "m", False)
+_SIGMA = ("float", 0.0, 300.0, "A m^2/kg", True)
+_RHO = ("float", 0.0, 3e4, "kg/m^3", True)
+_MOD = ("float", 1e2, 1e13, "Pa", False)
+_NU = ("float", -1.0, 0.5, "", True)      # open at both ends: checked below
+_TOL = ("float", 1e-14, 1e-2, "", False)
+_RULES = {
+    # particles (micro.particles.generate_rve, distribution and composition)
+    "arrangement": ("enum", ("dispersed", "clusters", "chains")),
+    "placement": ("enum", ("auto", "rsa", "compress")),
+    "distribution": ("enum", ("lognormal", "monodisperse")),
+    "gap_m": ("float", 0.0, 1e-3, "m", False),
+    "cluster_size": ("int", 2, 10 ** 6),
+    "cluster_density": ("float", 0.0, 0.74, "", True),
+    "chain_length": ("float", 1.0, 1e6, "", False),
+    "chain_direction": ("vec3",),
+    "chain_spread_deg": ("float", 0.0, 180.0, "deg", False),
+    "agglomerated_fraction": ("float", 0.0, 1.0, "", False),
+    "max_attempts": ("int", 1, 10 ** 8),
+    "mean_radius_m": _R, "r_min_m": _R, "r_max_m": _R,
+    "gsd": ("float", 1.0, 10.0, "", True),
+    "shell_thickness_m": ("float", 0.0, 1e-3, "m", False),
+    "core_density_kg_m3": _RHO, "shell_density_kg_m3": _RHO,
+    "core_sigma_Am2_kg": _SIGMA, "calibrate_sigma_Am2_kg": _SIGMA,
+    "shell_sigma_Am2_kg": ("float", 0.0, 300.0, "A m^2/kg", False),
+    # magnetics (micro.dipoles.solve)
+    "tol": _TOL, "accuracy": _TOL,
+    "method": ("enum", METHODS),
+    "summation": ("enum", SUMMATIONS),
+    "max_iter": ("int", 1, 10 ** 5),
+    "damping": ("float", 0.0, 1.0, "", True),
+    "precondition": ("bool",),
+    "demag_factor": ("float", 0.0, 1.0, "", False),
+    "rho_kg_m3": _RHO, "sigma_s_Am2_kg": _SIGMA,
+    "c_powder": ("float", 0.0, 1.0, "", True),
+    # magnetization law parameters (micro.magnetization.get_law)
+    "chi": ("float", 0.0, math.inf, "", True), "chi0": ("float", 0.0, 1e6, "", True),
+    "chi_i": ("float", 0.0, math.inf, "", True), "T_K": ("float", 0.0, 1e4, "K", True),
+    "measurement_time_s": ("float", 0.0, 1e12, "s", True),
+    "K1_J_m3": ("float", -1e8, 1e8, "J/m^3", False), "K_J_m3": ("float", 0.0, 1e8, "J/m^3", False),
+    "Ms_core_A_m": ("float", 0.0, 1e7, "A/m", True),
+    # cell (homogenize.cell.homogenize_rve)
+    "matrix_E_Pa": _MOD, "particle_E_Pa": _MOD, "matrix_nu": _NU, "particle_nu": _NU,
+    "rigid": ("bool",), "deflate": ("bool",), "maxiter": ("int", 1, 10 ** 6),
+}
+# the cell's tol shares the name of the dipoles' tol: both must be <= 1e-2
+_CELL_RULES = {"method": ("enum", ("centre", "fraction", "composite"))}
+
+#: resident memory per realization held by the client [bytes] (task, future, stored results)
+_BYTES_PER_TASK = 4e3
+#: memory of one RVE realization per particle [bytes] (measured ~0.5 kB/particle for the
+#: placement; the dipole solve about doubles it), and of one cell solve per voxel
+_BYTES_PER_PARTICLE, _BYTES_PER_VOXEL = 1.6e3, 6e3
+
+
+def _check_rule(where: str, key: str, v, rules=None):
+    """Check ``v`` against the rule of ``key`` (unknown keys pass: the evaluator names them)."""
+    rule = (rules or {}).get(key) or _RULES.get(key)
+    if rule is None:
+        return v
+    kind = rule[0]
+    if kind == "enum":
+        if not isinstance(v, str) or v not in rule[1]:
+            raise InputError(f"{where} must be one of {', '.join(rule[1])}; got {v!r}")
+    elif kind == "bool":
+        if not isinstance(v, bool):
+            raise InputError(f"{where} must be true or false, got {v!r}")
+    elif kind == "int":
+        if isinstance(v, bool) or not isinstance(v, int) or not rule[1] <= v <= rule[2]:
+            raise InputError(f"{where} must be an integer in [{rule[1]}, {rule[2]}], got {v!r}")
+    elif kind == "vec3":
+        if (not isinstance(v, list) or len(v) != 3
+                or any(isinstance(x, bool) or not isinstance(x, (int, float)) or
+                       not math.isfinite(x) for x in v) or not any(v)):
+            raise InputError(f"{where} must be a list of 3 finite numbers, not all zero; "
+                             f"got {v!r}")
+    else:
+        _, lo, hi, unit, lo_open = rule
+        hi_open = rule is _NU
+        u = f" {unit}" if unit else ""
+        left, right = ("(" if lo_open else "["), (")" if hi_open else "]")
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise InputError(f"{where} must be a number in {left}{lo:g}, {hi:g}{right}{u}, "
+                             f"got {v!r}")
+        if (v != v or (v <= lo if lo_open else v < lo) or (v >= hi if hi_open else v > hi)):
+            raise InputError(f"{where} must be in {left}{lo:g}, {hi:g}{right}{u}, got {v!r}")
+    return v
 
 
 def _unit_of(axis: str) -> str:
@@ -194,9 +291,21 @@ class Task:
 
 
 # --------------------------------------------------------------------------- parsing
+_MAX_STUDY_BYTES = 4 * 2 ** 20
+
+
 def load_study(path) -> Study:
     """Read and validate a study file; raise :class:`InputError` naming file, table and key."""
     path = Path(path)
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        raise InputError(f"study file {path} does not exist") from None
+    except OSError as exc:
+        raise InputError(f"study file {path} cannot be read: {exc.strerror}") from None
+    if not stat.S_ISREG(st.st_mode) or st.st_size > _MAX_STUDY_BYTES:
+        raise InputError(f"study file {path} must be a regular file of at most "
+                         f"{_MAX_STUDY_BYTES // 2 ** 20} MiB (a TOML text)")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -225,10 +334,15 @@ def _check_scalar_value(where: str, axis: str, v):
     """Range checks for the values of the common axes."""
     if isinstance(v, bool) or not isinstance(v, (int, float, str)):
         raise InputError(f"{where} values must be numbers or strings, got {v!r}")
+    if axis == "law":
+        if not isinstance(v, str) or (v not in LAW_NAMES and v not in LAW_ALIASES):
+            raise InputError(f"{where} values must be names of magnetization laws "
+                             f"({', '.join(LAW_NAMES)}), got {v!r}")
+        return v
     if isinstance(v, str):
         if axis in ("phi", "B_T", "gradB_T_per_m", "mean_radius_m", "shell_thickness_m"):
             raise InputError(f"{where} values must be numbers [{_unit_of(axis)}], got {v!r}")
-        return v
+        return _check_rule(f"{where} value", axis, v)
     v = float(v)
     if not math.isfinite(v):
         raise InputError(f"{where} values must be finite, got {v!r}")
@@ -240,8 +354,12 @@ def _check_scalar_value(where: str, axis: str, v):
         raise InputError(f"{where} values must be in (0, 1e-05) m, got {v:g}")
     if axis in ("shell_thickness_m",) and v < 0:
         raise InputError(f"{where} values must be >= 0 {_unit_of(axis)}, got {v:g}")
-    if axis == "law":
-        raise InputError(f"{where} values must be names of magnetization laws, got {v!r}")
+    if axis == "B_T" and v > 50:
+        raise InputError(f"{where} values must be <= 50 T, got {v:g}")
+    if axis == "gradB_T_per_m" and abs(v) > 1e4:
+        raise InputError(f"{where} values must be in [-1e4, 1e4] T/m, got {v:g}")
+    if axis in _RULES and axis != "phi":
+        _check_rule(f"{where} value", axis, v)
     return v
 
 
@@ -270,15 +388,16 @@ def parse_study(text: str, path: str = "<study>") -> Study:
             raise InputError(f"{path}: [study] missing key '{req}'")
     if s["seed"] < 0:
         raise InputError(f"{path}: [study] seed must be an integer >= 0, got {s['seed']}")
-    if s["realizations"] < 2:
+    if s["realizations"] < 2:         # the top is bounded by the memory estimate below
         raise InputError(f"{path}: [study] realizations must be >= 2 (a standard deviation "
                          f"needs two), got {s['realizations']}")
     n_particles = s.get("n_particles", 100)
-    if n_particles < 1:
-        raise InputError(f"{path}: [study] n_particles must be >= 1, got {n_particles}")
+    if not 1 <= n_particles <= 10 ** 8:
+        raise InputError(f"{path}: [study] n_particles must be in [1, 100000000], "
+                         f"got {n_particles}")
     voxels = s.get("voxels", 16)
-    if voxels < 4:
-        raise InputError(f"{path}: [study] voxels must be >= 4, got {voxels}")
+    if not 4 <= voxels <= 256:
+        raise InputError(f"{path}: [study] voxels must be in [4, 256], got {voxels}")
     confidence = s.get("confidence", 0.95)
     if not 0 < confidence < 1:
         raise InputError(f"{path}: [study] confidence must be in (0, 1), got {confidence:g}")
@@ -313,7 +432,10 @@ def parse_study(text: str, path: str = "<study>") -> Study:
         for k, v in tab.items():
             if k in dict(axes):
                 raise InputError(f"{path}: [{t}] {k} is also a grid axis; give it in one place")
+            _check_rule(f"{path}: [{t}] {k}", k, v, _CELL_RULES if t == "cell" else None)
         tables[t] = dict(tab)
+    _check_study_size(path, math.prod(len(v) for _, v in axes), s["realizations"], n_particles,
+                      s.get("fem", False), voxels)
 
     rve_size = None
     if "rve_size" in doc:
@@ -327,17 +449,21 @@ def parse_study(text: str, path: str = "<study>") -> Study:
         if not sizes:
             raise InputError(f"{path}: [rve_size] n_particles must be a non-empty list of "
                              f"particle counts")
-        if len(sizes) < 2:
-            raise InputError(f"{path}: [rve_size] n_particles needs at least two sizes for a "
-                             f"power-law fit, got {sizes}")
         for n in sizes:
-            if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-                raise InputError(f"{path}: [rve_size] n_particles must be integers >= 1, got {n!r}")
+            if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 10 ** 8:
+                raise InputError(f"{path}: [rve_size] n_particles must be integers in "
+                                 f"[1, 100000000], got {n!r}")
+        if len(sizes) < 3:
+            raise InputError(f"{path}: [rve_size] n_particles needs at least three sizes (a "
+                             f"power-law fit with an error estimate), got {sizes}")
         if len(set(sizes)) != len(sizes):
             raise InputError(f"{path}: [rve_size] n_particles has repeated values {sizes}")
         reals = r.get("realizations", s["realizations"])
         if reals < 3:
             raise InputError(f"{path}: [rve_size] realizations must be >= 3, got {reals}")
+        n_points = math.prod(len(v) for _, v in axes)
+        for n in sizes:
+            _check_study_size(path, n_points, reals, n, s.get("fem", False), voxels)
         prec = r.get("target_rel_precision", 0.02)
         if not 0 < prec < 1:
             raise InputError(f"{path}: [rve_size] target_rel_precision must be in (0, 1), "
@@ -356,6 +482,20 @@ def parse_study(text: str, path: str = "<study>") -> Study:
                   axes=tuple(axes), rve_size=rve_size, synthetic=synth, **tables)
     _evaluate.get_evaluator(evaluator).check(study)
     return study
+
+
+def _check_study_size(path, n_points: int, realizations: int, n_particles: int, fem: bool,
+                      voxels: int) -> None:
+    """Refuse a study whose client bookkeeping or single realization exceeds the machine."""
+    n_tasks = n_points * realizations
+    check_memory(f"{path}: {n_points} grid points x {realizations} realizations "
+                 f"({n_tasks:.3g} tasks)", n_tasks * _BYTES_PER_TASK,
+                 "use fewer realizations or grid values")
+    per = 0.3e9 + _BYTES_PER_PARTICLE * n_particles + (_BYTES_PER_VOXEL * voxels ** 3 if fem
+                                                       else 0.0)
+    check_memory(f"{path}: one realization of n_particles = {n_particles}"
+                 + (f" with voxels = {voxels}" if fem else ""), 2 * per,
+                 "two workers run at once; use fewer particles or voxels")
 
 
 def _synthetic_options(doc: dict, path: str, evaluator: str) -> dict:

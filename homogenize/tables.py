@@ -57,10 +57,13 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import fcntl
 import json
 import math
 import os
 import sys
+import tomllib
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -114,22 +117,180 @@ def _write_part(path: Path, task: Task, key: str, result: dict) -> None:
         np.savez(fh, **arrays)
 
 
+#: what a damaged part file raises on reading (truncated zip, zero length, bad array header)
+_DAMAGED = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile)
+
+
 def _read_part(path: Path, key: str) -> dict | None:
-    """The stored result, or None if the file is unusable (then it is recomputed)."""
+    """The stored result, or None if there is none usable (then it is recomputed).
+
+    A part that exists but cannot be read (zero length or truncated by a crash, a key that
+    does not match its name) is quarantined: renamed to ``quarantine/<name>`` in the parts
+    directory, never deleted, and a note goes to stderr.
+    """
     try:
-        with np.load(path, allow_pickle=False) as z:
+        # our own handle: np.load leaks the one it opens when the file is empty
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             if str(z["key"]) != key:
-                return None
+                raise ValueError(f"stored key {str(z['key'])!r} is not {key!r}")
             out = {k[2:]: z[k].copy() for k in z.files if k.startswith("q_")}
             out["__seed__"] = int(z["seed"])
             return out
-    except (OSError, ValueError, KeyError):
+    except FileNotFoundError:
+        return None
+    except _DAMAGED as exc:
+        _quarantine(path, f"{type(exc).__name__}: {exc}")
         return None
 
 
-def _run_task(task: Task, evaluator) -> dict:
-    """What a worker runs (module level, so it pickles by reference)."""
-    return evaluator(task)
+def _quarantine(path: Path, why: str) -> None:
+    """Move an unreadable part aside (``quarantine/`` beside it) so that it is recomputed."""
+    qdir = path.parent / "quarantine"
+    try:
+        qdir.mkdir(exist_ok=True)
+        dest = qdir / path.name
+        k = 1
+        while dest.exists():
+            dest = qdir / f"{path.name}.{k}"
+            k += 1
+        os.replace(path, dest)
+    except OSError as exc:
+        raise InputError(f"{path}: unreadable part ({why}) that cannot be moved aside "
+                         f"({exc.strerror}); remove it by hand") from None
+    print(f"mapsim: unreadable part {path.name} ({why.splitlines()[0][:120]}) moved to {dest}; "
+          f"it is recomputed", file=sys.stderr)
+
+
+def _clean_stale_temps(directory: Path, names) -> int:
+    """Remove hidden temporary files ``.NAME.*.tmp`` of our own atomic writes (left by a
+    process killed mid-write) for the given file names, or for every ``.npz`` part when
+    ``names`` is None. Only called while this process holds the batch lock."""
+    n = 0
+    if not directory.is_dir():
+        return 0
+    for f in directory.iterdir():
+        name = f.name
+        if not (name.startswith(".") and name.endswith(".tmp")) or not f.is_file():
+            continue
+        base = name[1:].rsplit(".", 2)[0]     # .NAME.XXXXXXXX.tmp -> NAME
+        ours = (base.endswith(".npz") and base.startswith("g")) if names is None \
+            else base in names
+        if ours:
+            with contextlib.suppress(FileNotFoundError):
+                f.unlink()
+                n += 1
+    return n
+
+
+@contextlib.contextmanager
+def _batch_lock(out: Path):
+    """Exclusive lock on a table being written: a second batch on the same ``--out`` is refused
+    (so temporary files found while holding it are stale: their writer is gone)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    lock = out.with_name(f".{out.name}.lock")
+    fh = open(lock, "a+")
+    try:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(f"{out}: another mapsim batch is writing this table now; wait for "
+                             f"it or give another --out") from None
+        yield
+    finally:
+        fh.close()
+        with contextlib.suppress(OSError):
+            lock.unlink()
+
+
+def _check_existing_table(out: Path, study: Study, clean: bool) -> None:
+    """Refuse to replace an existing file that is not this study's table (unless ``clean``)."""
+    if not out.exists():
+        return
+    try:
+        with h5py.File(out, "r") as h:
+            fmt = h.attrs.get("format")
+            name = h.attrs.get("study_name")
+            toml = h.attrs.get("study_toml")
+    except OSError:
+        fmt = name = toml = None
+    if isinstance(fmt, bytes):
+        fmt = fmt.decode()
+    if fmt != FORMAT:
+        if clean:
+            return
+        raise InputError(f"--out {out} exists and is not a mapsim table; refusing to replace "
+                         f"it (give another --out, or --clean to replace it)")
+    seed = None
+    with contextlib.suppress(tomllib.TOMLDecodeError, TypeError, AttributeError, UnicodeError):
+        text = toml.decode() if isinstance(toml, bytes) else toml
+        seed = tomllib.loads(text).get("study", {}).get("seed")
+    if isinstance(name, bytes):
+        name = name.decode()
+    if (name, seed) != (study.name, study.seed) and not clean:
+        raise InputError(f"--out {out} holds the table of another study (name {name!r}, seed "
+                         f"{seed}; this study: {study.name!r}, seed {study.seed}); give another "
+                         f"--out, or --clean to replace it")
+
+
+def reconcile_manifest(table) -> str | None:
+    """Make the side-car ``<table>.manifest.json`` agree with the manifest stored inside the
+    table (which is authoritative: both are written by one run, the table first, so a kill
+    between the two writes leaves a stale side-car). Returns a note when it was rewritten (or
+    could not be), None when it agreed."""
+    table = Path(table)
+    side = table.with_name(table.stem + ".manifest.json")
+    try:
+        with h5py.File(table, "r") as h:
+            inner = h.attrs.get("manifest")
+    except OSError:
+        return None
+    if inner is None:
+        return None
+    inner = inner.decode() if isinstance(inner, bytes) else inner
+    try:
+        want = json.loads(inner)
+    except ValueError:
+        return None
+    try:
+        have = json.loads(side.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        have = None
+    if have == want:
+        return None
+    try:
+        write_json(side, want)
+    except OSError as exc:
+        return f"{side} disagrees with the manifest inside {table} (authoritative) and cannot " \
+               f"be rewritten ({exc.strerror})"
+    return f"{side} disagreed with the manifest inside {table} (authoritative): rewritten"
+
+
+@dataclass(frozen=True)
+class _Failure:
+    """A realization whose evaluation raised a deterministic error (returned, not raised, so
+    that Dask does not retry it: the same seed would fail the same way)."""
+
+    kind: str
+    message: str
+    input_error: bool
+
+
+#: errors that may pass on another try (memory pressure, a file system hiccup): raised on the
+#: worker so that Dask retries them; every other error is deterministic and returned
+_TRANSIENT = (MemoryError, OSError)
+
+
+def _run_task(task: Task, evaluator):
+    """What a worker runs (module level, so it pickles by reference): the result dict, or a
+    :class:`_Failure` for a deterministic error."""
+    try:
+        return evaluator(task)
+    except _TRANSIENT:
+        raise
+    except Exception as exc:                 # deterministic: report once, do not retry
+        text = str(exc).strip().splitlines()
+        return _Failure(type(exc).__name__, text[0] if text else "",
+                        isinstance(exc, InputError))
 
 
 @contextlib.contextmanager
@@ -138,7 +299,7 @@ def _dask_client(scheduler: str | None, workers: int | None, processes: bool):
     if scheduler:
         try:
             client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError, TypeError) as exc:
             raise InputError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
                              f"({exc})") from None
         with client:
@@ -191,9 +352,24 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
     if not isinstance(study, Study):
         study = load_study(study)
     out = Path(out)
+    _check_existing_table(out, study, clean)
     evaluator = evaluator or get_evaluator(study.evaluator, fem=study.fem, **study.synthetic)
+    with _batch_lock(out):
+        return _run_batch_locked(study, out, evaluator, workers=workers, scheduler=scheduler,
+                                 processes=processes, client=client, retries=retries,
+                                 progress=progress, clean=clean, _stop_after=_stop_after)
+
+
+def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, client, retries,
+                      progress, clean, _stop_after) -> Path:
     started = _utcnow()
     parts = parts_dir_for(out)          # created with the first stored result
+    _clean_stale_temps(parts, None)
+    _clean_stale_temps(out.parent, {out.name, out.stem + ".manifest.json"})
+    if out.exists():
+        note = reconcile_manifest(out)
+        if note:
+            print(f"mapsim: {note}", file=sys.stderr)
     tasks = study.tasks()
     keys = [t.key(evaluator.id) for t in tasks]
     todo = [(t, k) for t, k in zip(tasks, keys)
@@ -228,8 +404,12 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
                         result = fut.result()
                     except Exception as e:          # cancelled, or failed on recomputation
                         exc = e
-                if exc is not None:
-                    failures.append((t, f"{type(exc).__name__}: {exc}"))
+                if isinstance(result, _Failure):
+                    failures.append((t, result))
+                elif exc is not None:
+                    failures.append((t, _Failure(type(exc).__name__,
+                                                 (str(exc).strip().splitlines() or [""])[0],
+                                                 False)))
                 else:
                     _write_part(_part_path(parts, t, k), t, k, result)
                     stored += 1
@@ -238,12 +418,7 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
                 if _stop_after is not None and stored >= _stop_after:
                     raise KeyboardInterrupt        # tests: an interruption after some results
     if failures:
-        lines = [f"  grid point {t.grid_index} ({_fmt_point(t.point)}) realization "
-                 f"{t.realization}: {msg}" for t, msg in failures[:10]]
-        more = f"\n  ... and {len(failures) - 10} more" if len(failures) > 10 else ""
-        raise BatchError(f"{len(failures)} of {len(tasks)} realizations failed; the other "
-                         f"results are kept in {parts} and a rerun computes only the "
-                         f"missing ones:\n" + "\n".join(lines) + more)
+        _raise_failures(failures, len(tasks), parts)
     data = aggregate(study, parts, evaluator.id)
     man = _manifest(study.config(), study.seed, started_utc=started, finished_utc=_utcnow(),
                     evaluator=evaluator.id, table=str(out))
@@ -252,6 +427,21 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
     if clean:
         shutil.rmtree(parts, ignore_errors=True)
     return out
+
+
+def _raise_failures(failures, n_tasks: int, parts: Path):
+    """One line when every failure is an input error (exit 2); else :class:`BatchError`
+    listing the first ten (exit 1)."""
+    t, f0 = failures[0]
+    if all(f.input_error for _, f in failures):      # the study asks for the impossible
+        raise InputError(f"{len(failures)} of {n_tasks} realizations refused their input, first "
+                         f"at grid point {t.grid_index} ({_fmt_point(t.point)}): {f0.message}")
+    lines = [f"  grid point {t.grid_index} ({_fmt_point(t.point)}) realization "
+             f"{t.realization}: {f.kind}: {f.message}" for t, f in failures[:10]]
+    more = f"\n  ... and {len(failures) - 10} more" if len(failures) > 10 else ""
+    raise BatchError(f"{len(failures)} of {n_tasks} realizations failed; the other "
+                     f"results are kept in {parts} and a rerun computes only the "
+                     f"missing ones:\n" + "\n".join(lines) + more)
 
 
 def _fmt_point(point: dict) -> str:

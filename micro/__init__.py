@@ -2,6 +2,8 @@
 
 Public API is what ``__all__`` lists; modules starting with ``_`` are private.
 """
+# first: chooses a writable numba cache before numba is imported (micro/_numba_cache.py)
+from . import _numba_cache  # noqa: F401
 from ._validate import ConvergenceError, InputError
 from .rve import RVE
 from .particles import (CoreShell, Histogram, LogNormal, Monodisperse, default_distribution,

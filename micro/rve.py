@@ -233,22 +233,100 @@ class RVE:
 
     @classmethod
     def load(cls, path) -> "RVE":
-        """Read an RVE written by :meth:`save`; a missing or malformed file raises InputError."""
+        """Read an RVE written by :meth:`save`; a missing or malformed file raises InputError.
+
+        Besides its layout, the file's invariants are checked: a known ``format_version``, an
+        ``n`` attribute equal to the number of particles, valid ``params_json``, no two
+        particles overlapping (beyond round-off).
+        """
 
         path = Path(path)
         with open_hdf5(path, "RVE file") as f:
-            if f.attrs.get("format") != "mapsim-rve":
+            if _text(f.attrs.get("format")) != "mapsim-rve":
                 raise InputError(f"RVE file {path} is not a mapsim RVE "
                                  f"(attribute 'format' missing)")
+            try:
+                version = int(f.attrs.get("format_version", -1))
+            except (TypeError, ValueError):
+                version = -1
+            if version != FORMAT_VERSION:
+                raise InputError(f"RVE file {path}: format_version "
+                                 f"{f.attrs.get('format_version')!r} is not one this mapsim "
+                                 f"reads ({FORMAT_VERSION})")
             kw = {}
             for name, unit, _dtype in _ARRAYS:
-                if name not in f:
+                if name not in f or not isinstance(f[name], h5py.Dataset):
                     raise InputError(f"RVE file {path}: dataset '{name}' missing")
-                got = f[name].attrs.get("units")
+                got = _text(f[name].attrs.get("units"))
                 if got != unit:
                     raise InputError(f"RVE file {path}: dataset '{name}' has units {got!r}, "
                                      f"expected {unit!r}")
                 kw[name] = f[name][()]
-            seed = None if bool(f.attrs.get("seed_is_none", False)) else int(f.attrs["seed"])
-            return cls(box_m=float(f.attrs["box_m"]), seed=seed,
-                       params=json.loads(f.attrs.get("params_json", "{}")), **kw)
+            try:
+                seed = None if bool(f.attrs.get("seed_is_none", False)) \
+                    else int(f.attrs["seed"])
+                box = float(f.attrs["box_m"])
+            except KeyError as exc:
+                raise InputError(f"RVE file {path}: attribute {exc.args[0]!r} missing") from None
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"RVE file {path}: attribute seed or box_m is not a number "
+                                 f"({exc})") from None
+            try:
+                params = json.loads(_text(f.attrs.get("params_json", "{}")))
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"RVE file {path}: attribute params_json is not valid JSON "
+                                 f"({exc})") from None
+            if not isinstance(params, dict):
+                raise InputError(f"RVE file {path}: attribute params_json must hold a JSON "
+                                 f"object, got {type(params).__name__}")
+            n_attr = f.attrs.get("n")
+        try:
+            rve = cls(box_m=box, seed=seed, params=params, **kw)
+        except InputError as exc:
+            raise InputError(f"RVE file {path}: {exc}") from None
+        if n_attr is not None and int(n_attr) != rve.n:
+            raise InputError(f"RVE file {path}: attribute n = {int(n_attr)} disagrees with the "
+                             f"{rve.n} particles in its arrays")
+        pair = _first_overlap(rve)
+        if pair is not None:
+            i, j, depth = pair
+            raise InputError(f"RVE file {path}: particles {i} and {j} overlap by {depth:.3g} m "
+                             f"(centre distance below the sum of their radii); the file is "
+                             f"damaged or not made by mapsim")
+        return rve
+
+
+def _text(v):
+    return v.decode() if isinstance(v, bytes) else v
+
+
+#: relative overlap tolerated as round-off: placement leaves touching particles at exactly
+#: r_i + r_j, reached to ~1e-15 relative after the wrap into the box
+_OVERLAP_RTOL = 1e-9
+
+
+def _first_overlap(rve: "RVE"):
+    """(i, j, depth [m]) of the deepest overlapping pair of particles (periodic), or None."""
+    if rve.n < 2:
+        return None
+    from scipy.spatial import cKDTree
+    L = rve.box_m
+    c = np.mod(rve.centers_m, L)
+    c[c >= L] = 0.0
+    r = rve.radii_m
+    reach = 2.0 * float(r.max())
+    if reach >= L / 2:                 # huge particles: brute force over minimum images
+        d = np.linalg.norm(minimum_image(c[:, None, :] - c[None, :, :], L), axis=-1)
+        i, j = np.triu_indices(rve.n, 1)
+        dist = d[i, j]
+    else:
+        pairs = cKDTree(c, boxsize=L).query_pairs(reach, output_type="ndarray")
+        if len(pairs) == 0:
+            return None
+        i, j = pairs[:, 0], pairs[:, 1]
+        dist = np.linalg.norm(minimum_image(c[i] - c[j], L), axis=-1)
+    depth = (r[i] + r[j]) * (1 - _OVERLAP_RTOL) - dist
+    k = int(np.argmax(depth)) if len(depth) else 0
+    if len(depth) and depth[k] > 0:
+        return int(i[k]), int(j[k]), float(depth[k] / (1 - _OVERLAP_RTOL))
+    return None

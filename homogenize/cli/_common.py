@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import stat
 import sys
 from pathlib import Path
@@ -10,12 +11,36 @@ from pathlib import Path
 from micro._io import atomic_write_text
 from micro._validate import InputError
 
-__all__ = ["Formatter", "int_in", "float_in", "check_outputs", "parse_at", "write_snippet",
-           "config_of"]
+from homogenize._budget import check_memory, machine_memory_bytes
+
+__all__ = ["Formatter", "one_line_errors", "int_in", "float_in", "scheduler_address",
+           "check_outputs", "check_output_dir", "check_input_file", "machine_memory_bytes",
+           "check_memory", "parse_at", "write_snippet", "config_of"]
 
 
 class Formatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     pass
+
+
+def one_line_errors(sub) -> None:
+    """Make every parser registered so far in the subparsers action ``sub`` report a usage
+    error as ONE line ``mapsim CMD: error: ...`` (exit 2), without argparse's usage block.
+    Idempotent; each command module calls it at the end of its ``register``."""
+    for parser in sub.choices.values():
+        parser.error = _OneLineError(parser)
+
+
+class _OneLineError:
+    def __init__(self, parser):
+        self.prog = parser.prog
+
+    def __call__(self, message: str):
+        # "argument --nz: --nz must be ..." -> "--nz must be ..."
+        m = re.match(r"argument ([^:]+): (.*)$", message, re.S)
+        if m and m.group(2).startswith(m.group(1).split("/")[0]):
+            message = m.group(2)
+        sys.stderr.write(f"{self.prog}: error: {' '.join(message.split())}\n")
+        raise SystemExit(2)
 
 
 def int_in(name: str, lo: int, hi: int):
@@ -52,11 +77,41 @@ def float_in(name: str, lo: float, hi: float, unit: str = "", lo_open: bool = Fa
     return conv
 
 
+def scheduler_address(text):
+    """argparse type: a Dask scheduler address ``PROTOCOL://HOST:PORT`` (tcp, tls, ucx, ws,
+    wss, inproc); anything else is a usage error before any connection is tried."""
+    m = re.fullmatch(r"(tcp|tls|ucx|ws|wss|inproc)://([^\s/:]+|\[[0-9a-fA-F:]+\])(:(\d{1,5}))?/?",
+                     text.strip())
+    if m is None or (m.group(4) is not None and not 0 < int(m.group(4)) < 65536):
+        raise argparse.ArgumentTypeError(
+            f"--scheduler must be an address PROTOCOL://HOST:PORT (protocol tcp, tls, ucx, ws, "
+            f"wss or inproc; port 1-65535), e.g. tcp://127.0.0.1:8786; got {text!r}")
+    return text.strip()
+
+
 def _name_max(directory: Path) -> int:
     try:
         return os.pathconf(directory, "PC_NAME_MAX")
     except (OSError, ValueError):
         return 255
+
+
+def _check_name(opt: str, p: Path) -> None:
+    """Refuse a path with a component too long for its file system (and the temp-file prefix
+    and suffix of an atomic write) before anything is created."""
+    limit = _name_max(Path("."))
+    for part in p.parts:
+        if len(part.encode()) > limit - 16:
+            raise InputError(f"{opt}: file name is too long ({len(part.encode())} bytes; at most "
+                             f"{limit - 16} per name)")
+
+
+def _exists(p: Path) -> bool:
+    try:
+        os.lstat(p)
+        return True
+    except OSError:
+        return False
 
 
 def check_outputs(outputs, inputs=()) -> None:
@@ -67,20 +122,25 @@ def check_outputs(outputs, inputs=()) -> None:
     if it exists and is not a regular file (a device such as /dev/null, a directory, a pipe),
     if its file name is too long, or if its directory cannot be created or written.
     """
-    ins = [Path(p) for p in inputs if p is not None and Path(p).exists()]
+    ins = [Path(p) for p in inputs if p is not None and _exists(Path(p))]
     seen = {}
     for opt, path in outputs:
         if path is None or str(path) == "-":
             continue
         p = Path(path)
+        _check_name(opt, p)
         if str(p) in seen:
             raise InputError(f"{opt} {p}: the same file is also given to {seen[str(p)]}")
         seen[str(p)] = opt
-        for q in ins:
-            if p.exists() and os.path.samefile(p, q):
-                raise InputError(f"{opt} {p} is an input of this command ({q}); refusing to "
-                                 f"overwrite it: give another output name")
-        if p.exists() or p.is_symlink():
+        if _exists(p):
+            for q in ins:
+                try:
+                    same = os.path.samefile(p, q)
+                except OSError:
+                    same = False
+                if same:
+                    raise InputError(f"{opt} {p} is an input of this command ({q}); refusing "
+                                     f"to overwrite it: give another output name")
             try:
                 mode = os.stat(p).st_mode
             except OSError as exc:
@@ -89,14 +149,31 @@ def check_outputs(outputs, inputs=()) -> None:
                 kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file"
                 raise InputError(f"{opt} {p} exists and is {kind}; give a regular file name")
         parent = p.parent if str(p.parent) else Path(".")
-        if len(p.name.encode()) > _name_max(parent if parent.exists() else Path(".")) - 16:
-            raise InputError(f"{opt}: file name is too long ({len(p.name.encode())} bytes; "
-                             f"at most {_name_max(Path('.')) - 16}) ")
         anc = parent
-        while not anc.exists():
+        while not _exists(anc):
             anc = anc.parent
         if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
             raise InputError(f"{opt} {p}: directory {anc} is not writable")
+
+
+def check_input_file(opt: str, path, max_bytes: int = 64 * 2 ** 20) -> None:
+    """Refuse an input that is not a regular file of at most ``max_bytes`` (a device such as
+    /dev/zero would be read forever, a FIFO would block) before it is opened."""
+    if path is None:
+        return
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise InputError(f"{opt} {p} does not exist") from None
+    except OSError as exc:
+        raise InputError(f"{opt} {p}: cannot be examined ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(f"{opt} {p} must be a regular file (this is a device, pipe or "
+                         f"directory)")
+    if st.st_size > max_bytes:
+        raise InputError(f"{opt} {p} is {st.st_size / 2 ** 20:.1f} MiB, more than the "
+                         f"{max_bytes / 2 ** 20:g} MiB allowed")
 
 
 def check_output_dir(opt: str, path) -> None:
@@ -104,12 +181,13 @@ def check_output_dir(opt: str, path) -> None:
     if path is None:
         return
     p = Path(path)
-    if p.exists() and not p.is_dir():
+    _check_name(opt, p)
+    if _exists(p) and not p.is_dir():
         raise InputError(f"{opt} {p} exists and is not a directory")
     anc = p
-    while not anc.exists():
+    while not _exists(anc):
         anc = anc.parent
-    if not os.access(anc, os.W_OK | os.X_OK):
+    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
         raise InputError(f"{opt} {p}: directory {anc} is not writable")
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from micro._io import manifest, write_json
 
 from homogenize.bench import PROVIDERS, run
-from homogenize.cli._common import check_outputs
+from homogenize.cli._common import check_outputs, one_line_errors
 
 
 def _fmt(value, spec: str) -> str:
@@ -33,3 +33,4 @@ def register(sub, formatter):
                    help="run only this provider (default: all)")
     p.add_argument("--json", default=None, help="write the records to this JSON file")
     p.set_defaults(func=_cmd, outputs=("json",))
+    one_line_errors(sub)

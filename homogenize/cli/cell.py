@@ -15,7 +15,7 @@ from micro.rve import RVE
 
 from homogenize._cell_output import plot_slice, write_pvd
 from homogenize.cell import CellConfig, homogenize
-from homogenize.cli._common import config_of
+from homogenize.cli._common import check_memory, config_of, float_in, int_in
 from homogenize.studies.cell_studies import (dilute_convergence_study, phi_study,
                                              plot_dilute_convergence, plot_phi_study)
 
@@ -28,6 +28,22 @@ pairwise virial stress come from micro.dipoles.solve. A manifest is written next
 """
 
 
+# Ranges of the options (parse time, exit 2): moduli from soft gels to diamond, so that no
+# stiffness contrast overflows the solver (1e300 Pa did).
+_MODULUS = (1e2, 1e13)
+_VOXELS = (4, 256)
+#: peak memory of one cell solve [bytes]: a base of 1 GB (interpreter, numba, dipoles) plus
+#: 6 kB per voxel (measured peak RSS: 1.05 GB at 32^3, 1.35 GB at 48^3, i.e. ~4 kB/voxel)
+_CELL_BASE_BYTES, _CELL_BYTES_PER_VOXEL = 1e9, 6e3
+_VECTOR_LIMITS = {"B": 50.0, "gradB": 1e4}
+
+
+def _check_voxels(opt: str, n: int) -> None:
+    """Refuse a voxel grid whose memory estimate exceeds the machine, before any work."""
+    check_memory(f"{opt} {n} ({n ** 3:.3g} voxels)",
+                 _CELL_BASE_BYTES + _CELL_BYTES_PER_VOXEL * n ** 3, f"use fewer {opt}")
+
+
 def _parse_vec(text: str | None, name: str, unit: str):
     if text is None:
         return None
@@ -36,6 +52,10 @@ def _parse_vec(text: str | None, name: str, unit: str):
     except ValueError:
         raise InputError(f"--{name} must be a number or 3 comma-separated numbers [{unit}], "
                          f"got {text!r}") from None
+    lim = _VECTOR_LIMITS.get(name, float("inf"))
+    if not all(abs(v) <= lim for v in vals):          # also catches nan
+        raise InputError(f"--{name} entries must be finite and in [-{lim:g}, {lim:g}] {unit}, "
+                         f"got {text!r}")
     if len(vals) == 1:
         return vals[0]
     if len(vals) in (3, 9):
@@ -47,6 +67,7 @@ def _parse_vec(text: str | None, name: str, unit: str):
 
 
 def _cmd(args) -> int:
+    _check_voxels("--voxels", args.voxels)
     cfg = CellConfig(voxels=args.voxels, matrix=Material(args.matrix_E, args.matrix_nu),
                      particle=Material(args.particle_E, args.particle_nu), rigid=args.rigid,
                      method=args.method, tol=args.tol)
@@ -94,10 +115,14 @@ def _cmd(args) -> int:
 
 
 def _cmd_phi_study(args) -> int:
-    phis = [float(v) for v in args.phi.split(",")]
+    try:
+        phis = [float(v) for v in args.phi.split(",")]
+    except ValueError:
+        raise InputError(f"--phi must be comma-separated numbers, got {args.phi!r}") from None
     for v in phis:
         if not 0.0 < v <= 0.45:
             raise InputError(f"--phi values must be in (0, 0.45] (volume fraction), got {v:g}")
+    _check_voxels("--voxels", args.voxels)
     study = phi_study(phis, args.voxels, progress=not args.quiet)
     study["manifest"] = manifest({"phi": phis, "voxels": args.voxels})
     if args.png:
@@ -114,6 +139,7 @@ def _cmd_dilute_study(args) -> int:
     for n in ns:
         if not 4 <= n <= 256:
             raise InputError(f"--voxels values must be in [4, 256] (voxels per edge), got {n}")
+    _check_voxels("--voxels", max(ns))
     if not 0.0 < args.phi <= 0.05:
         raise InputError(f"--phi must be in (0, 0.05] (a dilute volume fraction), got {args.phi:g}")
     check_positive("--particle-E", args.particle_E, "Pa")
@@ -137,8 +163,11 @@ def register(sub, formatter):
                                    "result and Mori-Tanaka; observed rate and Richardson limit.")
     d.add_argument("--voxels", default="8,16,24,32,48,64",
                    help="comma-separated voxels per cube edge (default 8,16,24,32,48,64)")
-    d.add_argument("--phi", type=float, default=0.01, help="particle volume fraction [1] (default 0.01)")
-    d.add_argument("--particle-E", dest="particle_E", type=float, default=20e6,
+    d.add_argument("--phi", type=float_in("--phi", 0.0, 0.05, lo_open=True), default=0.01,
+                   help="particle volume fraction [1] (default 0.01)")
+    d.add_argument("--particle-E", dest="particle_E",
+                   type=float_in("--particle-E", *_MODULUS, "Pa"),
+                   default=20e6,
                    help="particle Young's modulus [Pa] (default 20e6: contrast 10 to PDMS)")
     d.add_argument("--json", required=True, type=Path, help="result JSON file")
     d.add_argument("--png", type=Path, default=None, help="plot file (PNG)")
@@ -151,7 +180,8 @@ def register(sub, formatter):
                                    "modulus [Pa] from the voxel FEM and from closed forms.")
     q.add_argument("--phi", default="0.01,0.05,0.1,0.2,0.3",
                    help="comma-separated particle volume fractions [1]")
-    q.add_argument("--voxels", type=int, default=24, help="voxels per cube edge")
+    q.add_argument("--voxels", type=int_in("--voxels", *_VOXELS),
+                   default=24, help="voxels per cube edge")
     q.add_argument("--json", required=True, type=Path, help="result JSON file")
     q.add_argument("--png", type=Path, default=None, help="plot file (PNG)")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -160,7 +190,8 @@ def register(sub, formatter):
     p = sub.add_parser("homogenize", formatter_class=formatter, description=_DESCRIPTION,
                        help="FEM homogenization of an RVE: C_eff, E_eff, f_eff, magnetic stress")
     p.add_argument("rve", type=Path, help="RVE file (HDF5, from `mapsim rve`)")
-    p.add_argument("--voxels", type=int, default=64, help="voxels per cube edge (>= 4)")
+    p.add_argument("--voxels", type=int_in("--voxels", *_VOXELS),
+                   default=64, help="voxels per cube edge (>= 4)")
     p.add_argument("--B", default=None,
                    help="applied flux density mu0 H [T]: scalar (along z) or 'Bx,By,Bz'; "
                         "enables the magnetic load case (default: none)")
@@ -169,18 +200,25 @@ def register(sub, formatter):
                         "(default: 0 when --B is given)")
     p.add_argument("--law", default=DEFAULT_LAW, choices=LAW_NAMES,
                    help="magnetization law of one particle")
-    p.add_argument("--matrix-E", dest="matrix_E", type=float, default=2e6,
+    p.add_argument("--matrix-E", dest="matrix_E", type=float_in("--matrix-E", *_MODULUS, "Pa"),
+                   default=2e6,
                    help="matrix Young's modulus [Pa]")
-    p.add_argument("--matrix-nu", dest="matrix_nu", type=float, default=0.45,
+    p.add_argument("--matrix-nu", dest="matrix_nu",
+                   type=float_in("--matrix-nu", -1.0, 0.5, lo_open=True, hi_open=True),
+                   default=0.45,
                    help="matrix Poisson's ratio [1], in (-1, 0.5)")
-    p.add_argument("--particle-E", dest="particle_E", type=float, default=211e9,
+    p.add_argument("--particle-E", dest="particle_E",
+                   type=float_in("--particle-E", *_MODULUS, "Pa"),
+                   default=211e9,
                    help="particle Young's modulus [Pa] (Fe)")
-    p.add_argument("--particle-nu", dest="particle_nu", type=float, default=0.29,
+    p.add_argument("--particle-nu", dest="particle_nu",
+                   type=float_in("--particle-nu", -1.0, 0.5, lo_open=True, hi_open=True),
+                   default=0.29,
                    help="particle Poisson's ratio [1]")
     p.add_argument("--rigid", action="store_true", help="rigid particles (stiff limit)")
     p.add_argument("--method", default="centre", choices=("centre", "fraction"),
                    help="voxel phase: centre in sphere, or volume fraction of 4^3 sub-samples")
-    p.add_argument("--tol", type=float, default=1e-6,
+    p.add_argument("--tol", type=float_in("--tol", 1e-14, 1e-2), default=1e-6,
                    help="CG relative residual per load case [1] (default 1e-6; C_eff and "
                         "stress_mag are variational: their error is ~ tol^2)")
     p.add_argument("--json", required=True, type=Path, help="result JSON file (written atomically)")

@@ -7,7 +7,7 @@ from pathlib import Path
 from micro._io import manifest, write_json
 from micro._validate import InputError
 
-from homogenize.cli._common import check_outputs
+from homogenize.cli._common import check_input_file, check_outputs, int_in, one_line_errors
 from homogenize.experiments.diagnose import diagnose
 from homogenize.experiments.io import load_experiment
 from homogenize.experiments.study import run_study, summarize, write_study
@@ -33,6 +33,9 @@ the median gain (study.json, confusion.csv, confusion.png, manifest.json in --ou
 
 
 def _diagnose(args) -> int:
+    if args.discussion and not args.report:
+        raise InputError("--discussion is appended to the report: give --report DIR too")
+    check_input_file("--discussion", args.discussion, 4 * 2 ** 20)
     exp = load_experiment(args.experiment)
     check_outputs([("--json", args.json)], [exp.data_path, args.experiment])
     d = diagnose(exp, progress=not args.quiet)
@@ -68,8 +71,6 @@ def _diagnose(args) -> int:
 
 
 def _study(args) -> int:
-    if args.n < 1:
-        raise InputError(f"--n must be >= 1 (number of synthetic cases), got {args.n}")
     records = run_study(args.n, seed=args.seed, progress=not args.quiet)
     summary = summarize(records)
     config = {"command": "diagnose-study", "n": args.n, "seed": args.seed}
@@ -98,8 +99,6 @@ def _tables(args) -> int:
     argv = ["mapsim", "diagnose-tables", "--only", args.only]
     if args.only in ("stiffness", "all"):
         argv += ["--voxels", str(args.voxels)]
-    if args.voxels < 8:
-        raise InputError(f"--voxels must be >= 8 (voxels per RVE edge), got {args.voxels}")
     if args.only in ("stiffness", "all"):
         out = T.build_stiffness_table(voxels=args.voxels, progress=not args.quiet, argv=argv)
         print(f"wrote {out}")
@@ -133,8 +132,10 @@ def register(sub, formatter):
 
     q = sub.add_parser("diagnose-study", formatter_class=formatter, description=_STUDY_DOC,
                        help="recovery of hidden causes on synthetic experiments")
-    q.add_argument("--n", type=int, default=200, help="number of synthetic cases (-)")
-    q.add_argument("--seed", type=int, default=0, help="seed of the first case; case i uses seed+i")
+    q.add_argument("--n", type=int_in("--n", 1, 100_000), default=200,
+                   help="number of synthetic cases (-)")
+    q.add_argument("--seed", type=int_in("--seed", 0, 2 ** 63 - 100_001), default=0,
+                   help="seed of the first case; case i uses seed+i")
     q.add_argument("--out", default="results/diagnose/study",
                    help="output directory (study.json, confusion.csv/.png, manifest.json)")
     q.add_argument("--json", default=None, help="also write the study JSON to this file")
@@ -146,7 +147,8 @@ def register(sub, formatter):
     t.add_argument("--only", choices=("all", "stiffness", "resolution", "stress", "cell-stress"), default="all",
                    help="which table to re-make; 'resolution' is the stiffness table's "
                         "discretization check (one sphere at 12-40 voxels) (default: all)")
-    t.add_argument("--voxels", type=int, default=24,
+    t.add_argument("--voxels", type=int_in("--voxels", 8, 96), default=24,
                    help="voxels per RVE edge of the stiffness table (-, default 24)")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=_tables)
+    one_line_errors(sub)

@@ -7,7 +7,8 @@ from pathlib import Path
 from micro._io import manifest, write_json
 from micro._validate import InputError
 
-from homogenize.cli._common import config_of, parse_at, write_snippet
+from homogenize.cli._common import (config_of, float_in, int_in, one_line_errors, parse_at,
+                                    scheduler_address, write_snippet)
 from homogenize.macro.cantilever import Strip
 from homogenize.macro.effective import beam_with_interval, effective_material_from_table
 from homogenize.macro.exporters import ExportSpec, export_text
@@ -42,22 +43,11 @@ per-realization values, with the difference, its interval and Hedges' g (effect 
 Points are given by index or as axis=value pairs, e.g. "arrangement=clusters,B_T=0.1"."""
 
 
-def _positive_int(name):
-    def conv(text):
-        try:
-            v = int(text)
-        except ValueError:
-            raise InputError(f"{name} must be an integer >= 1, got {text!r}") from None
-        if v < 1:
-            raise InputError(f"{name} must be an integer >= 1, got {v}")
-        return v
-    return conv
-
-
 def _add_cluster_options(p):
-    p.add_argument("--workers", type=int, default=None,
+    p.add_argument("--workers", type=int_in("--workers", 1, 64), default=None,
                    help="worker processes of the local Dask cluster (default: min(2, cores))")
-    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    p.add_argument("--scheduler", type=scheduler_address, default=None,
+                   metavar="tcp://HOST:PORT",
                    help="address of an existing Dask scheduler to run on instead of a local "
                         "cluster (default: none, start a local cluster)")
     p.add_argument("--no-progress", action="store_true",
@@ -70,9 +60,6 @@ def _check_workers(args):
 
 
 def _cmd_batch(args) -> int:
-    _check_workers(args)
-    if args.retries < 0:
-        raise InputError(f"--retries must be >= 0, got {args.retries}")
     study = load_study(args.study)          # all validation before anything is written
     try:
         out = run_batch(study, args.out, workers=args.workers, scheduler=args.scheduler,
@@ -102,10 +89,7 @@ def _print_force_summary(path, max_rows: int = 40) -> None:
 
 
 def _cmd_rve_size(args) -> int:
-    _check_workers(args)
     study = load_study(args.study)
-    if args.target is not None and not 0 < args.target < 1:
-        raise InputError(f"--target must be in (0, 1), got {args.target:g}")
     try:
         res = rve_size_study(study, args.out, workers=args.workers, scheduler=args.scheduler,
                              progress=not args.no_progress, quantity=args.quantity,
@@ -120,10 +104,6 @@ def _cmd_rve_size(args) -> int:
 
 
 def _cmd_compare(args) -> int:
-    if args.permutations < 99:
-        raise InputError(f"--permutations must be >= 99, got {args.permutations}")
-    if not 0 < args.confidence < 1:
-        raise InputError(f"--confidence must be in (0, 1), got {args.confidence:g}")
     table = read_table(args.table)
     q = table.resolve_quantity(args.quantity)
     a = table.select(args.point_a)
@@ -190,8 +170,10 @@ def register(sub, formatter):
     p.add_argument("study", help="study file (TOML)")
     p.add_argument("--out", required=True, help="table file to write (HDF5) (default: none, required)")
     _add_cluster_options(p)
-    p.add_argument("--retries", type=int, default=2,
-                   help="resubmissions of a realization whose task raised")
+    p.add_argument("--retries", type=int_in("--retries", 0, 10), default=2,
+                   help="resubmissions of a realization whose task raised a possibly transient "
+                        "error (out of memory, I/O); deterministic errors are reported at once "
+                        "(the same seed fails the same way), lost workers are recomputed by Dask")
     p.add_argument("--clean", action="store_true",
                    help="delete the per-realization parts once the table is written "
                         "(default: keep them, so that a changed study reuses them)")
@@ -207,7 +189,8 @@ def register(sub, formatter):
     p.add_argument("--component", default=None,
                    help="x, y, z or norm for vectors, xx..zz for tensors "
                         "(default: [rve_size] component, else z)")
-    p.add_argument("--target", type=float, default=None,
+    p.add_argument("--target", type=float_in("--target", 0.0, 1.0, lo_open=True, hi_open=True),
+                   default=None,
                    help="target relative precision of the mean, e.g. 0.02 "
                         "(default: [rve_size] target_rel_precision, else 0.02)")
     p.add_argument("--at", default=None, metavar="AXIS=VALUE,...",
@@ -225,11 +208,13 @@ def register(sub, formatter):
                    help="quantity (name or prefix, e.g. f_eff, M_eff, E_eff, d_eff)")
     p.add_argument("--component", default=None,
                    help="x, y, z or norm for vectors, xx..zz for tensors (default: z / zz)")
-    p.add_argument("--confidence", type=float, default=0.95,
+    p.add_argument("--confidence", type=float_in("--confidence", 0.0, 1.0, lo_open=True,
+                                                 hi_open=True), default=0.95,
                    help="level of the interval of the difference")
-    p.add_argument("--permutations", type=int, default=9999,
+    p.add_argument("--permutations", type=int_in("--permutations", 99, 10 ** 7), default=9999,
                    help="resamples of the permutation test (exact test if all splits fit)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the permutation resampling")
+    p.add_argument("--seed", type=int_in("--seed", 0, 2 ** 63 - 1), default=0,
+                   help="seed of the permutation resampling")
     p.add_argument("--json", default=None, help="also write the result to this JSON file (default: none)")
     p.set_defaults(func=_cmd_compare, outputs=("json",), inputs=("table",))
 
@@ -244,12 +229,15 @@ def register(sub, formatter):
     p.add_argument("--out", default="results/chain", help="output directory")
     p.add_argument("--keep-parts", action="store_true",
                    help="keep the per-realization parts after the table is written (default: delete them)")
-    p.add_argument("--thickness", type=float, default=1e-3,
+    p.add_argument("--thickness", type=float_in("--thickness", 0.0, 1.0, "m", lo_open=True),
+                   default=1e-3,
                    help="assumed strip thickness [m] (the paper gives none; the length follows "
                         "from its premise, 43.79 kN/m^3 -> 4 mm)")
-    p.add_argument("--width", type=float, default=5e-3, help="assumed strip width [m]")
+    p.add_argument("--width", type=float_in("--width", 0.0, 1.0, "m", lo_open=True),
+                   default=5e-3, help="assumed strip width [m]")
     _add_cluster_options(p)
     p.set_defaults(func=_cmd_chain, output_dirs=("out",), inputs=("study",))
+    one_line_errors(sub)
 
 
 # --------------------------------------------------------------------------- mapsim beam --table
@@ -263,10 +251,12 @@ def add_beam_table_options(p) -> None:
         "propagated to the tip deflection of every model.")
     g.add_argument("--table", default=None, help="effective-parameter table (HDF5) "
                                                  "(default: none, use --body-force-N-m3)")
-    g.add_argument("--phi", type=float, default=None, help="particle volume fraction [-] (default: none, required with --table)")
-    g.add_argument("--B", dest="B_T", type=float, default=None,
+    g.add_argument("--phi", type=float_in("--phi", 0.0, 0.74, lo_open=True), default=None,
+                   help="particle volume fraction [-] (default: none, required with --table)")
+    g.add_argument("--B", dest="B_T", type=float_in("--B", 0.0, 50.0, "T"), default=None,
                    help="applied flux density at the strip [T] (default: none, required with --table)")
-    g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=None,
+    g.add_argument("--gradB", dest="gradB_T_per_m", type=float_in("--gradB", -1e4, 1e4, "T/m"),
+                   default=None,
                    help="field gradient d|B|/dz [T/m] (default: none, required with --table)")
     g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
                    help="values of other grid axes with several values, e.g. "
@@ -340,9 +330,12 @@ def add_export_table_options(p) -> None:
         "density defaults to the mixture (1 - phi) 1210 + phi 7870 kg/m^3.")
     g.add_argument("--table", default=None, help="effective-parameter table (HDF5) "
                                                  "(default: none, give the numbers)")
-    g.add_argument("--phi", type=float, default=None, help="particle volume fraction [-] (default: none, required with --table)")
-    g.add_argument("--B", dest="B_T", type=float, default=None, help="applied flux density [T] (default: none, required with --table)")
-    g.add_argument("--gradB", dest="gradB_T_per_m", type=float, default=None,
+    g.add_argument("--phi", type=float_in("--phi", 0.0, 0.74, lo_open=True), default=None,
+                   help="particle volume fraction [-] (default: none, required with --table)")
+    g.add_argument("--B", dest="B_T", type=float_in("--B", 0.0, 50.0, "T"), default=None,
+                   help="applied flux density [T] (default: none, required with --table)")
+    g.add_argument("--gradB", dest="gradB_T_per_m", type=float_in("--gradB", -1e4, 1e4, "T/m"),
+                   default=None,
                    help="field gradient d|B|/dz [T/m] (default: none, required with --table)")
     g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
                    help="values of other grid axes with several values (default: none)")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+import stat
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -65,6 +66,10 @@ _RANGES = {
     "stress_sd_Pa": (0.0, _INF, True, True, "Pa", "a standard deviation"),
 }
 _STRING_COLUMNS = ("specimen", "branch")
+
+#: largest experiment file (TOML or CSV) read [bytes]: far above any measured data set, far
+#: below what would exhaust memory (a device such as /dev/zero never ends)
+MAX_FILE_BYTES = 64 * 2 ** 20
 
 
 @dataclass(frozen=True)
@@ -229,6 +234,7 @@ def load_experiment(toml_path) -> Experiment:
     InputError -- one message naming the file, row and column of the first problem.
     """
     toml_path = Path(toml_path)
+    _check_regular(toml_path, "experiment file")
     try:
         text = toml_path.read_bytes().decode("utf-8")
     except FileNotFoundError:
@@ -257,13 +263,93 @@ def load_experiment(toml_path) -> Experiment:
     setup = _section(toml_path, doc, "setup", Setup)
     _check_sections(toml_path, matrix, particles, setup)
     csv_path = (toml_path.parent / data)
-    cols, specimen, down = _read_csv(csv_path, kind)
+    cols, specimen, down, lines = _read_csv(csv_path, kind)
+    _check_plausible(csv_path, kind, cols, specimen, down, lines, matrix, particles)
     return Experiment(kind=kind, toml_path=toml_path, data_path=csv_path, title=title,
                       matrix=matrix, particles=particles, setup=setup, columns=cols,
                       specimen=specimen, down=down)
 
 
+def _check_regular(path: Path, what: str) -> None:
+    """A file we read must be a regular file of bounded size (not a device, FIFO, directory)."""
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        raise InputError(f"{path}: {what} not found") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(f"{path}: {what} must be a regular file (this is a device, pipe or "
+                         f"directory)")
+    if st.st_size > MAX_FILE_BYTES:
+        raise InputError(f"{path}: {what} is {st.st_size / 2 ** 20:.1f} MiB, more than the "
+                         f"{MAX_FILE_BYTES / 2 ** 20:g} MiB allowed")
+
+
+def _check_plausible(path, kind, cols, specimen, down, lines, matrix, particles) -> None:
+    """Refuse data that contradict their declared units or kind, before any fit: a fit would
+    otherwise land on a bound of its parameter without a word. One message naming file, row
+    and column; the checks are loose enough for any real specimen."""
+    def bad(i, col, msg):
+        raise InputError(f"{path}, row {lines[i]}, column '{col}': {msg}")
+    # exact duplicate rows (a copy-paste): every column and label equal
+    seen = {}
+    keys = sorted(cols)
+    for i in range(len(lines)):
+        row = (str(specimen[i]), bool(down[i])) + tuple(float(cols[k][i]) for k in keys)
+        if row in seen:
+            raise InputError(f"{path}, row {lines[i]}: repeats row {lines[seen[row]]} exactly "
+                             f"(a duplicated row?); remove it or label repeats as their own "
+                             f"specimen")
+        seen[row] = i
+    if "B_T" in cols:
+        i = int(np.argmax(np.abs(cols["B_T"])))
+        if abs(cols["B_T"][i]) > 50.0:
+            bad(i, "B_T", f"{cols['B_T'][i]:g} T is beyond any laboratory magnet (50 T); "
+                          f"a value in mT?")
+    if kind == "tensile":
+        eps, sig = cols["strain"], cols["stress_Pa"]
+        i = int(np.argmax(eps))
+        if eps[i] > 10.0:
+            bad(i, "strain", f"{eps[i]:g} is a 1000 % strain; strain is a fraction (0.1 = 10 %), "
+                             f"not percent")
+        big = float(np.max(np.abs(sig))) if sig.size else 0.0
+        for i in np.flatnonzero((eps > 0) & (sig < -0.01 * big)):
+            bad(int(i), "stress_Pa", f"{sig[i]:g} Pa is compressive at a tensile strain "
+                                     f"{eps[i]:g}; tensile stress is positive")
+        sel = eps > 1e-3
+        if np.any(sel):
+            modulus = float(np.median(sig[sel] / eps[sel]))
+            ratio = modulus / matrix.E_Pa
+            if not 1e-3 <= ratio <= 1e3:
+                i = int(np.flatnonzero(sel)[0])
+                hint = "stress in MPa or kPa?" if ratio < 1 else "strain in percent?"
+                bad(i, "stress_Pa", f"the data imply a modulus of {modulus:.3g} Pa, "
+                                    f"{ratio:.1e} times [matrix] E_Pa = {matrix.E_Pa:g} Pa; "
+                                    f"{hint} (columns are SI: Pa and a strain fraction)")
+    elif kind == "magnetostriction":
+        i = int(np.argmax(np.abs(cols["strain"])))
+        if abs(cols["strain"][i]) > 0.5:
+            bad(i, "strain", f"{cols['strain'][i]:g} is a {100 * cols['strain'][i]:g} % "
+                             f"magnetostrictive strain; strain is a fraction, not percent")
+    elif kind == "deflection":
+        ratio = np.abs(cols["deflection_m"]) / cols["length_m"]
+        i = int(np.argmax(ratio))
+        if ratio[i] > 1.0:
+            bad(i, "deflection_m", f"{cols['deflection_m'][i]:g} m exceeds the strip length "
+                                   f"{cols['length_m'][i]:g} m; a value in mm?")
+    elif kind == "magnetization":
+        M, phi = cols["M_A_per_m"], cols["phi"]
+        limit = 1.5 * phi * particles.Ms_A_per_m + 1.0
+        i = int(np.argmax(np.abs(M) / limit))
+        if abs(M[i]) > limit[i]:
+            bad(i, "M_A_per_m", f"{M[i]:g} A/m exceeds the saturation of the filler, phi Ms = "
+                                f"{phi[i] * particles.Ms_A_per_m:.4g} A/m; a value in emu/g or "
+                                f"kA/m? (the column is the composite's M in A/m)")
+
+
 def _read_csv(path: Path, kind: str):
+    _check_regular(path, "data file")
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except FileNotFoundError:
@@ -325,7 +411,7 @@ def _read_csv(path: Path, kind: str):
             if c not in _STRING_COLUMNS}
     specimen = _ro(np.asarray(values["specimen"], dtype=str))
     down = _ro(np.asarray([b == "down" for b in values.get("branch", ["up"] * len(body))]))
-    return cols, specimen, down
+    return cols, specimen, down, [line for line, _ in body]
 
 
 def write_experiment(toml_path, exp_or_kind, columns: dict, *, title: str = "",

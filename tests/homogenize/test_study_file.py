@@ -102,7 +102,7 @@ def test_scalar_axis_and_defaults(tmp_path):
     (GOOD.replace('evaluator = "synthetic"', 'evaluator = "magic"'), ["evaluator", "magic"]),
     (GOOD.replace('"clusters"', '"stacked"'), ["arrangement", "stacked"]),
     ("[study\nseed = 1", ["not valid TOML"]),
-    (GOOD + "\n[rve_size]\nn_particles = [10]\n", ["[rve_size]", "two sizes"]),
+    (GOOD + "\n[rve_size]\nn_particles = [10]\n", ["[rve_size]", "three sizes"]),
     (GOOD + "\n[rve_size]\nn_particles = [10, -20]\n", ["[rve_size]", "-20"]),
     (GOOD + "\n[rve_size]\nn_particles = [10, 20]\nfoo = 1\n", ["[rve_size]", "foo"]),
     (GOOD + "\n[synthetic]\nwork_seconds = -1\n", ["[synthetic] work_seconds", "-1"]),
