@@ -6,16 +6,18 @@ import datetime as _dt
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
 import tempfile
+import time
 from importlib import metadata
 from pathlib import Path
 from micro._validate import InputError
 import h5py
 import numpy as np
 
-__all__ = ["atomic_path", "atomic_write_text", "write_json", "manifest", "git_revision",
+__all__ = ["atomic_path", "clean_stale_temps", "atomic_write_text", "write_json", "manifest", "git_revision",
            "open_hdf5"]
 
 _PACKAGES = ("mapsim", "numpy", "scipy", "numba", "scikit-fem", "h5py", "trimesh", "pyamg",
@@ -42,14 +44,43 @@ def _read_umask() -> int:
 _UMASK = _read_umask()
 
 
+#: a temporary file of ours untouched for this long belongs to a writer that died (kill -9,
+#: power loss): the next atomic write of the same name removes it [s]
+STALE_TEMP_SECONDS = 3600.0
+
+
+def clean_stale_temps(path, max_age_s: float = STALE_TEMP_SECONDS) -> int:
+    """Remove hidden temporaries ``.NAME.XXXXXXXX.tmp`` of :func:`atomic_path` for ``path``
+    that were last modified more than ``max_age_s`` ago; return how many."""
+    path = Path(path)
+    pat = re.compile(r"\." + re.escape(path.name) + r"\.[A-Za-z0-9_]{8}\.tmp")
+    n = 0
+    now = time.time()
+    try:
+        entries = list(os.scandir(path.parent))
+    except OSError:
+        return 0
+    for e in entries:
+        if not pat.fullmatch(e.name):
+            continue
+        with contextlib.suppress(OSError):
+            if e.is_file(follow_symlinks=False) and now - e.stat().st_mtime > max_age_s:
+                os.unlink(e.path)
+                n += 1
+    return n
+
+
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside ``path``; move it onto ``path`` only if the block succeeds.
 
     A reader never sees a half-written file: either the old file (or none) or the new one.
+    Temporaries of earlier writers of the same name that died mid-write (older than
+    :data:`STALE_TEMP_SECONDS`) are removed first.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    clean_stale_temps(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:

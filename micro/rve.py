@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ._io import atomic_path
+from ._io import _default as _json_default, atomic_path, write_json
 from ._validate import InputError
 from micro._io import open_hdf5
 import h5py
 
-__all__ = ["RVE", "minimum_image", "FORMAT_VERSION"]
+__all__ = ["RVE", "minimum_image", "FORMAT_VERSION", "check_sidecar_manifest", "sidecar_path"]
 
 FORMAT_VERSION = 1
 
@@ -211,8 +211,13 @@ class RVE:
                    params=params or {})
 
     # ------------------------------------------------------------------ HDF5 I/O
-    def save(self, path) -> Path:
-        """Write the RVE to HDF5 at ``path`` atomically (units as attributes); return the path."""
+    def save(self, path, manifest: dict | None = None) -> Path:
+        """Write the RVE to HDF5 at ``path`` atomically (units as attributes); return the path.
+
+        ``manifest`` (the run manifest) is stored inside the file as ``manifest_json``: it is
+        the authoritative copy, a side-car ``<stem>.manifest.json`` is checked against it by
+        :func:`check_sidecar_manifest`.
+        """
 
         path = Path(path)
         with atomic_path(path) as tmp:
@@ -226,6 +231,9 @@ class RVE:
                 f.attrs["params_json"] = json.dumps(self.params, sort_keys=True)
                 f.attrs["n"] = self.n
                 f.attrs["phi"] = self.phi
+                if manifest is not None:
+                    f.attrs["manifest_json"] = json.dumps(manifest, sort_keys=True,
+                                                          default=_json_default)
                 for name, unit, _dtype in _ARRAYS:
                     ds = f.create_dataset(name, data=getattr(self, name))
                     ds.attrs["units"] = unit
@@ -294,6 +302,51 @@ class RVE:
                              f"(centre distance below the sum of their radii); the file is "
                              f"damaged or not made by mapsim")
         return rve
+
+
+def sidecar_path(path) -> Path:
+    """The side-car manifest of an RVE file: ``<stem>.manifest.json`` beside it."""
+    path = Path(path)
+    return path.with_name(path.stem + ".manifest.json")
+
+
+def check_sidecar_manifest(path) -> str | None:
+    """Reconcile the side-car manifest of the RVE file ``path`` with the file.
+
+    The file and its side-car are two writes; a kill between them leaves a side-car of an
+    earlier run. If the file holds its manifest (``manifest_json``), a side-car that differs
+    is rewritten from it; otherwise a side-car whose seed differs from the file's is flagged.
+    Returns a note for the user, or None when there is nothing to say.
+    """
+    side = sidecar_path(path)
+    try:
+        have = json.loads(side.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError):
+        have = None
+    with open_hdf5(path, "RVE file") as f:
+        inner = _text(f.attrs.get("manifest_json"))
+        seed = None if bool(f.attrs.get("seed_is_none", False)) else f.attrs.get("seed")
+    if inner is not None:
+        try:
+            want = json.loads(inner)
+        except ValueError:
+            return f"{path}: its stored manifest is not valid JSON; {side} left as it is"
+        if have == want:
+            return None
+        try:
+            write_json(side, want)
+        except OSError as exc:
+            return f"{side} disagrees with the manifest inside {path} and cannot be " \
+                   f"rewritten ({exc.strerror})"
+        return f"{side} disagreed with the manifest inside {path} (authoritative): rewritten"
+    side_seed = have.get("seed") if isinstance(have, dict) else None
+    file_seed = None if seed is None else int(seed)
+    if have is None or side_seed != file_seed:
+        return f"{side} does not describe {path} (seed {side_seed} vs {file_seed}); the file " \
+               f"is authoritative"
+    return None
 
 
 def _text(v):

@@ -159,3 +159,41 @@ def test_numba_cache_fallback_only_when_needed(tmp_path):
     assert (os.stat(d).st_mode & 0o777) == 0o700
     # the source tree is read-only but the user cache works: numba falls back itself
     assert choose_cache_dir([blocker / "pkg"], user, tmp, env) is None
+
+
+# --------------------------------------------------------------------------- atomic writes
+def test_stale_temporaries_of_a_name_are_removed_by_its_next_write(tmp_path):
+    import time
+    from micro._io import STALE_TEMP_SECONDS, atomic_write_text
+    old = tmp_path / ".a.json.abcd1234.tmp"          # a writer killed an hour ago
+    live = tmp_path / ".a.json.efgh5678.tmp"         # a writer busy right now
+    other = tmp_path / ".b.json.abcd1234.tmp"        # another file's: not ours to judge
+    for f in (old, live, other):
+        f.write_bytes(b"\0" * 10)
+    t = time.time() - 2 * STALE_TEMP_SECONDS
+    os.utime(old, (t, t))
+    os.utime(other, (t, t))
+    atomic_write_text(tmp_path / "a.json", "{}")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name,
+                                                                 "a.json"])
+
+
+def test_rve_sidecar_manifest_follows_the_file(tmp_path, capsys):
+    from homogenize.cli import main
+    from micro.rve import check_sidecar_manifest
+    out = tmp_path / "r.h5"
+    assert main(["rve", "--n", "20", "--phi", "0.05", "--seed", "2", "--out", str(out)]) == 0
+    side = tmp_path / "r.manifest.json"
+    good = json.loads(side.read_text())
+    # a kill between the two writes of a later run: the side-car is of another seed
+    side.write_text(json.dumps({**good, "seed": 1}))
+    note = check_sidecar_manifest(out)
+    assert "rewritten" in note and json.loads(side.read_text()) == good
+    assert check_sidecar_manifest(out) is None
+    # a file without a stored manifest: a disagreeing side-car is flagged, not rewritten
+    side.write_text(json.dumps({"seed": 1}))
+    with h5py.File(out, "r+") as f:
+        del f.attrs["manifest_json"]
+    assert "does not describe" in check_sidecar_manifest(out)
+    assert main(["rve", "--load", str(out)]) == 0
+    assert "does not describe" in capsys.readouterr().err

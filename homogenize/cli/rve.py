@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,7 @@ from micro.magnetization import DEFAULT_LAW, LAW_NAMES, get_law
 from micro.materials import FE, FE3O4, SEED
 from micro import particles as P
 from micro.particles import describe, generate_rve
-from micro.rve import RVE
+from micro.rve import RVE, check_sidecar_manifest, sidecar_path
 from micro._viz import export_mesh
 from micro._viz import save_picture
 
@@ -239,6 +240,9 @@ def _cmd(args) -> int:
     _check_outputs(args)
     if args.load:
         rve = RVE.load(args.load)
+        note = check_sidecar_manifest(args.load)
+        if note:
+            print(f"note: {note}", file=sys.stderr)
         dist = None
     else:
         check_rve_size(args)
@@ -258,9 +262,9 @@ def _cmd(args) -> int:
 
     config = {k: v for k, v in vars(args).items() if k != "func"}
     if args.out:
-        rve.save(args.out)
-        out = Path(args.out)
-        write_json(out.with_name(out.stem + ".manifest.json"), manifest(config, rve.seed))
+        man = manifest(config, rve.seed)
+        rve.save(args.out, manifest=man)          # the copy inside the file is authoritative
+        write_json(sidecar_path(args.out), man)
         print(f"wrote {args.out}")
     if args.ply or args.glb:
         for f in (args.ply, args.glb):
