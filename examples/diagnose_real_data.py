@@ -25,5 +25,5 @@ if __name__ == "__main__":
         md = write_report(d, out / name, discussion=disc.read_text() if disc.exists() else None)
         write_json(out / name / "diagnosis.json", d.as_dict())
         write_json(out / name / "manifest.json",
-                   manifest({"experiment": str(DATA / f"{name}.toml"), "command": "diagnose"}, None))
+                   manifest({"experiment": f"examples/data/{name}.toml", "command": "diagnose"}, None))
         print(f"{name}: causes {d.as_dict()['causes']}, gain {d.as_dict()['gain']:.3g} -> {md}")

@@ -154,6 +154,21 @@ def git_revision() -> str:
 RUN_LOG_ENV = "MAPSIM_RUN_LOG"
 
 
+def _relative_paths(obj):
+    """Absolute paths inside the working directory written relative to it (recursively), so
+    that a manifest does not depend on where the checkout lives."""
+    cwd = os.getcwd().rstrip(os.sep) + os.sep
+    if isinstance(obj, str) and obj.startswith(cwd):
+        return obj[len(cwd):]
+    if isinstance(obj, Path):
+        return _relative_paths(str(obj))
+    if isinstance(obj, dict):
+        return {k: _relative_paths(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(_relative_paths(v) for v in obj)
+    return obj
+
+
 def manifest(config: dict | None = None, seed=None, **extra) -> dict:
     """A run manifest: configuration, seed, package versions, git revision, time, machine.
 
@@ -167,7 +182,8 @@ def manifest(config: dict | None = None, seed=None, **extra) -> dict:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             versions[name] = None
-    out = {"config": config or {}, "seed": seed, "versions": versions}
+    config = _relative_paths(config or {})
+    out = {"config": config, "seed": seed, "versions": versions}
     run = {
         "python": sys.version.split()[0],
         "platform": platform.platform(),
@@ -182,7 +198,7 @@ def manifest(config: dict | None = None, seed=None, **extra) -> dict:
         out["run"] = f"per-run facts (git revision, times, machine) in the run log {Path(log).name}"
         Path(log).parent.mkdir(parents=True, exist_ok=True)
         with open(log, "a", encoding="utf-8") as fh:
-            fh.write(json.dumps({"config": config or {}, "seed": seed, **run},
+            fh.write(json.dumps({"config": config, "seed": seed, **run},
                                 default=_default) + "\n")
     else:
         out.update(run)

@@ -150,7 +150,7 @@ def _plot_confusion(outcomes, summary, path):
     colours = np.zeros(M.shape + (3,)) + 1.0
     tint = np.array([[0.75, 0.9, 0.75], [1.0, 0.85, 0.6], [1.0, 0.7, 0.7]])
     for j in range(3):
-        w = M[:, j] / max(M.max(), 1)
+        w = M[:, j] / max(M[:, j].max(), 1)      # each column on its own scale
         colours[:, j, :] = 1.0 - w[:, None] * (1.0 - tint[j])
     ax.imshow(colours, aspect="auto")
     ax.set_xticks(range(3), heads, fontsize=8)
@@ -162,7 +162,7 @@ def _plot_confusion(outcomes, summary, path):
     fr = summary["false_cause_rate"]
     g = summary["median_gain"]
     ax.set_title(f"{summary['n_used']} synthetic cases: exact recovery "
-                 f"{summary['exact_recovery_rate']:.1%}, cases with a false cause {fr:.1%}, "
+                 f"{summary['exact_recovery_rate']:.1%}\ncases with a false cause {fr:.1%}, "
                  f"median gain {g:.3g}" if fr is not None and g is not None
                  else "diagnose-study", fontsize=9)
     fig.tight_layout()
