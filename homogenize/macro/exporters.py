@@ -31,7 +31,9 @@ solvers use (:func:`homogenize.macro.fem.box_mesh` of the same tensor grids):
 ``solver="abaqus"`` (also read by CalculiX ``ccx``) writes one ``.inp``: ``*NODE``,
 ``*ELEMENT`` (``C3D10``: the tetrahedra of :func:`box_mesh` with their edge midpoints, the
 same P2 space as ``solve_cantilever(..., order=2)``; or ``C3D20R``: the hexahedra of the same
-grid), ``*NSET``/``*ELSET``, ``*SOLID SECTION``, the material, ``*BOUNDARY``, then ``*STEP``,
+grid; for the cantilever also ``C3D20``, ``C3D4``, ``C3D8``, ``C3D8R``, ``C3D8I``, see
+:data:`ABAQUS_ELEMENTS`), ``*NSET``/``*ELSET``, ``*SOLID SECTION``, the material,
+``*BOUNDARY``, then ``*STEP``,
 ``*STATIC``, ``*DLOAD`` (``BX/BY/BZ`` and ``GRAV``), ``*NODE FILE`` U, ``*NODE PRINT`` U of
 ``NTIP``, ``*END STEP``. :func:`parse_ccx_dat` reads the printed displacements back.
 
@@ -57,7 +59,7 @@ from micro._validate import InputError, check_choice, check_positive, check_rang
 __all__ = ["ExportSpec", "DIRECTIONS", "to_elmer", "to_abaqus", "abaqus_model", "abaqus_step",
            "parse_elmer", "parse_abaqus", "export_text", "Deck", "DeckMesh", "deck_mesh",
            "write_deck", "parse_ccx_dat", "parse_sif", "read_elmer_mesh", "ELMER_KEYWORDS",
-           "DECK_KINDS", "DECK_SOLVERS", "ABAQUS_ELEMENTS"]
+           "DECK_KINDS", "DECK_SOLVERS", "ABAQUS_ELEMENTS", "LINEAR_ELEMENTS"]
 
 #: allowed force directions (unit vectors along the global axes)
 DIRECTIONS = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0),
@@ -228,8 +230,13 @@ def parse_abaqus(text: str) -> dict:
 DECK_KINDS = ("cantilever", "channel")
 #: target solvers of :func:`write_deck`
 DECK_SOLVERS = ("abaqus", "elmer")
-#: element types of Abaqus/CalculiX decks
-ABAQUS_ELEMENTS = ("C3D10", "C3D20R")
+#: element types of Abaqus/CalculiX decks: quadratic tetrahedra and serendipity hexahedra
+#: (reduced or full integration), and, for the cantilever only, linear tetrahedra and trilinear
+#: hexahedra (full ``C3D8``, reduced with hourglass control ``C3D8R``, incompatible modes
+#: ``C3D8I``) -- the element-sensitivity study of :mod:`homogenize.macro.elements`
+ABAQUS_ELEMENTS = ("C3D10", "C3D20R", "C3D4", "C3D8", "C3D8R", "C3D8I", "C3D20")
+#: the linear (corner-node only) element types among :data:`ABAQUS_ELEMENTS`
+LINEAR_ELEMENTS = ("C3D4", "C3D8", "C3D8R", "C3D8I")
 
 # corner pairs of the edge nodes, in Abaqus (= Elmer 510 / 306) node order
 _TET10_EDGES = ((0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3))
@@ -245,11 +252,16 @@ class DeckMesh:
     """A quadratic mesh ready for writing (0-based indices).
 
     nodes_m : (N, 3) coordinates [m]; elements : (E, 10) tetrahedra (C3D10 / Elmer 510 node
-    order) or (E, 20) hexahedra (C3D20 order); element : "C3D10" | "C3D20R";
+    order), (E, 20) hexahedra (C3D20 order), or for the linear types (E, 4) tetrahedra / (E, 8)
+    hexahedra; element : one of :data:`ABAQUS_ELEMENTS`;
     node_sets : name -> node indices; boundaries : name -> (F, 6) quadratic triangles with
     (F,) parent elements, as ``(faces, parents)`` (tetrahedral meshes only);
     fixed : (node set, tuple of fixed components 1..3) pairs; tip_m : (3,) the probed point;
     divisions : the hexahedra per direction of the tensor grid.
+
+    ``node_sets["NTIP"]`` is the node at ``tip_m``; for linear elements on a grid with an odd
+    number of layers (no node at mid-thickness) it is the nodes of the tip line
+    ``x = L, y = w/2``, sorted by ``z``, between which the displacement is linear.
     """
     nodes_m: np.ndarray
     elements: np.ndarray
@@ -363,7 +375,9 @@ def deck_mesh(kind: str, geometry, *, element: str = "C3D10", divisions=None, nz
         :class:`~homogenize.macro.channel.ChannelGeometry` [m]
     element : "C3D10" (tetrahedra of :func:`~homogenize.macro.fem.box_mesh`, the mesh of
         ``solve_cantilever(..., half=False, divisions=...)`` and of ``solve_channel``) or
-        "C3D20R" (hexahedra of the same tensor grid; cantilever only)
+        "C3D20R" (hexahedra of the same tensor grid; cantilever only); cantilever only also
+        "C3D20" (same nodes, full integration), "C3D4" (the box_mesh tetrahedra without edge
+        nodes) and "C3D8", "C3D8R", "C3D8I" (the grid's hexahedra, corner nodes)
     divisions : (nx, ny, nz) hexahedra along length, full width, thickness (cantilever); None:
         :func:`~homogenize.macro.cantilever.beam_divisions` ``(strip, nz, aspect)``
     nc, channel_aspect : layers through the ceiling and aspect of the channel mesh (as in
@@ -390,12 +404,28 @@ def deck_mesh(kind: str, geometry, *, element: str = "C3D10", divisions=None, nz
             p, cells = m.p.T.copy(), _positive_tets(m.p.T, m.t.T.astype(np.int64))
             nodes, elems = _with_midside(p, cells, _TET10_EDGES)
             bnd = {"ROOT": _boundary_faces(elems, nodes, 0, 0.0, tol)}
+        elif element == "C3D4":
+            m = box_mesh(xs, ys, zs)
+            nodes = m.p.T.copy()
+            elems = _positive_tets(nodes, m.t.T.astype(np.int64))
+            bnd = {}
         else:
             nodes, elems = _hex20(xs, ys, zs)
+            if element in LINEAR_ELEMENTS:
+                # the corner nodes come first (C3D8 order = the first 8 of C3D20)
+                nodes, elems = _compact(nodes, elems[:, :8])
             bnd = {}
         tip = np.array([L, w / 2, t / 2])
-        sets = {"NROOT": _on(nodes, 0, 0.0, tol),
-                "NTIP": _tip_set(nodes, tip, tol, "use an even ny, or quadratic elements")}
+        if element in LINEAR_ELEMENTS and not np.any(np.linalg.norm(nodes - tip, axis=1) < tol):
+            # odd number of layers: the tip line's nodes, the tip value is interpolated
+            line = np.nonzero((np.abs(nodes[:, 0] - L) < tol)
+                              & (np.abs(nodes[:, 1] - w / 2) < tol))[0]
+            if line.size == 0:
+                raise InputError("no mesh node on the tip line (L, w/2, z): use an even ny")
+            ntip = line[np.argsort(nodes[line, 2])]
+        else:
+            ntip = _tip_set(nodes, tip, tol, "use an even ny, or quadratic elements")
+        sets = {"NROOT": _on(nodes, 0, 0.0, tol), "NTIP": ntip}
         return DeckMesh(nodes, elems, element, sets, bnd, (("NROOT", (1, 2, 3)),), tip, div)
     from homogenize.macro import channel as ch
     if not isinstance(geometry, ch.ChannelGeometry):
@@ -444,8 +474,7 @@ def _abaqus_deck(kind: str, spec: ExportSpec, mesh: DeckMesh) -> str:
            "*NODE, NSET=NALL"]
     # 14 significant digits: CalculiX reads at most 20 characters per number
     out += [f"{k + 1}, {x:.13e}, {y:.13e}, {z:.13e}" for k, (x, y, z) in enumerate(mesh.nodes_m)]
-    etype = "C3D20R" if mesh.element == "C3D20R" else "C3D10"
-    out.append(f"*ELEMENT, TYPE={etype}, ELSET={spec.elset}")
+    out.append(f"*ELEMENT, TYPE={mesh.element}, ELSET={spec.elset}")
     for e, conn in enumerate(mesh.elements):
         # at most 16 entries per data line; a trailing comma continues the line
         out += _id_lines(np.concatenate(([e + 1], conn + 1)), 16)

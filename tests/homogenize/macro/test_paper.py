@@ -6,7 +6,10 @@ import pytest
 
 from homogenize.cli import main
 from homogenize.macro import closed_form as cf
+from homogenize.macro.cantilever import Strip
+from homogenize.studies import paper
 from homogenize.studies.paper import seed_body_force
+from micro.materials import SEED
 
 KEYS = ["body_force_seed_N_m3", "beam", "force_for_4mm_N_m3", "tip_linear_m", "tip_nonlinear_m",
         "gravity", "channel"]
@@ -34,7 +37,7 @@ def quick(tmp_path_factory):
 def test_paper_files_and_keys(quick):
     out, res = quick
     for name in ("summary.md", "paper.json", "copy.json", "manifest.json", "beam_convergence.png",
-                 "beam_nonlinear.png", "channel.png"):
+                 "beam_nonlinear.png", "channel.png", "element_sensitivity.png"):
         assert (out / name).stat().st_size > 0
     assert json.loads((out / "copy.json").read_text()) == res
     for k in KEYS:
@@ -43,7 +46,9 @@ def test_paper_files_and_keys(quick):
         assert res["beam"][k] > 0
     for k in ("P1_coarse", "P2_coarse", "converged", "coarse_mesh", "converged_mesh"):
         assert k in res["force_for_4mm_N_m3"]
-    assert "Abaqus" in (out / "summary.md").read_text()
+    text = (out / "summary.md").read_text()
+    assert "Abaqus" in text and "element-type sensitivity" in text
+    assert "cannot single out" in text
 
 
 def test_paper_numbers_are_physical(quick):
@@ -70,3 +75,50 @@ def test_paper_numbers_are_physical(quick):
     assert eb * (1 - 0.45**2) < 4e-3 < eb
     rows = res["channel"]["table"]
     assert len(rows) >= 4 and all(r["max_deflection_m"] > 0 for r in rows)
+
+
+def test_seed_constants_come_from_micro_materials(quick):
+    _, res = quick
+    assert paper.SEED is SEED and paper.SeedParameters is type(SEED)
+    assert res["parameters"]["E_Pa"] == SEED.E_Pa and res["parameters"]["nu"] == SEED.nu
+    assert res["gravity"]["phi"] == SEED.c
+
+
+def test_element_sensitivity_quick(quick):
+    _, res = quick
+    es = res["element_sensitivity"]
+    rows = [r for r in es["rows"] if r["status"] == "ok"]
+    assert es["converged_force_N_m3"]["0.45"] == pytest.approx(40e3, rel=1e-12)
+    # with E fixed nu enters only through 3D effects (anticlastic curvature, the clamp): the
+    # converged force moves by a few per cent (quick mesh: 38.6 kN/m^3)
+    assert es["converged_force_N_m3"]["0.3"] == pytest.approx(40e3, rel=0.06)
+    by = {(r["family"], r["layers"], r["nu"], r["element"]): r["ratio_to_converged"]
+          for r in rows}
+    for (fam, k, nu, name), q in by.items():
+        if name in ("hex20", "hex20-r", "hex27", "tet10") and k >= 2:
+            assert q == pytest.approx(1.0, abs=0.05)      # quadratic: near converged
+        if name == "hex8":
+            if (fam, k, nu, "hex20") in by:
+                assert q > by[(fam, k, nu, "hex20")]      # trilinear stiffer than quadratic
+            if nu == 0.45:
+                # full integration locks more than SRI at nu = 0.45
+                assert q > by[(fam, k, nu, "hex8-sri")]
+        if name == "tet4":
+            assert q > 1.5                                # linear tets lock strongly
+        if name == "C3D8":
+            assert q == pytest.approx(by[(fam, k, nu, "hex8")], rel=1e-4)
+    for d in es["pairs_matching_paper"]:
+        assert abs(d["ratio"] - 1.25) <= es["pair_tolerance"]
+    assert es["ccx"] in ("ok", "not run: ccx not installed")
+
+
+def test_element_study_without_ccx_marks_the_columns():
+    cfg = {"nu": (0.45,), "layers": (1,), "families": ("beam",),
+           "cubic_quadratic_max_layers": 0, "p1_fine_layers": ()}
+    es = paper._element_study(SEED, Strip(19.4e-3, 5e-3, 1e-3), 2.0, (1, 2), cfg, None,
+                              "no-such-ccx-executable", None)
+    assert es["ccx"] == "not run: ccx not installed"
+    ccx_rows = [r for r in es["rows"] if r["code"] == "CalculiX"]
+    assert ccx_rows and all(r["status"] == "not run: ccx not installed"
+                            and r["force_N_m3"] is None for r in ccx_rows)
+    assert all(r["status"] == "ok" for r in es["rows"] if r["code"] == "scikit-fem")
