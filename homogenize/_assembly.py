@@ -259,3 +259,166 @@ def rigid_body_modes(n: int, h: float) -> np.ndarray:
     B[:, 0, 4], B[:, 2, 4] = x[:, 2], -x[:, 0]
     B[:, 0, 5], B[:, 1, 5] = -x[:, 1], x[:, 0]
     return B.reshape(3 * n ** 3, 6)
+
+
+# ------------------------------------------------------------------------------------------------
+# composite voxels: anisotropic element matrices, laminate stiffness, scatter into the BSR matrix
+# ------------------------------------------------------------------------------------------------
+
+def voigt_tensor4(C: np.ndarray) -> np.ndarray:
+    """(..., 6, 6) Voigt stiffness (engineering shear) -> (..., 3, 3, 3, 3) tensor ``C_ijkl``."""
+    C = np.asarray(C, dtype=np.float64)
+    T = np.empty(C.shape[:-2] + (3, 3, 3, 3))
+    for a, (i, j) in enumerate(VOIGT):
+        for b, (k, l) in enumerate(VOIGT):
+            v = C[..., a, b]
+            T[..., i, j, k, l] = T[..., j, i, k, l] = T[..., i, j, l, k] = T[..., j, i, l, k] = v
+    return T
+
+
+def isotropic_voigt(lam, mu) -> np.ndarray:
+    """(..., 6, 6) isotropic stiffness, Voigt order 11, 22, 33, 23, 13, 12, engineering shear."""
+    lam, mu = np.broadcast_arrays(np.asarray(lam, dtype=np.float64), np.asarray(mu, np.float64))
+    C = np.zeros(lam.shape + (6, 6))
+    C[..., :3, :3] = lam[..., None, None]
+    for a in range(3):
+        C[..., a, a] += 2.0 * mu
+        C[..., 3 + a, 3 + a] = mu
+    return C
+
+
+def laminate_voigt(C1: np.ndarray, C2: np.ndarray, f1, normal) -> np.ndarray:
+    """Stiffness of a rank-one laminate of two phases with interface normal ``normal``.
+
+    C1, C2 : ndarray, shape (6, 6) or (m, 6, 6) -- phase stiffnesses (Voigt, engineering shear) [Pa]
+    f1 : ndarray, shape (m,) -- volume fraction of phase 1 [1]
+    normal : ndarray, shape (m, 3) -- unit laminate normal [1]
+    Returns (m, 6, 6) [Pa].
+
+    Phase strains ``eps_1 = E + sym(a_1 (x) n)``, ``eps_2 = E + sym(a_2 (x) n)`` with
+    ``f1 a_1 + f2 a_2 = 0`` (compatible jumps, mean strain E) and continuous traction
+    ``sigma_1 n = sigma_2 n``: with ``a_1 = f2 d``, ``a_2 = -f1 d`` and the acoustic tensors
+    ``A_i = n . C_i . n``, ``(f2 A_1 + f1 A_2) d = (C_2 - C_1) : E . n`` and the mean stress is
+    ``<C> : E + f1 f2 (C_1 - C_2) : sym(d (x) n)`` -- tangential strains mix by Voigt, normal
+    tractions by Reuss (Kabel, Merkert & Schneider 2015).
+    """
+    nrm = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
+    f1 = np.asarray(f1, dtype=np.float64).reshape(-1)
+    m = nrm.shape[0]
+    f2 = 1.0 - f1
+    T1 = np.broadcast_to(voigt_tensor4(C1), (m, 3, 3, 3, 3))
+    T2 = np.broadcast_to(voigt_tensor4(C2), (m, 3, 3, 3, 3))
+    A1 = np.einsum("mjlkq,ml,mq->mjk", T1, nrm, nrm)
+    A2 = np.einsum("mjlkq,ml,mq->mjk", T2, nrm, nrm)
+    A = f2[:, None, None] * A1 + f1[:, None, None] * A2
+    Tm = f1[:, None, None, None, None] * T1 + f2[:, None, None, None, None] * T2
+    dT = T1 - T2
+    out = np.empty((m, 6, 6))
+    for b in range(6):
+        E = np.zeros((3, 3))
+        i, j = VOIGT[b]
+        E[i, j] = E[j, i] = 1.0 if i == j else 0.5          # engineering shear strain 1
+        rhs = -np.einsum("mjlkq,kq,ml->mj", dT, E, nrm)     # (C2 - C1) : E . n
+        d = np.linalg.solve(A, rhs[..., None])[..., 0]
+        sdn = 0.5 * (d[:, :, None] * nrm[:, None, :] + nrm[:, :, None] * d[:, None, :])
+        sig = (np.einsum("mijkl,kl->mij", Tm, E)
+               + (f1 * f2)[:, None, None] * np.einsum("mijkl,mkl->mij", dT, sdn))
+        for a, (p, q) in enumerate(VOIGT):
+            out[:, a, b] = sig[:, p, q]
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def _unit_strain_operators() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Strain-displacement matrices of the unit Q1 cube: (B at the 8 Gauss points (8, 6, 24),
+    Gauss weights (8,), B at the centre (6, 24)); engineering shear, DOF ``3 a + c``."""
+    g = 0.5 + np.array([-1.0, 1.0]) / (2.0 * np.sqrt(3.0))
+    pts = np.array([[x, y, z] for z in g for y in g for x in g])
+
+    def B_at(p):
+        B = np.zeros((6, 24))
+        for a, (ax, ay, az) in enumerate(CORNERS):
+            fx = (p[0] if ax else 1.0 - p[0], p[1] if ay else 1.0 - p[1],
+                  p[2] if az else 1.0 - p[2])
+            sx = (1.0 if ax else -1.0, 1.0 if ay else -1.0, 1.0 if az else -1.0)
+            dN = np.array([sx[0] * fx[1] * fx[2], fx[0] * sx[1] * fx[2], fx[0] * fx[1] * sx[2]])
+            for c in range(3):
+                B[c, 3 * a + c] = dN[c]
+            for v, (i, j) in enumerate(VOIGT[3:]):
+                B[3 + v, 3 * a + i] += dN[j]
+                B[3 + v, 3 * a + j] += dN[i]
+        return B
+
+    Bq = np.stack([B_at(p) for p in pts])
+    return Bq, np.full(8, 1.0 / 8.0), B_at(np.full(3, 0.5))
+
+
+@functools.lru_cache(maxsize=1)
+def _voigt_element_basis() -> tuple[np.ndarray, np.ndarray]:
+    """(R (6, 6, 24, 24), V (24, 24)): ``R[i, j] = sum_q w_q B_q[i]^T B_q[j]`` of the unit cube,
+    so the fully integrated element matrix of a stiffness C is ``sum_ij C_ij R[i, j]``, and the
+    one-point volumetric matrix ``V = b^T b`` with ``b = m^T B(centre)``."""
+    Bq, w, B0 = _unit_strain_operators()
+    R = np.einsum("q,qia,qjb->ijab", w, Bq, Bq)
+    b = B0[:3].sum(axis=0)
+    return R, np.outer(b, b)
+
+
+def anisotropic_element_matrices(C: np.ndarray, h: float) -> np.ndarray:
+    """Element matrices (m, 24, 24) of cubes of edge ``h`` with stiffness C (m, 6, 6) [Pa].
+
+    The same selective reduced integration as the isotropic element (:func:`reference_matrices`):
+    a volumetric part ``lambda* m (x) m`` on the one-point rule, the rest ``C - lambda* m (x) m``
+    on the 2x2x2 rule, with ``lambda* = K_R - 2 G_R / 3`` from the Reuss bulk and shear moduli of
+    C (for an isotropic C exactly its lambda, so the element equals ``lambda K_lam + mu K_mu``),
+    clipped to ``[0, K_R)``: ``C - lambda* m (x) m`` stays positive definite (no hourglass mode).
+    """
+    C = np.asarray(C, dtype=np.float64).reshape(-1, 6, 6)
+    S = np.linalg.inv(C)
+    KR = 1.0 / (S[:, 0, 0] + S[:, 1, 1] + S[:, 2, 2]
+                + 2.0 * (S[:, 0, 1] + S[:, 0, 2] + S[:, 1, 2]))
+    GR = 15.0 / (4.0 * (S[:, 0, 0] + S[:, 1, 1] + S[:, 2, 2])
+                 - 4.0 * (S[:, 0, 1] + S[:, 0, 2] + S[:, 1, 2])
+                 + 3.0 * (S[:, 3, 3] + S[:, 4, 4] + S[:, 5, 5]))
+    lam = np.clip(KR - 2.0 * GR / 3.0, 0.0, None) if SRI else np.zeros_like(KR)
+    Cf = C.copy()
+    Cf[:, :3, :3] -= lam[:, None, None]
+    R, V = _voigt_element_basis()
+    K = np.einsum("mij,ijab->mab", Cf, R, optimize=True) + lam[:, None, None] * V[None]
+    return K * h
+
+
+def _block_positions(n: int, vox: np.ndarray) -> np.ndarray:
+    """(m, 8, 8) positions in the sorted 27-block rows of :func:`assemble_bsr` of the blocks
+    (corner a, corner b) of voxels ``vox`` (flat index ``i + n (j + n k)``)."""
+    _, indices, _ = _pattern(n)
+    rowcols = indices.reshape(-1, 27)
+    k, rem = np.divmod(vox, n * n)
+    j, i = np.divmod(rem, n)
+    nodes = np.stack([(i + ax) % n + n * (((j + ay) % n) + n * ((k + az) % n))
+                      for ax, ay, az in CORNERS], axis=1)                 # (m, 8)
+    P = np.repeat(nodes, 8, axis=1)                                       # row node (a major)
+    Q = np.tile(nodes, (1, 8))                                            # column node
+    rank = (rowcols[P] < Q[..., None]).sum(axis=-1)
+    return (27 * P + rank).reshape(-1, 8, 8), nodes
+
+
+def add_voxel_matrices(K: sp.bsr_matrix, n: int, vox: np.ndarray, Ke: np.ndarray) -> None:
+    """K += the element matrices Ke (m, 24, 24) of voxels ``vox`` (m,), in place (sorted BSR)."""
+    pos, _ = _block_positions(n, np.asarray(vox, dtype=np.int64))
+    blocks = Ke.reshape(-1, 8, 3, 8, 3).transpose(0, 1, 3, 2, 4)         # (m, a, b, 3, 3)
+    np.add.at(K.data, pos.ravel(), blocks.reshape(-1, 3, 3))
+
+
+def voxel_matrix_load(n: int, vox: np.ndarray, Ke: np.ndarray, ue: np.ndarray) -> np.ndarray:
+    """Nodal vector (3 n^3,) of ``-Ke @ ue`` summed over voxels ``vox``; ue (24,) the same element
+    displacement for all (an affine field)."""
+    k, rem = np.divmod(np.asarray(vox, dtype=np.int64), n * n)
+    j, i = np.divmod(rem, n)
+    g = -(Ke @ ue).reshape(-1, 8, 3)
+    out = np.zeros((n ** 3, 3))
+    for a, (ax, ay, az) in enumerate(CORNERS):
+        node = (i + ax) % n + n * (((j + ay) % n) + n * ((k + az) % n))
+        np.add.at(out, node, g[:, a])
+    return out.ravel()
+

@@ -44,7 +44,7 @@ from micro.rve import minimum_image
 from . import _assembly as asm
 from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
-from .mesh import VoxelMesh, voxelize
+from .mesh import METHODS, VoxelMesh, voxelize
 from homogenize._amg import BlockVCycle, BSROp, grid_colours
 from homogenize._amg import block_cg
 import pyamg
@@ -76,7 +76,8 @@ class CellResult:
     stress_mag_elastic_Pa, stress_mag_moment_Pa : its two parts (mean FE stress, force moment)
     strain_mag : (3, 3) strain of a stress-free sample, ``-C_eff^-1 stress_mag``
     n_dof, voxels, h_m : mesh size
-    phi_voxel : particle volume fraction of the stiffness field (voxels with fraction >= 0.5)
+    phi_voxel : particle volume fraction of the stiffness field (composite voxels: the exact mean
+        fraction; centre/fraction: voxels with fraction >= 0.5)
     iterations, residuals : per load case, CG iterations and final relative residual
     timings_s : seconds per stage
     """
@@ -178,9 +179,7 @@ class _CellSolver:
     """
 
     def __init__(self, mesh: VoxelMesh, lam, mu, *, deflate: bool, stiff_mask, tol: float,
-                 maxiter: int, solver: str = "fast"):
-
-
+                 maxiter: int, solver: str = "fast", composite: _Composite | None = None):
         if solver not in SOLVERS:
             raise InputError(f"solver must be one of {SOLVERS}, got {solver!r}")
         self.mesh, self.lam, self.mu = mesh, lam, mu
@@ -191,9 +190,13 @@ class _CellSolver:
         t = {}
         t0 = time.perf_counter()
         K = asm.assemble_bsr(lam, mu, self.h, method="numba" if fast else "blas")
+        if composite is not None:
+            composite.add_to(K)
         t["assembly"] = time.perf_counter() - t0
         # pin one node surrounded by matrix voxels only (rigid translation; loads are balanced)
         soft = (mu <= mu.min() * (1.0 + 1e-12))
+        if composite is not None:
+            soft &= ~composite.mask
         node_soft = np.all(asm.node_coefficients(soft.astype(np.float64)) > 0.5, axis=1)
         cand = np.flatnonzero(node_soft)
         self.pin = int(cand[0]) if cand.size else 0
@@ -345,6 +348,76 @@ def _material_fields(mesh: VoxelMesh, matrix: Material, particle: Material):
     return (1.0 - f) * lm + f * lp, (1.0 - f) * mm + f * mp
 
 
+class _Composite:
+    """Cut voxels (0 < fraction < 1) of a ``method="composite"`` or ``"laminate"`` mesh.
+
+    ``"composite"``: the Reuss (harmonic) average of particle and matrix stiffness at the exact
+    volume fraction. ``"laminate"``: the rank-one laminate along the sphere normal (Kabel,
+    Merkert & Schneider 2015: Voigt in the tangential strains, Reuss in the normal tractions).
+    Both on the same SRI element as the pure voxels (:func:`asm.anisotropic_element_matrices`).
+    Measured against Eshelby, Mori-Tanaka and conforming P2 meshes (results/cell/): with nodal
+    trilinear elements the laminate's tangential Voigt stiffness makes every cut voxel rigid at
+    Fe/PDMS contrast (a thin Fe cap stiffens the whole voxel through its nodes), overshooting the
+    dilute shear coefficient by 80 % at 8.6 voxels per diameter; the Reuss voxel converges to
+    within 2 %. The isotropic fields carry the matrix in the cut voxels; this object adds the
+    difference (cut-voxel element - matrix element) to the stiffness matrix, the affine loads and
+    the affine energy, in chunks of voxels.
+    """
+
+    CHUNK = 16384
+
+    def __init__(self, mesh: VoxelMesh, matrix: Material, particle: Material, lam, mu):
+        f = mesh.fraction.reshape(-1)
+        self.mask = (mesh.fraction > 0.0) & (mesh.fraction < 1.0)
+        self.vox = np.flatnonzero(self.mask.reshape(-1))
+        Cm = asm.isotropic_voigt(*matrix.lame_Pa)
+        Cp = asm.isotropic_voigt(*particle.lame_Pa)
+        fv = f[self.vox]
+        if mesh.method == "laminate":
+            self.C = asm.laminate_voigt(Cp, Cm, fv, mesh.normal.reshape(-1, 3)[self.vox])
+        else:
+            w = fv[:, None, None]
+            self.C = np.linalg.inv(w * np.linalg.inv(Cp) + (1.0 - w) * np.linalg.inv(Cm))
+        self.Cbase = asm.isotropic_voigt(lam.reshape(-1)[self.vox], mu.reshape(-1)[self.vox])
+        self.n, self.h = mesh.n, mesh.h_m
+
+    def _chunks(self):
+        for s in range(0, self.vox.size, self.CHUNK):
+            sl = slice(s, s + self.CHUNK)
+            Ke = (asm.anisotropic_element_matrices(self.C[sl], self.h)
+                  - asm.anisotropic_element_matrices(self.Cbase[sl], self.h))
+            yield sl, Ke
+
+    def add_to(self, K) -> None:
+        for sl, Ke in self._chunks():
+            asm.add_voxel_matrices(K, self.n, self.vox[sl], Ke)
+
+    def loads(self, Es) -> list[np.ndarray]:
+        """Extra right-hand sides ``-dK (E x)`` for the mean strains Es."""
+        ues = [(asm._corner_coords(self.h) @ E.T).ravel() for E in Es]
+        out = [np.zeros(3 * self.n ** 3) for _ in Es]
+        for sl, Ke in self._chunks():
+            for o, ue in zip(out, ues):
+                o += asm.voxel_matrix_load(self.n, self.vox[sl], Ke, ue)
+        return out
+
+    def energy(self, Ea, Eb) -> float:
+        """Extra ``mean(E_a : (C - C_base) : E_b)`` over all voxels [Pa]."""
+        a = tensor_to_voigt(Ea, engineering=True)
+        b = tensor_to_voigt(Eb, engineering=True)
+        return float(np.einsum("i,mij,j->", a, self.C - self.Cbase, b)) / self.n ** 3
+
+
+def _composite_fields(mesh: VoxelMesh, matrix: Material, particle: Material):
+    """(lam, mu, composite): particle only in voxels entirely inside a particle, matrix elsewhere;
+    the cut voxels' laminates in ``composite``."""
+    lm, mm = matrix.lame_Pa
+    lp, mp = particle.lame_Pa
+    full = (mesh.fraction >= 1.0).astype(np.float64)
+    lam, mu = (1.0 - full) * lm + full * lp, (1.0 - full) * mm + full * mp
+    return lam, mu, _Composite(mesh, matrix, particle, lam, mu)
+
+
 def _force_density(mesh: VoxelMesh, forces_N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Body force per voxel [N/m^3], shape (n, n, n, 3), and first moment sum x (x) F [N m]."""
     n, h, L = mesh.n, mesh.h_m, mesh.box_m
@@ -373,18 +446,23 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                     maxiter: int = 2000, keep_fields: bool = False, cases=CASES,
                     progress: bool = False, solver: str = "fast") -> CellResult:
     """Solve the periodic cell problems on a prepared voxel mesh. See :func:`homogenize_rve`."""
-    check_positive("tol", tol, "")
+    # a residual above 1e-2 returns meaningless moduli (tol 2 gave E_eff 1600x too high)
+    check_range("tol", tol, 0.0, 1e-2, "(relative residual)", lo_open=True)
     t_start = time.perf_counter()
     if rigid:
         # rigid particles as the stiff limit: 1e6 x the matrix modulus, same Poisson's ratio as
         # the particle; deflation makes the iteration count independent of this contrast and the
         # relative error of the rigid limit is O(1e-6) (tested against increasing contrast).
         particle = Material(matrix.E_Pa * 1e6, particle.nu, particle.density_kg_m3)
-    lam, mu = _material_fields(mesh, matrix, particle)
+    composite = None
+    if mesh.method in ("composite", "laminate"):
+        lam, mu, composite = _composite_fields(mesh, matrix, particle)
+    else:
+        lam, mu = _material_fields(mesh, matrix, particle)
     stiff = particle.E_Pa > 10.0 * matrix.E_Pa
     solver = _CellSolver(mesh, lam, mu, deflate=deflate and stiff,
                          stiff_mask=mesh.fraction >= 0.5, tol=tol, maxiter=maxiter,
-                         solver=solver)
+                         solver=solver, composite=composite)
     iters, resid, hist, fields = {}, {}, {}, {}
     t_solve = time.perf_counter()
     L = mesh.box_m
@@ -392,6 +470,9 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     # every load case in one block: the unit mean strains, then the magnetic load
     Es = [voigt_to_tensor(np.eye(6)[CASES.index(c)], engineering=True) for c in cases]
     loads = [asm.affine_load(lam, mu, mesh.h_m, E) for E in Es]
+    if composite is not None:
+        for ld, extra in zip(loads, composite.loads(Es)):
+            ld += extra
     f_eff = np.zeros(3)
     b = moment = None
     if forces_N is not None:
@@ -441,6 +522,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
         for bb, ib in enumerate(idx):
             aff = float(np.mean(lam * np.trace(Es[a]) * np.trace(Es[bb])
                                 + 2.0 * mu * np.tensordot(Es[a], Es[bb])))
+            if composite is not None:
+                aff += composite.energy(Es[a], Es[bb])
             C[ia, ib] = aff - (FW[a, bb] + FW[bb, a] - WKW[a, bb]) / V
             lin[ib, ia] = aff - FW[bb, a] / V
     if keep_fields:
@@ -475,7 +558,10 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 sv_lin[ia] = -FW[a, m] / V
             else:   # unit-strain case not solved: the mean stress (linear in the error) only
                 E = voigt_to_tensor(np.eye(6)[ia], engineering=True)
-                sv[ia] = sv_lin[ia] = -float(asm.affine_load(lam, mu, mesh.h_m, E) @ wm) / V
+                fa = asm.affine_load(lam, mu, mesh.h_m, E)
+                if composite is not None:
+                    fa += composite.loads([E])[0]
+                sv[ia] = sv_lin[ia] = -float(fa @ wm) / V
         stress_el = voigt_to_tensor(sv)
         if virial_stress_Pa is not None:
             Vr = np.asarray(check_finite("virial_stress_Pa", virial_stress_Pa, "Pa"), dtype=float)
@@ -509,7 +595,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
         anisotropy_index=AU, f_eff_N_m3=f_eff, stress_mag_Pa=stress,
         stress_mag_elastic_Pa=stress_el, stress_mag_moment_Pa=stress_mo, strain_mag=strain,
         n_dof=mesh.n_dof, voxels=mesh.n, h_m=mesh.h_m,
-        phi_voxel=float((mesh.fraction >= 0.5).mean()),
+        phi_voxel=float(mesh.fraction.mean() if composite is not None
+                        else (mesh.fraction >= 0.5).mean()),
         n_particles=mesh.n_particles, n_unresolved=int((~mesh.resolved).sum()),
         iterations=iters, residuals=resid, residual_history=hist, timings_s=timings,
         settings=settings, mesh=mesh, fields=fields)
@@ -519,7 +606,7 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
                    matrix_E_Pa: float = PDMS.E_Pa, matrix_nu: float = PDMS.nu,
                    particle_E_Pa: float = FE.E_Pa, particle_nu: float = FE.nu,
                    rigid: bool = False,
-                   method: str = "centre", deflate: bool = True, tol: float = 1e-6,
+                   method: str = "composite", deflate: bool = True, tol: float = 1e-6,
                    maxiter: int = 2000, keep_fields: bool = False, progress: bool = False,
                    solver: str = "fast") -> CellResult:
     """Effective stiffness, body force and magnetic stress of an RVE by periodic voxel FEM.
@@ -536,7 +623,12 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
     matrix_E_Pa, matrix_nu : matrix Young's modulus [Pa] (> 0) and Poisson's ratio (-1, 0.5)
     particle_E_Pa, particle_nu : particle material (default Fe: 211 GPa, 0.29)
     rigid : bool -- particles as rigid bodies (stiff limit, 1e6 x matrix modulus)
-    method : {"centre", "fraction"} -- voxel phase assignment (see :func:`homogenize.mesh.voxelize`)
+    method : {"composite", "centre", "fraction", "laminate"} -- voxel phase assignment (see
+        :func:`homogenize.mesh.voxelize`); "composite" (default): exact volume fraction of the
+        spheres in every cut voxel, Reuss stiffness there, forces spread by fraction
+        (results/cell/: about second-order convergence of E_eff, within 2 % of conforming P2
+        meshes at 24^3); "centre": the staircase of earlier versions (first order, 20-50 % high
+        at Fe/PDMS contrast and 2-4 voxels per radius)
     deflate : bool -- deflate the rigid-body modes of stiff particles in CG (default True)
     tol : float -- relative residual of CG per load case (default 1e-6). C_eff and the elastic part
         of stress_mag are computed from the energy of the solutions (variational), so their error
@@ -554,6 +646,7 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
     -------
     CellResult
     """
+    check_range("tol", tol, 0.0, 1e-2, "(relative residual)", lo_open=True)
     matrix = Material(matrix_E_Pa, matrix_nu)
     particle = Material(particle_E_Pa, particle_nu)
     mesh = voxelize(rve, voxels, method=method)
@@ -578,18 +671,21 @@ class CellConfig:
     matrix: ElasticMaterial = elastic(PDMS)
     particle: ElasticMaterial = elastic(FE)
     rigid: bool = False
-    method: str = "centre"
+    method: str = "composite"
     tol: float = 1e-6
     maxiter: int = 2000
     solver: str = "fast"
 
     def __post_init__(self):
-        if isinstance(self.voxels, bool) or not isinstance(self.voxels, (int, np.integer)):
-            raise InputError(f"voxels must be an integer, got {self.voxels!r}")
-        check_range("voxels", self.voxels, 4, 256, "(per cube edge)")
+        if isinstance(self.voxels, bool) or not isinstance(self.voxels, (int, np.integer)) \
+                or not 4 <= self.voxels <= 256:
+            raise InputError(f"voxels must be an integer >= 4 and <= 256 (voxels per cube "
+                             f"edge), got {self.voxels!r}")
         check_range("tol", self.tol, 0.0, 1e-2, "(relative residual)", lo_open=True)
         if self.solver not in SOLVERS:
             raise InputError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
+        if self.method not in METHODS:
+            raise InputError(f"method must be one of {METHODS}, got {self.method!r}")
 
 
 def homogenize(rve, state=None, config: CellConfig = CellConfig(), *, keep_fields=False,

@@ -10,19 +10,24 @@ from types import SimpleNamespace
 
 import numpy as np
 
+import time
+
 from homogenize._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
                                mori_tanaka, young_poisson)
-from homogenize.cell import homogenize_rve
+from homogenize.cell import homogenize_rve, isotropic_projection
 from micro._io import atomic_path
+from micro.materials import FE, PDMS
 from homogenize.cell import Material, homogenize_mesh
 from homogenize.mesh import voxelize
 from tqdm import tqdm
 
-__all__ = ["phi_study", "plot_phi_study", "dilute_convergence_study", "plot_dilute_convergence"]
+__all__ = ["phi_study", "plot_phi_study", "dilute_convergence_study", "plot_dilute_convergence",
+           "inside_spheres", "composite_accuracy_study"]
 
 
-def phi_study(phis=(0.01, 0.05, 0.1, 0.2, 0.3), voxels: int = 24, *, matrix_E_Pa=2e6,
-              matrix_nu=0.45, particle_E_Pa=211e9, particle_nu=0.29, progress=False) -> dict:
+def phi_study(phis=(0.01, 0.05, 0.1, 0.2, 0.3), voxels: int = 24, *, matrix_E_Pa=PDMS.E_Pa,
+              matrix_nu=PDMS.nu, particle_E_Pa=FE.E_Pa, particle_nu=FE.nu, progress=False,
+              method: str = "composite") -> dict:
     """E_eff [Pa] of a simple cubic array of spheres by FEM and by the closed forms, per phi."""
     Km, Gm = bulk_shear(matrix_E_Pa, matrix_nu)
     Kp, Gp = bulk_shear(particle_E_Pa, particle_nu)
@@ -34,7 +39,7 @@ def phi_study(phis=(0.01, 0.05, 0.1, 0.2, 0.3), voxels: int = 24, *, matrix_E_Pa
         a = (3.0 * phi / (4.0 * np.pi)) ** (1.0 / 3.0)
         rve = SimpleNamespace(box_m=1e-6, centers_m=np.full((1, 3), 0.5e-6), radii_m=np.array([a * 1e-6]))
         r = homogenize_rve(rve, voxels, matrix_E_Pa=matrix_E_Pa, matrix_nu=matrix_nu,
-                           particle_E_Pa=particle_E_Pa, particle_nu=particle_nu)
+                           particle_E_Pa=particle_E_Pa, particle_nu=particle_nu, method=method)
         pv = r.phi_voxel
         hs = hashin_shtrikman_bounds(pv, Km, Gm, Kp, Gp)
         rows.append({
@@ -44,7 +49,7 @@ def phi_study(phis=(0.01, 0.05, 0.1, 0.2, 0.3), voxels: int = 24, *, matrix_E_Pa
             "E_guth_gold_Pa": float(guth_gold(pv, matrix_E_Pa)),
             "E_hs_upper_Pa": float(hs["E_upper_Pa"]), "iterations": r.iterations,
         })
-    return {"voxels": voxels, "matrix_E_Pa": matrix_E_Pa, "matrix_nu": matrix_nu,
+    return {"voxels": voxels, "method": method, "matrix_E_Pa": matrix_E_Pa, "matrix_nu": matrix_nu,
             "particle_E_Pa": particle_E_Pa, "particle_nu": particle_nu, "rows": rows}
 
 
@@ -73,15 +78,18 @@ def plot_phi_study(path, study: dict) -> None:
 
 
 def dilute_convergence_study(voxels=(8, 16, 24, 32, 48, 64), phi: float = 0.01, *,
-                             matrix_E_Pa=2e6, matrix_nu=0.45, particle_E_Pa=20e6,
-                             particle_nu=0.29, progress=False) -> dict:
+                             matrix_E_Pa=PDMS.E_Pa, matrix_nu=PDMS.nu, particle_E_Pa=FE.E_Pa,
+                             particle_nu=FE.nu, progress=False, method: str = "composite") -> dict:
     """One sphere at dilute phi, refined: the shear stiffening coefficient against Eshelby.
 
     The coefficient ``c = (G_eff / G_m - 1) / phi_voxel`` (per unit VOXEL volume fraction, so the
     staircase volume error is divided out) tends to Eshelby's dilute value plus the O(phi)
     interaction of the periodic images (Mori-Tanaka estimates it). Reports the error per
     resolution, the observed rate ``p`` of ``|c - c_dilute|`` between the finest grids, and a
-    Richardson extrapolation ``c_inf`` from the three finest with that rate.
+    Richardson extrapolation ``c_inf`` from the three finest with that rate. Once the grid error
+    falls below the O(phi) image interaction (composite voxels) ``|c - c_dilute|`` levels off, so
+    the self-convergence rate is reported too: ``polyfit(log h, log |c_n - c_finest|)`` over the
+    grids with at least 6 voxels per diameter.
     """
     mat, par = Material(matrix_E_Pa, matrix_nu), Material(particle_E_Pa, particle_nu)
     Km, Gm = mat.bulk_shear_Pa
@@ -97,9 +105,11 @@ def dilute_convergence_study(voxels=(8, 16, 24, 32, 48, 64), phi: float = 0.01, 
         # centre slightly off the grid symmetry so no voxel face cuts the sphere symmetrically
         rve = SimpleNamespace(box_m=1e-6, centers_m=np.full((1, 3), (0.5 + 0.1 / n) * 1e-6),
                               radii_m=np.array([a * 1e-6]))
-        r = homogenize_mesh(voxelize(rve, n), matrix=mat, particle=par, cases=("g12",))
+        r = homogenize_mesh(voxelize(rve, n, method=method), matrix=mat, particle=par,
+                            cases=("g12",))
         c = (r.C_eff_Pa[5, 5] / Gm - 1.0) / r.phi_voxel
-        rows.append({"voxels": int(n), "radius_voxels": a * n, "phi_voxel": r.phi_voxel,
+        rows.append({"voxels": int(n), "radius_voxels": a * n, "diameter_voxels": 2.0 * a * n,
+                     "phi_voxel": r.phi_voxel,
                      "coefficient": c, "error_vs_dilute": abs(c - c_dil) / c_dil,
                      "error_vs_mori_tanaka": abs(c - c_mt) / c_mt,
                      "iterations": r.iterations["g12"], "seconds": r.timings_s["total"]})
@@ -113,7 +123,15 @@ def dilute_convergence_study(voxels=(8, 16, 24, 32, 48, 64), phi: float = 0.01, 
         c1, c2 = rows[-2]["coefficient"], rows[-1]["coefficient"]
         q = (ns[-1] / ns[-2]) ** rate
         c_inf = float((q * c2 - c1) / (q - 1.0))
-    return {"phi": phi, "matrix_E_Pa": matrix_E_Pa, "matrix_nu": matrix_nu,
+    cs = np.array([r["coefficient"] for r in rows])
+    sel = np.flatnonzero((2.0 * a * ns >= 6.0) & (ns < ns[-1]))
+    self_rate = None
+    if sel.size >= 2:
+        d = np.abs(cs[sel] - cs[-1])
+        if np.all(d > 0):
+            self_rate = float(-np.polyfit(np.log(ns[sel]), np.log(d), 1)[0])
+    return {"phi": phi, "method": method, "matrix_E_Pa": matrix_E_Pa, "matrix_nu": matrix_nu,
+            "self_convergence_rate": self_rate,
             "particle_E_Pa": particle_E_Pa, "particle_nu": particle_nu,
             "coefficient_dilute": c_dil, "coefficient_mori_tanaka": c_mt,
             "observed_rate": rate, "coefficient_extrapolated": c_inf,
@@ -153,3 +171,88 @@ def plot_dilute_convergence(path, study: dict) -> None:
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=120, format="png")
+
+
+def inside_spheres(phi: float, n_particles: int, seed: int, *, spread: float = 0.15,
+                   gap: float = 0.03) -> SimpleNamespace:
+    """Random non-overlapping spheres in the unit cube (box 1e-6 m), none cutting a face (so the
+    conforming periodic mesh can hold them): radii uniform within +-``spread`` of the mean,
+    scaled to the exact ``phi``; random sequential addition with a surface gap ``gap`` [box]."""
+    rng = np.random.default_rng(seed)
+    r0 = (3.0 * phi / (4.0 * np.pi * n_particles)) ** (1.0 / 3.0)
+    radii = np.sort(r0 * (1.0 + spread * rng.uniform(-1.0, 1.0, n_particles)))[::-1]
+    radii *= (phi / (4.0 / 3.0 * np.pi * np.sum(radii ** 3))) ** (1.0 / 3.0)
+    centres = []
+    for tries in range(200000):
+        i = len(centres)
+        if i == n_particles:
+            break
+        p = rng.uniform(radii[i] + gap, 1.0 - radii[i] - gap, 3)
+        if all(np.linalg.norm(p - q) > radii[i] + radii[j] + gap for j, q in enumerate(centres)):
+            centres.append(p)
+    else:
+        raise RuntimeError("inside_spheres: could not place the particles")
+    return SimpleNamespace(box_m=1e-6, centers_m=np.array(centres) * 1e-6, radii_m=radii * 1e-6)
+
+
+def composite_accuracy_study(phi: float, n_particles: int, seed: int = 7,
+                             voxels=(16, 24, 32, 48, 64), methods=("composite", "centre"),
+                             p2_mesh_sizes=(0.12, 0.08), progress=False) -> dict:
+    """E_eff of one random Fe/PDMS RVE: voxel FEM (per method, refined) against the conforming
+    P2 tetrahedral mesh (gmsh) on the same particles. Self-convergence of the voxel FEM by
+    Richardson extrapolation of the three finest grids (observed rate). The reference is the
+    finest P2 mesh; the change between the two P2 meshes is its own uncertainty
+    (``p2_change_rel``)."""
+    from homogenize._conforming import homogenize_conforming
+    rve = inside_spheres(phi, n_particles, seed)
+    Em = PDMS.E_Pa
+    out = {"phi": phi, "n_particles": n_particles, "seed": seed,
+           "radii_box": (rve.radii_m / rve.box_m).tolist(),
+           "centres_box": (rve.centers_m / rve.box_m).tolist(), "voxel": {}, "p2": []}
+    for m in methods:
+        rows = []
+        for n in voxels:
+            t0 = time.perf_counter()
+            r = homogenize_rve(rve, n, method=m)
+            rows.append({"voxels": int(n), "E_eff_Pa": r.E_eff_Pa,
+                         "stiffening": r.E_eff_Pa / Em - 1.0, "phi_voxel": r.phi_voxel,
+                         "min_radius_voxels": float(rve.radii_m.min() / r.h_m),
+                         "iterations": max(r.iterations.values()),
+                         "seconds": time.perf_counter() - t0})
+            if progress:
+                print(m, rows[-1], flush=True)
+        E = np.array([x["E_eff_Pa"] for x in rows])
+        ns = np.array(voxels, dtype=float)
+        rate = E_inf = None
+        if len(rows) >= 3:
+            d1, d2 = E[-2] - E[-3], E[-1] - E[-2]
+            if d1 * d2 > 0 and abs(d2) < abs(d1):
+                # E(n) = E_inf + A n^-p through the three finest grids
+                from scipy.optimize import brentq
+                f = lambda p: ((ns[-2] ** -p - ns[-1] ** -p) / (ns[-3] ** -p - ns[-2] ** -p)
+                               - d2 / d1)
+                try:
+                    rate = float(brentq(f, 0.05, 8.0))
+                    E_inf = float(E[-1] + d2 / ((ns[-1] / ns[-2]) ** rate - 1.0))
+                except ValueError:
+                    rate = None
+        for x in rows:
+            x["error_vs_extrapolated"] = None if E_inf is None else x["E_eff_Pa"] / E_inf - 1.0
+        out["voxel"][m] = {"rows": rows, "observed_rate": rate, "E_extrapolated_Pa": E_inf}
+    for hs in p2_mesh_sizes:
+        t0 = time.perf_counter()
+        c = homogenize_conforming(1.0, rve.centers_m / rve.box_m, rve.radii_m / rve.box_m, hs,
+                                  matrix=(PDMS.E_Pa, PDMS.nu), particle=(FE.E_Pa, FE.nu))
+        E = isotropic_projection(c["C_eff_Pa"])[0]
+        out["p2"].append({"mesh_size_box": hs, "E_eff_Pa": E, "stiffening": E / Em - 1.0,
+                          "n_dof": c["n_dof"], "phi_mesh": c["phi_mesh"],
+                          "seconds": time.perf_counter() - t0})
+        if progress:
+            print("p2", out["p2"][-1], flush=True)
+    if len(out["p2"]) >= 2:
+        out["p2_change_rel"] = out["p2"][-1]["E_eff_Pa"] / out["p2"][-2]["E_eff_Pa"] - 1.0
+    ref = out["p2"][-1]["E_eff_Pa"]
+    for m in methods:
+        for x in out["voxel"][m]["rows"]:
+            x["error_vs_p2"] = x["E_eff_Pa"] / ref - 1.0
+    return out

@@ -68,24 +68,32 @@ def test_chains_along_z_are_stiffer_along_z(dispersion_result):
     # square array: C11 = C22 and C44 = C55 by symmetry (to solver tolerance)
     assert C[0, 0] == pytest.approx(C[1, 1], rel=1e-6)
     assert C[3, 3] == pytest.approx(C[4, 4], rel=1e-6)
-    assert C[2, 2] > 1.5 * C[0, 0]
+    # the gaps (0.01 L, a sixth of a voxel) are not resolved: composite voxels mix them into soft
+    # Reuss voxels, so the chains are stiffer along z by 10 % at 16^3 and 23 % at 48^3 (still
+    # rising as the gap is resolved), while the staircase ("centre") bonds the spheres into
+    # rigid rods (C33 ~ 1000-8000 x the matrix at 16-48^3)
+    assert C[2, 2] > 1.05 * C[0, 0]
     assert r.anisotropy_index > 10 * dispersion_result[1].anisotropy_index
+    rc = homogenize_rve(_rve(cs, [0.12] * 16), 16, method="centre").C_eff_Pa
+    assert rc[2, 2] > 100 * rc[0, 0]
 
 
 def test_single_sphere_converges_to_eshelby_dilute():
-    # contrast 10: the dilute formula holds for any contrast. The full refinement to 64^3 is
-    # `mapsim cell-dilute-study` (results/cell/dilute_convergence.json: rate 0.79 over 32-64,
-    # Richardson limit 2.4 % from dilute, 1.5 % from Mori-Tanaka, which includes the periodic
-    # images' interaction); here the same study on the three grids CI can afford.
+    # Fe sphere in PDMS at phi 0.01 with composite voxels. The full refinement (to 16 voxels per
+    # diameter) is `mapsim cell-dilute-study` (results/cell/dilute_convergence.json); here the
+    # three grids CI can afford (4.3, 6.4, 8.6 voxels per diameter).
     from homogenize.studies.cell_studies import dilute_convergence_study
     st = dilute_convergence_study((16, 24, 32), 0.01)
     errs = [r["error_vs_dilute"] for r in st["rows"]]
     print("relative error of the dilute shear coefficient:", errs, "rate", st["observed_rate"])
-    # measured: 17 %, 11 %, 8.9 % (rate ~0.9): a staircase sphere of radius 2-4 voxels; the O(phi)
-    # interaction of the periodic images is < 1 % at phi = 1 % (Mori-Tanaka vs dilute), so the
-    # error is discretisation and must shrink at a clear rate
-    assert errs[-1] < 0.10 and errs[-1] < 0.6 * errs[0] and st["observed_rate"] > 0.6
-    assert st["coefficient_extrapolated"] == pytest.approx(st["coefficient_dilute"], rel=0.05)
+    # measured: 4.1 %, 1.0 %, 2.3 %. Beyond ~6 voxels per diameter the coefficient settles within
+    # +-0.5 % of 2.40 (1.4-1.9 % above Eshelby, 0.4-0.9 % above Mori-Tanaka: the O(phi)
+    # interaction of the periodic images and the cubic array's C66), so no asymptotic rate
+    # against Eshelby exists to assert; the staircase ("centre") was 36 % and 18 % high at 4.3
+    # and 8.6 voxels per diameter.
+    assert errs[0] < 0.06 and max(errs[1:]) < 0.03
+    centre = dilute_convergence_study((16,), 0.01, method="centre")["rows"][0]["error_vs_dilute"]
+    assert centre > 5 * errs[0]
 
 
 def test_rigid_is_the_stiff_limit_and_deflation_keeps_iterations_flat():
