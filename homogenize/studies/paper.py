@@ -506,13 +506,15 @@ QUICK = {
 
 
 def run_paper(width_m=5e-3, thickness_m=1e-3, *, quick=False, quiet=False,
-              params: SeedParameters | None = None, ccx: str | None = "ccx") -> dict:
+              params: SeedParameters | None = None, ccx: str | None = "ccx",
+              workdir=None) -> dict:
     """Every number of the paper reproduction as a JSON-ready dict (SI units).
 
     ``quick`` uses small meshes and sweeps (for tests); the full run takes a few minutes.
     ``params``: the seed parameters (default :data:`micro.materials.SEED`). ``ccx``: the
     CalculiX executable for the element-study columns of CalculiX's own elements (None: not
-    run; if it is not installed the columns say so and everything else is unchanged).
+    run; if it is not installed the columns say so and everything else is unchanged);
+    ``workdir``: where the CalculiX decks are written and run (None: a temporary directory).
     """
     sp = SEED if params is None else params
     w = check_positive("width_m", width_m, "m")
@@ -534,7 +536,7 @@ def run_paper(width_m=5e-3, thickness_m=1e-3, *, quick=False, quiet=False,
     try:
         beam, force, nonlinear, gravity = _beam_study(sp, w, t, bcfg, bar)
         strip = Strip(beam["inferred_length_m"], w, t)
-        with tempfile.TemporaryDirectory(prefix="mapsim-paper-ccx-") as work:
+        with tempfile.TemporaryDirectory(prefix=".ccx-", dir=workdir) as work:
             elements = _element_study(sp, strip, beam["mesh_study"]["P2_observed_order"],
                                       bcfg["search"], ecfg, bar, ccx, work)
         channel = _channel_study(sp, cfg["channel"], bar)
@@ -1037,8 +1039,9 @@ def write_paper(out_dir, json_path=None, *, quick=False, quiet=False, width_m=5e
     element study's CalculiX columns (None or not installed: marked "not run").
     """
     out = Path(out_dir)
-    res = run_paper(width_m, thickness_m, quick=quick, quiet=quiet, ccx=ccx)
     out.mkdir(parents=True, exist_ok=True)
+    # CalculiX decks of the element study: a temporary directory inside ``out``, removed after
+    res = run_paper(width_m, thickness_m, quick=quick, quiet=quiet, ccx=ccx, workdir=out)
     figs = _figures(res, out)
     write_json(out / "paper.json", res)
     if json_path is not None and Path(json_path).resolve() != (out / "paper.json").resolve():
