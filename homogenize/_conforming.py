@@ -13,6 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from micro._validate import InputError
+from micro.materials import FE, PDMS
 from homogenize._effective_media import lame
 from homogenize.cell import voigt_to_tensor
 from scipy.sparse.linalg import splu
@@ -22,8 +23,12 @@ from skfem.helpers import ddot, sym_grad, trace
 __all__ = ["conforming_tet_mesh", "homogenize_conforming"]
 
 
-def conforming_tet_mesh(box_m: float, centers_m, radii_m, mesh_size_m: float):
-    """(points (M, 3) [m], tets (T, 4), phase (T,) 0 matrix / 1 particle) from gmsh."""
+def conforming_tet_mesh(box_m: float, centers_m, radii_m, mesh_size_m: float, *,
+                        curvature_elements: int = 0):
+    """(points (M, 3) [m], tets (T, 4), phase (T,) 0 matrix / 1 particle) from gmsh.
+
+    ``curvature_elements`` > 0 refines the sphere surfaces to that many elements per 2 pi of
+    curvature (gmsh ``Mesh.MeshSizeFromCurvature``), so small spheres keep their volume."""
     try:
         import gmsh
     except ImportError:
@@ -55,6 +60,9 @@ def conforming_tet_mesh(box_m: float, centers_m, radii_m, mesh_size_m: float):
             gmsh.model.mesh.setPeriodic(2, [f[1] for f in f1], [f[1] for f in f0], T.ravel().tolist())
         gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size_m)
         gmsh.option.setNumber("Mesh.MeshSizeMin", 0.3 * mesh_size_m)
+        if curvature_elements:
+            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", int(curvature_elements))
+            gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
         gmsh.model.mesh.generate(3)
         tags, coords, _ = gmsh.model.mesh.getNodes()
         pts = coords.reshape(-1, 3)
@@ -84,12 +92,12 @@ def conforming_tet_mesh(box_m: float, centers_m, radii_m, mesh_size_m: float):
     return pts[used], remap[np.concatenate(tets)], np.concatenate(phase)
 
 
-def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(2e6, 0.45),
-                          particle=(211e9, 0.29)) -> dict:
-    """C_eff (6x6 Voigt, Pa) of the periodic cell with P2 tetrahedra on a conforming gmsh mesh."""
-
-
-    pts, tets, phase = conforming_tet_mesh(box_m, centers_m, radii_m, mesh_size_m)
+def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDMS.E_Pa, PDMS.nu),
+                          particle=(FE.E_Pa, FE.nu), curvature_elements: int = 0) -> dict:
+    """C_eff (6x6 Voigt, Pa) of the periodic cell with P2 tetrahedra on a conforming gmsh mesh
+    (``curvature_elements``: see :func:`conforming_tet_mesh`)."""
+    pts, tets, phase = conforming_tet_mesh(box_m, centers_m, radii_m, mesh_size_m,
+                                           curvature_elements=curvature_elements)
     L = float(box_m)
     m = MeshTet(pts.T / L, tets.T)           # unit cell; stiffness is scale-free in 3D up to L
     basis = Basis(m, ElementVector(ElementTetP2()))
