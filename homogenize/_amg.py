@@ -96,6 +96,21 @@ def greedy_colours(op: BSROp) -> list[np.ndarray]:
     return [np.flatnonzero(colour == c).astype(np.int64) for c in range(colour.max() + 1)]
 
 
+def _block_inverse(diag: np.ndarray) -> np.ndarray:
+    """Inverses of the diagonal blocks (m, R, R) for Gauss-Seidel; a (nearly) singular block --
+    a coarse direction no fine vector reaches, from a rank-deficient rigid-body fit on a small
+    aggregate next to cut composite voxels -- gets its symmetric pseudo-inverse, so the sweep
+    leaves that null direction alone."""
+    ev = np.linalg.eigvalsh(diag)
+    bad = ev[:, 0] <= 1e-12 * np.abs(ev[:, -1:]).max(axis=1)
+    out = np.empty_like(diag)
+    ok = ~bad
+    out[ok] = np.linalg.inv(diag[ok])
+    if bad.any():
+        out[bad] = np.linalg.pinv(diag[bad], rcond=1e-12, hermitian=True)
+    return out
+
+
 class _Level:
     def __init__(self, A, colours, P=None):
         self.A = BSROp(A)
@@ -105,7 +120,7 @@ class _Level:
         diag = data[ind == rows]
         if diag.shape[0] != ip.size - 1:
             raise ValueError("every block row needs its diagonal block")
-        self.dinv = np.ascontiguousarray(np.linalg.inv(diag))
+        self.dinv = np.ascontiguousarray(_block_inverse(diag))
         self.colours = colours if colours is not None else greedy_colours(self.A)
         self.R_blk = R
         # parallel sweeps when a colour holds enough work to pay for starting the threads
