@@ -16,9 +16,9 @@ import os
 from homogenize import _assembly as A
 from homogenize.bench.reference import skfem_reference
 from micro.particles import generate_rve
-from homogenize.cell import homogenize_rve
+from homogenize.cell import homogenize_rve, isotropic_projection
 from homogenize.cell import Material, homogenize_mesh
-from homogenize.mesh import voxelize
+from homogenize.mesh import estimate_memory_bytes, voxelize
 import numba
 
 
@@ -127,8 +127,209 @@ def _contrast_records(voxels: int) -> list[dict]:
     return out
 
 
+def _method_records(sizes) -> list[dict]:
+    """Composite voxels against the staircase (the reference path) on the same RVE: time and
+    peak memory (each run in its own process under /usr/bin/time), and their growth with size."""
+    out, prev = [], None
+    for n in sizes:
+        comp = _run_peer("full-composite", n, 1, None)
+        cent = _run_peer("full-centre", n, 1, None)
+        if "error" in comp or "error" in cent:
+            out.append({"name": f"cell/homogenize {n}^3 composite vs centre", "n": 3 * n ** 3,
+                        "seconds": None, "reference": "method=centre", "reference_seconds": None,
+                        "ratio": None, "max_rel_error": None,
+                        "skipped": comp.get("error") or cent.get("error")})
+            continue
+        rec = {"name": f"cell/homogenize {n}^3 (6 strains + magnetic) composite vs centre",
+               "n": 3 * n ** 3, "seconds": comp["seconds"], "reference": "method=centre "
+               "(staircase), same RVE and solver", "reference_seconds": cent["seconds"],
+               "ratio": cent["seconds"] / comp["seconds"],
+               "max_rel_error": None, "E_eff_Pa": comp["E_eff_Pa"],
+               "E_eff_centre_Pa": cent["E_eff_Pa"],
+               "peak_rss_GB": comp["peak_rss_GB"], "reference_peak_rss_GB": cent["peak_rss_GB"],
+               "memory_ratio": cent["peak_rss_GB"] / comp["peak_rss_GB"],
+               "iterations": comp["iterations"], "timings_s": comp["timings_s"],
+               "memory_estimate_GB": estimate_memory_bytes(n) / 1e9, **_machine()}
+        if prev is not None:
+            f = (n / prev["n_vox"]) ** 3
+            rec["growth_vs"] = f"{prev['n_vox']}^3 (x{f:g} voxels)"
+            rec["time_growth"] = comp["seconds"] / prev["seconds"]
+            rec["memory_growth"] = comp["peak_rss_GB"] / prev["peak_rss_GB"]
+        prev = {"n_vox": n, "seconds": comp["seconds"], "peak_rss_GB": comp["peak_rss_GB"]}
+        out.append(rec)
+    return out
+
+
 def bench_records(quick: bool) -> list[dict]:
     recs = [_assembly_record(12 if quick else 32)]
     recs += _contrast_records(12 if quick else 24)
     recs.append(_full_record(16 if quick else 64))
+    recs += _method_records((12, 16) if quick else (32, 64))
+    recs += _peer_records(15 if quick else 33)
+    return recs
+
+
+# ------------------------------------------------------------------------------------------------
+# muSpectre peer (FFT-based homogenization) on the same voxel microstructure
+# ------------------------------------------------------------------------------------------------
+
+PEER_TOL = 1e-8
+
+
+def _voxel_moduli(voxels: int, seed: int):
+    """(E [Pa], nu) per voxel, shape (n, n, n) indexed [k, j, i], of the composite-voxel model
+    mapsim solves: particle / matrix, and in cut voxels the Reuss average (isotropic: harmonic
+    bulk and shear moduli) -- exactly the stiffness field of ``method="composite"``."""
+    from micro.materials import FE, PDMS, elastic
+    from homogenize._effective_media import bulk_shear
+    mesh = voxelize(_rve(voxels, seed), voxels, method="composite")
+    f = mesh.fraction
+    Km, Gm = bulk_shear(*(elastic(PDMS).E_Pa, elastic(PDMS).nu))
+    Kp, Gp = bulk_shear(*(elastic(FE).E_Pa, elastic(FE).nu))
+    K = 1.0 / (f / Kp + (1.0 - f) / Km)
+    G = 1.0 / (f / Gp + (1.0 - f) / Gm)
+    E = 9.0 * K * G / (3.0 * K + G)
+    nu = (3.0 * K - 2.0 * G) / (2.0 * (3.0 * K + G))
+    return mesh, E, nu
+
+
+def _near_contacts(mesh) -> dict:
+    """Voxel pairs of two different particles (fraction >= 0.5) that touch: through a face, or
+    only through an edge or a corner node (which a nodal FE bonds and a voxel-centred FFT
+    strain field barely does)."""
+    own = np.where(mesh.fraction >= 0.5, mesh.owner, -1)
+    face = other = 0
+    for dz in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                if (dz, dy, dx) <= (0, 0, 0):
+                    continue
+                nb = np.roll(own, shift=(-dz, -dy, -dx), axis=(0, 1, 2))
+                c = int(np.sum((own >= 0) & (nb >= 0) & (own != nb)))
+                if abs(dz) + abs(dy) + abs(dx) == 1:
+                    face += c
+                else:
+                    other += c
+    return {"face_contacts": face, "edge_or_corner_contacts": other}
+
+
+def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
+    """Run one tool on the shared microstructure (in a child process, for its peak memory)."""
+    import json
+    mesh, E, nu = _voxel_moduli(voxels, seed)
+    V = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
+    t0 = time.perf_counter()
+    extra = {}
+    if tool.startswith("full-"):                 # 6 strains + magnetic load, given method
+        rve = _rve(voxels, seed)
+        forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
+        t0 = time.perf_counter()
+        r = homogenize_rve(rve, voxels, forces_N=forces, method=tool[5:])
+        C = r.C_eff_Pa
+        extra = {"iterations": max(r.iterations.values()), "E_eff_Pa": r.E_eff_Pa,
+                 "timings_s": r.timings_s}
+    elif tool == "mapsim":
+        r = homogenize_mesh(mesh, tol=PEER_TOL)
+        C = r.C_eff_Pa
+        extra = {"iterations": max(r.iterations.values())}
+    else:
+        import muFFT
+        import muSpectre as msp
+        n = voxels
+        cell = msp.cell.CellData.make([n, n, n], [1.0, 1.0, 1.0])
+        cell.nb_quad_pts = 1
+        mat = msp.material.MaterialLinearElastic4_3d.make(cell, "voxels")
+        for i, px in cell.pixels.enumerate():       # px = (x, y, z); our arrays are [z, y, x]
+            mat.add_pixel(i, float(E[px[2], px[1], px[0]]), float(nu[px[2], px[1], px[0]]))
+        krylov = msp.solvers.KrylovSolverCG(PEER_TOL, 20000, msp.Verbosity.Silent)
+        grad = list(muFFT.Stencils3D.central) if tool == "muspectre-central" else None
+        args = (cell, krylov, msp.Verbosity.Silent, PEER_TOL, PEER_TOL, 20000)
+        solver = (msp.solvers.SolverNewtonCG(*args, grad, [1.0]) if grad
+                  else msp.solvers.SolverNewtonCG(*args))
+        solver.formulation = msp.Formulation.small_strain
+        solver.initialise_cell()
+        C = np.zeros((6, 6))
+        fev = 0
+        for b, (i, j) in enumerate(V):
+            eps = np.zeros((3, 3))
+            eps[i, j] = eps[j, i] = 1e-3 if i == j else 0.5e-3     # engineering shear 1e-3
+            res = solver.solve_load_increment(eps)
+            sig = np.asarray(res.stress).reshape(3, 3, -1).mean(axis=-1)
+            for a, (p, q) in enumerate(V):
+                C[a, b] = sig[p, q] / 1e-3
+            fev = int(res.nb_fev)
+        C = 0.5 * (C + C.T)
+        extra = {"cg_matvecs_total": fev}
+    sec = time.perf_counter() - t0
+    with open(out, "w") as fh:
+        json.dump({"C_eff_Pa": C.tolist(), "seconds": sec, **extra}, fh)
+
+
+def _run_peer(tool: str, voxels: int, seed: int, threads: int | None) -> dict:
+    """Run :func:`_peer_worker` under ``/usr/bin/time -v``: result, seconds, peak RSS [GB]."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+    env = dict(os.environ)
+    if threads:
+        env.update(NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads),
+                   OPENBLAS_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads))
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "peer.json")
+        code = (f"from homogenize.bench.cell import _peer_worker; "
+                f"_peer_worker({tool!r}, {voxels}, {seed}, {out!r})")
+        p = subprocess.run(["/usr/bin/time", "-v", sys.executable, "-c", code], env=env,
+                           capture_output=True, text=True)
+        if p.returncode != 0:
+            return {"error": p.stderr.strip().splitlines()[-1] if p.stderr.strip() else "failed"}
+        rss = [ln for ln in p.stderr.splitlines() if "Maximum resident set size" in ln]
+        with open(out) as fh:
+            res = json.load(fh)
+    res["peak_rss_GB"] = float(rss[0].split(":")[1]) / 1e6 if rss else None
+    return res
+
+
+def _peer_records(voxels: int, seed: int = 1) -> list[dict]:
+    """muSpectre 0.27.0 (FFT, small strain, CG; serial PocketFFT wheel) against mapsim on the
+    same composite-voxel moduli, odd grid (muSpectre's stencils need one)."""
+    try:
+        import muSpectre  # noqa: F401
+    except ImportError as exc:
+        return [{"name": f"cell/peer muSpectre {voxels}^3", "n": 3 * voxels ** 3,
+                 "seconds": None, "reference": "muSpectre", "reference_seconds": None,
+                 "ratio": None, "max_rel_error": None,
+                 "skipped": f"muSpectre not installed ({exc}); pip install .[peers]"}]
+    mesh, _, _ = _voxel_moduli(voxels, seed)
+    contacts = _near_contacts(mesh)
+    ours = {t: _run_peer("mapsim", voxels, seed, t) for t in (1, None)}
+    recs = []
+    for tool in ("muspectre-central", "muspectre-fourier"):
+        peer = _run_peer(tool, voxels, seed, 1)
+        for threads, me in ours.items():
+            name = (f"cell/peer {tool} vs mapsim ({'1 thread' if threads else 'default threads'}) "
+                    f"{voxels}^3 composite voxels")
+            if "error" in peer or "error" in me:
+                recs.append({"name": name, "n": 3 * voxels ** 3, "seconds": None,
+                             "reference": tool, "reference_seconds": None, "ratio": None,
+                             "max_rel_error": None,
+                             "skipped": peer.get("error") or me.get("error")})
+                continue
+            Cm, Cp = np.array(me["C_eff_Pa"]), np.array(peer["C_eff_Pa"])
+            Em, Ep = isotropic_projection(Cm)[0], isotropic_projection(Cp)[0]
+            recs.append({
+                "name": name, "n": 3 * voxels ** 3, "seconds": me["seconds"],
+                "reference": f"muSpectre 0.27.0 {tool.split('-')[1]} gradient, serial",
+                "reference_seconds": peer["seconds"], "ratio": peer["seconds"] / me["seconds"],
+                "max_rel_error": float(np.abs(Cm - Cp).max() / np.abs(Cp).max()),
+                "E_eff_Pa": Em, "E_eff_peer_Pa": Ep, "E_eff_rel_diff": Em / Ep - 1.0,
+                "peak_rss_GB": me["peak_rss_GB"], "peer_peak_rss_GB": peer["peak_rss_GB"],
+                "memory_ratio": peer["peak_rss_GB"] / me["peak_rss_GB"],
+                "tolerance": f"both CG relative residual {PEER_TOL:g}; mapsim C_eff variational "
+                             "(error ~ residual^2), muSpectre C_eff from the mean stress "
+                             "(error ~ residual)",
+                "peer_cg_matvecs": peer.get("cg_matvecs_total"),
+                "mapsim_iterations": me.get("iterations"), **contacts,
+                "note": "same voxel moduli; the difference is discretization (nodal trilinear "
+                        "FE vs voxel-centred FFT strain), not the solver", **_machine()})
     return recs
