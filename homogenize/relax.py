@@ -1,0 +1,656 @@
+"""Coupled magneto-mechanical equilibrium of an RVE: particles that move.
+
+Each particle is a rigid sphere bonded to the elastic matrix. In a field step the magnetic
+forces ``F(x)`` (self-consistent point dipoles, :func:`micro.dipoles.solve`, re-solved at the
+current positions) and a short-range contact penalty ``F_c(x)`` displace the particles by
+
+    u = M F(X + u)                                                     (1)
+
+with ``M`` the (3N, 3N) displaceability (compliance) of the rigid particles in the periodic
+cell at zero mean strain, evaluated in the reference configuration ``X`` (small-strain
+elasticity; the LOAD follows the particles: that is the geometric nonlinearity that makes
+neighbours along the field snap together). Equation (1) is solved for ``u`` by Newton's method
+with pseudo-transient continuation (the Jacobian ``I - M dF/dx``: contact penalty exact,
+magnetic stiffness by differences of the full self-consistent forces for close particles),
+field step after field step, each step starting from the previous solution; no particle moves
+by more than a quarter of its smallest gap per step, and no step makes particles overlap.
+Torques: the moments of soft spheres follow their local field (isotropic laws), so point
+dipoles carry no torque and the rotations of the spheres (which do not change their positions
+to the order of ``M``) are not solved.
+
+Displaceability ``M``:
+
+* ``elastic="green"`` (default, fast): the elastic Rotne-Prager tensor of rigid spheres,
+  Ewald-summed in the periodic cell (:mod:`homogenize._green`); exact for one sphere and to
+  O(r^-3) for pairs (many-body reflections left out).
+* ``elastic="fem"``: the voxel cell FEM with rigid particles, one unit force per particle and
+  direction (:func:`fem_displaceability`, 3N cell solves; for small RVEs and for validation).
+
+Macro boundary. The fluctuations are solved at zero mean strain. The relaxed RVE then goes
+through the cell FEM (:func:`homogenize.cell.homogenize_mesh`, rigid particles) with its
+magnetic forces and pairwise virial: ``C_eff`` (stiffness along and across the field after
+restructuring), the magnetic mean stress and, with ``boundary="free"``, the free
+magnetostriction ``strain_mag = -C_eff^-1 stress_mag`` (zero mean stress); with
+``boundary="strain"`` the mean strain stays zero and the mean stress is reported. The affine
+strain (~1e-3 .. 1e-2) is not fed back into the magnetics (it changes pair distances by that
+relative amount, against the gap changes of tens of per cent that restructuring makes).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import scipy.sparse.csgraph as csgraph
+import scipy.sparse as sp
+
+from micro._validate import ConvergenceError, InputError, check_choice, check_finite
+from scipy.constants import mu_0 as MU0
+
+from micro.dipoles import solve as solve_dipoles
+from micro.magnetization import DEFAULT_LAW
+from micro.materials import FE, PDMS, ElasticMaterial, elastic
+from micro.rve import RVE, minimum_image
+
+from ._green import periodic_displaceability, rigid_sphere_displaceability
+from .cell import homogenize_mesh
+from .mesh import voxelize
+
+__all__ = ["relax", "RelaxResult", "equilibrium", "Equilibrium", "fem_displaceability",
+           "green_displaceability", "microstructure", "magnetic_coenergy_J", "BOUNDARIES",
+           "ELASTIC_MODELS"]
+
+BOUNDARIES = ("free", "strain")
+ELASTIC_MODELS = ("green", "fem")
+
+
+# ------------------------------------------------------------------------------------------
+# Elastic response of the rigid particles
+# ------------------------------------------------------------------------------------------
+def _check_matrix(matrix):
+    if not isinstance(matrix, ElasticMaterial):
+        raise InputError(f"matrix must be a micro.materials.ElasticMaterial, got "
+                         f"{type(matrix).__name__}")
+    if not (np.isfinite(matrix.E_Pa) and matrix.E_Pa > 0):
+        raise InputError(f"matrix modulus E_Pa must be > 0 Pa, got {matrix.E_Pa}")
+    if not -1.0 < matrix.nu <= 0.5:
+        raise InputError(f"matrix Poisson's ratio must be in (-1, 0.5], got {matrix.nu}")
+
+
+def _shear(matrix):
+    return matrix.E_Pa / (2.0 * (1.0 + matrix.nu))
+
+
+def green_displaceability(rve, matrix: ElasticMaterial = elastic(PDMS), *,
+                          accuracy: float = 1e-8) -> np.ndarray:
+    """Displaceability of the RVE's particles, (3N, 3N) [m/N], from the periodic elastic
+    Rotne-Prager tensor (:func:`homogenize._green.periodic_displaceability`)."""
+    _check_matrix(matrix)
+    return periodic_displaceability(rve.centers_m, rve.radii_m, rve.box_m, _shear(matrix),
+                                    matrix.nu, accuracy=accuracy)
+
+
+def _particle_translation(mesh, W, p):
+    """Mean displacement of the nodes of particle p's voxels (its rigid translation) [m]."""
+    n = mesh.n
+    vox = np.argwhere((mesh.owner == p) & (mesh.fraction >= 0.5))     # (m, 3) as (k, j, i)
+    acc = np.zeros(3)
+    cnt = 0
+    for az in (0, 1):
+        for ay in (0, 1):
+            for ax in (0, 1):
+                k, j, i = (vox[:, 0] + az) % n, (vox[:, 1] + ay) % n, (vox[:, 2] + ax) % n
+                acc += W[k, j, i].sum(axis=0)
+                cnt += vox.shape[0]
+    return acc / cnt
+
+
+def fem_displaceability(rve, voxels: int, matrix: ElasticMaterial = elastic(PDMS), *,
+                        tol: float = 1e-8, particles=None) -> np.ndarray:
+    """Displaceability of rigid particles from the periodic voxel cell FEM, (3N, 3N) [m/N].
+
+    A unit force on particle j (spread over its voxels, balanced by a uniform counter-load,
+    zero mean strain) is solved with :func:`homogenize.cell.homogenize_mesh` (rigid particles,
+    deflated CG); column (j, d) holds the mean nodal displacement of every particle. Costs 3N
+    cell solves; ``particles`` (indices) restricts the loaded particles (other columns zero).
+    """
+    _check_matrix(matrix)
+    mesh = voxelize(rve, voxels)
+    N = mesh.n_particles
+    M = np.zeros((3 * N, 3 * N))
+    loaded = range(N) if particles is None else particles
+    # unit force scaled to the matrix: displacements ~ 1/(G a), keeps CG in its usual range
+    for j in loaded:
+        for d in range(3):
+            F = np.zeros((N, 3))
+            F[j, d] = 1.0
+            res = homogenize_mesh(mesh, forces_N=F, matrix=matrix, rigid=True, cases=(),
+                                  keep_fields=True, tol=tol)
+            W = res.fields["magnetic"]
+            for p in range(N):
+                M[3 * p:3 * p + 3, 3 * j + d] = _particle_translation(mesh, W, p)
+    return M
+
+
+# ------------------------------------------------------------------------------------------
+# Contact penalty
+# ------------------------------------------------------------------------------------------
+def _pairs(centers, radii, box, cutoff):
+    """Pairs (i < j) with surface gap below ``cutoff``: i, j, minimum-image d = x_i - x_j, r, gap."""
+    N = radii.size
+    iu, ju = np.triu_indices(N, 1)
+    d = minimum_image(centers[iu] - centers[ju], box)
+    r = np.linalg.norm(d, axis=1)
+    gap = r - radii[iu] - radii[ju]
+    sel = gap < cutoff
+    return iu[sel], ju[sel], d[sel], r[sel], gap[sel]
+
+
+def _barrier(g, g0, kc):
+    """Contact penalty pair force phi(g) >= 0 (repulsive) and d phi / d g for gaps g < g0.
+
+    Linear in the overlap ``d = g0 - g`` (``kc (d - w/2)``) with a quadratic onset over the first
+    ``w = g0 / 10`` (``kc d^2 / (2 w)``): C1-smooth, so Newton does not cycle at its start, and
+    of constant stiffness beyond, so its Jacobian is exact over a whole step.
+    """
+    w = 0.1 * g0
+    d = g0 - g
+    if d < w:
+        return 0.5 * kc * d * d / w, -kc * d / w
+    return kc * (d - 0.5 * w), -kc
+
+
+def _contact(centers, radii, box, g0, k_c):
+    """Barrier forces (N, 3) [N], stiffness dF/dx (3N, 3N) [N/m] and energy [J] of the pairs
+    closer than ``g0`` (see :func:`_barrier`; ``k_c`` per particle [N/m])."""
+    N = radii.size
+    F = np.zeros((N, 3))
+    K = np.zeros((3 * N, 3 * N))
+    i, j, d, r, g = _pairs(centers, radii, box, g0)
+    e = 0.0
+    for a, b, dv, rv, gv in zip(i, j, d, r, g):
+        kc = 2.0 * k_c[a] * k_c[b] / (k_c[a] + k_c[b])
+        phi, dphi = _barrier(gv, g0, kc)
+        n = dv / rv
+        F[a] += phi * n
+        F[b] -= phi * n
+        # dF_a/dx_a = phi' n n + phi / r (I - n n)
+        Kab = dphi * np.outer(n, n) + phi / rv * (np.eye(3) - np.outer(n, n))
+        sa, sb = slice(3 * a, 3 * a + 3), slice(3 * b, 3 * b + 3)
+        K[sa, sa] += Kab
+        K[sb, sb] += Kab
+        K[sa, sb] -= Kab
+        K[sb, sa] -= Kab
+        e += _barrier_energy(gv, g0, kc)
+    return F, K, e
+
+
+def _barrier_energy(g, g0, kc):
+    """Energy of the penalty, int_g^g0 phi dg' [J]."""
+    w = 0.1 * g0
+    d = g0 - g
+    if d < w:
+        return kc * d ** 3 / (6.0 * w)
+    return kc * w * w / 6.0 + kc * (0.5 * (d * d - w * w) - 0.5 * w * (d - w))
+
+
+def _dipole_force(d, mi, mj):
+    """Force on dipole i from dipole j at d = x_i - x_j (open space), (..., 3) [N]."""
+    r = np.linalg.norm(d, axis=-1)[..., None]
+    rh = d / r
+    mir = np.sum(mi * rh, axis=-1)[..., None]
+    mjr = np.sum(mj * rh, axis=-1)[..., None]
+    mm = np.sum(mi * mj, axis=-1)[..., None]
+    return 3.0 * MU0 / (4.0 * math.pi * r ** 4) * (mir * mj + mjr * mi + mm * rh
+                                                    - 5.0 * mir * mjr * rh)
+
+
+def _dipole_pair_stiffness(x, moments, a, box, near=2.0):
+    """Approximate magnetic stiffness dF/dx (3N, 3N) [N/m]: point-dipole pair forces of near
+    pairs (gap < ``near`` mean radii) at frozen moments, by central differences. Used only in
+    the Jacobian of the pseudo-time steps (the residual always has the full periodic,
+    self-consistent forces), so its approximations slow the convergence, never bias it."""
+    N = a.size
+    K = np.zeros((3 * N, 3 * N))
+    i, j, d, r, g = _pairs(x, a, box, near * float(a.mean()))
+    if i.size == 0:
+        return K
+    h = 1e-4 * r[:, None]
+    mi, mj = moments[i], moments[j]
+    for c in range(3):
+        e = np.zeros(3)
+        e[c] = 1.0
+        dF = (_dipole_force(d + h * e, mi, mj) - _dipole_force(d - h * e, mi, mj)) / (2 * h)
+        for p, q, col in zip(i, j, dF):        # dF_i/dx_i[:, c] = col, dF_i/dx_j = -col
+            K[3 * p:3 * p + 3, 3 * p + c] += col
+            K[3 * q:3 * q + 3, 3 * q + c] += col
+            K[3 * p:3 * p + 3, 3 * q + c] -= col
+            K[3 * q:3 * q + 3, 3 * p + c] -= col
+    return K
+
+
+# ------------------------------------------------------------------------------------------
+# Equilibrium at one field
+# ------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Equilibrium:
+    """Relaxed particles at one field (SI units).
+
+    Attributes
+    ----------
+    displacement_m : (N, 3) particle displacements from the reference positions [m]
+    centers_m : (N, 3) relaxed centres, wrapped into the cell [m]
+    state : MagneticState at the relaxed positions
+    contact_force_N : (N, 3) penalty forces [N]
+    iterations : Newton iterations; residual_history : relative residual per residual evaluation
+    """
+
+    displacement_m: np.ndarray
+    centers_m: np.ndarray
+    state: object
+    contact_force_N: np.ndarray
+    iterations: int
+    evaluations: int
+    residual_history: tuple
+    contacts: tuple
+
+
+def _rve_at(rve, centers):
+    return replace(rve, centers_m=np.mod(centers, rve.box_m))
+
+
+def magnetic_coenergy_J(state, B_T) -> float:
+    """Magnetic co-energy of linearly magnetizable dipoles in a fixed applied field [J]:
+    ``-(1/2) sum m_i . B_applied`` (metallic boundary). Its negative gradient with respect to
+    the positions is the dipole force (tested); for capped or nonlinear laws it is not."""
+    B = np.asarray(B_T, dtype=float)
+    B = B if B.ndim else np.array([0.0, 0.0, float(B)])
+    return -0.5 * float(np.sum(state.moments_Am2 @ B))
+
+
+def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None,
+                u0_m=None, tol=1e-6, max_iter=60, demag_factor=None, accuracy=1e-6,
+                magnetic_tol=1e-10, matrix: ElasticMaterial = elastic(PDMS)) -> Equilibrium:
+    """Solve ``u = M F(X + u)`` at one applied field (see the module docstring).
+
+    Parameters
+    ----------
+    rve : RVE -- reference configuration X
+    B_T : float or (3,) -- applied flux density mu0 H [T] (scalar: along z)
+    M : ndarray, shape (3N, 3N) -- displaceability [m/N] (:func:`green_displaceability`)
+    min_gap_m : float -- surface gap where the contact penalty starts [m] (default 5 % of the
+        mean radius); pairs below it are reported as in contact
+    u0_m : (N, 3) initial displacements [m] (continuation from the previous step)
+    tol : float -- converged when max |u - M F| < tol * mean radius
+    matrix : the matrix material (only for the penalty stiffness scale)
+
+    Raises
+    ------
+    ConvergenceError -- no convergence in ``max_iter`` Newton iterations, or particles overlap.
+    """
+    N = rve.n
+    X = np.asarray(rve.centers_m, dtype=float)
+    a = np.asarray(rve.radii_m, dtype=float)
+    L = float(rve.box_m)
+    a_mean = float(a.mean())
+    g0 = 0.05 * a_mean if min_gap_m is None else float(min_gap_m)
+    if not g0 > 0:
+        raise InputError(f"min_gap_m must be > 0 m, got {min_gap_m}")
+    k_c = _contact_stiffness(a, matrix)
+    law_params = dict(law_params or {})
+    last = {"m": None, "state": None, "Fc": None}
+    if M.shape != (3 * N, 3 * N):
+        raise InputError(f"M must have shape ({3 * N}, {3 * N}) [m/N], got {M.shape}")
+    hist = []
+
+    def forces(u):
+        x = X + u
+        st = solve_dipoles(_rve_at(rve, x), B_T, 0.0, law, demag_factor=demag_factor,
+                           tol=magnetic_tol, accuracy=accuracy, initial_moments_Am2=last["m"],
+                           **law_params)
+        last["m"] = st.moments_Am2
+        Fc, Kc, _ = _contact(x, a, L, g0, k_c)
+        return st, Fc, Kc
+
+    def magnetic_stiffness(u, st):
+        """dF/dx: forward differences of the full self-consistent periodic forces for the
+        particles with a neighbour closer than one radius (where the moments respond strongly
+        to the positions), frozen-moment pair stiffness for the others."""
+        x = X + u
+        K = _dipole_pair_stiffness(x, st.moments_Am2, a, L)
+        ii, jj, _, _, _ = _pairs(x, a, L, a_mean)
+        close = np.unique(np.concatenate([ii, jj]))
+        if close.size == 0:
+            return K
+        F0 = st.total_force_N.ravel()
+        h = 1e-4 * a_mean
+        for p in close:
+            for c in range(3):
+                du = np.zeros((N, 3))
+                du[p, c] = h
+                sp_ = solve_dipoles(_rve_at(rve, x + du), B_T, 0.0, law,
+                                    demag_factor=demag_factor, tol=magnetic_tol,
+                                    accuracy=accuracy, initial_moments_Am2=st.moments_Am2,
+                                    **law_params)
+                K[:, 3 * p + c] = (sp_.total_force_N.ravel() - F0) / h
+        return K
+
+    def resid(y):
+        u = y.reshape(N, 3) * a_mean
+        st, Fc, _ = forces(u)
+        last["state"], last["Fc"] = st, Fc
+        r = (u.ravel() - M @ (st.total_force_N + Fc).ravel()) / a_mean
+        hist.append(float(np.abs(r).max()))
+        return r
+
+    u_init = np.zeros((N, 3)) if u0_m is None else np.asarray(u0_m, dtype=float)
+    y = u_init.ravel() / a_mean
+    # Pseudo-transient continuation (Kelley & Keyes 1998) on the overdamped dynamics
+    # du/dt = M F(X + u) - u, whose attracting fixed points are the STABLE equilibria: a step
+    # solves (I/dt + I - M K) dy = r with an approximate stiffness K (contact penalty exact,
+    # dipole pairs at frozen moments); dt grows as the residual falls (switched evolution
+    # relaxation), which turns the steps into Newton steps near the solution and lets the
+    # particles snap through to contact where the field makes the as-placed branch unstable.
+    r = -resid(y)
+    rn = float(np.abs(r).max())
+    dt = 1.0
+    n_newton = 0
+    Kmag, k_mag = None, 0
+    ok = rn < tol
+    while not ok and n_newton < max_iter:
+        n_newton += 1
+        u = y.reshape(N, 3) * a_mean
+        x = X + u
+        _, Kc, _ = _contact(x, a, L, g0, k_c)
+        if Kmag is None or (n_newton - k_mag) >= 5:
+            Kmag, k_mag = magnetic_stiffness(u, last["state"]), n_newton
+        K = Kc + Kmag
+        J = (1.0 + 1.0 / dt) * np.eye(3 * N) - M @ K
+        dy = np.linalg.solve(J, r)
+        # trust region in physical terms: no particle moves by more than half of its current
+        # smallest surface gap (nor by more than 0.2 radii), so a snap-through towards contact
+        # is followed in steps instead of jumping into an overlap
+        step = np.linalg.norm(dy.reshape(N, 3), axis=1) * a_mean
+        nn = np.full(N, np.inf)
+        ii, jj, _, _, gg = _pairs(x, a, L, 0.5 * a_mean)
+        np.minimum.at(nn, ii, gg)
+        np.minimum.at(nn, jj, gg)
+        lim = np.minimum(0.25 * nn, 0.2 * a)       # both partners may move: a quarter each
+        scale = float(min(1.0, np.min(lim / np.maximum(step, 1e-300))))
+        y_new = y + scale * dy
+        for _ in range(30):                           # never step into an overlap
+            if _pairs(X + y_new.reshape(N, 3) * a_mean, a, L, 0.0)[0].size == 0:
+                break
+            scale *= 0.5
+            y_new = y + scale * dy
+        r_new = -resid(y_new)
+        rn_new = float(np.abs(r_new).max())
+        if not np.isfinite(rn_new):
+            dt = max(dt / 4.0, 1e-4)           # rejected: shorter pseudo-time step
+            continue
+        # switched evolution relaxation, asymmetric: grow dt with the residual ratio (at least
+        # x2) when the residual falls, shrink it only by the square root of the ratio when it
+        # rises (a snap-through or a damped two-cycle must not freeze dt)
+        ratio = np.linalg.norm(r) / max(np.linalg.norm(r_new), 1e-300)
+        dt = min(dt * max(ratio, 2.0), 1e12) if ratio > 1.0 else max(dt * math.sqrt(ratio), 1e-4)
+        y, r, rn = y_new, r_new, rn_new
+        ok = rn < tol
+    u = y.reshape(N, 3) * a_mean
+    if not ok:
+        raise ConvergenceError(
+            f"relaxation at B = {np.linalg.norm(np.atleast_1d(B_T)):.4g} T did not converge to "
+            f"max |u - M F| < {tol:.0e} radii ({len(hist)} residual evaluations; last "
+            + ", ".join(f"{v:.1e}" for v in hist[-4:]) + ")", hist)
+    st, Fc, _ = forces(u)
+    x = X + u
+    i, j, d, rr, g = _pairs(x, a, L, g0)
+    if np.any(g < 0):
+        k = int(np.argmin(g))
+        raise ConvergenceError(
+            f"particles {i[k]} and {j[k]} overlap by {-g[k]:.3g} m after relaxation at "
+            f"B = {np.linalg.norm(np.atleast_1d(B_T)):.4g} T: the contact penalty is too soft "
+            f"for these forces (raise min_gap_m)", hist)
+    return Equilibrium(displacement_m=u, centers_m=np.mod(x, L), state=st, contact_force_N=Fc,
+                       iterations=n_newton, evaluations=len(hist), residual_history=tuple(hist),
+                       contacts=tuple((int(p), int(q)) for p, q in zip(i, j)))
+
+
+# ------------------------------------------------------------------------------------------
+# Microstructure descriptors
+# ------------------------------------------------------------------------------------------
+def microstructure(rve, direction=(0.0, 0.0, 1.0), *, near_gap_m=None, chain_gap_m=None,
+                   chain_angle_deg=30.0) -> dict:
+    """Descriptors of the arrangement relative to the field direction (SI units).
+
+    * ``pair_anisotropy_P2``: <P2(cos theta)> over near pairs (surface gap < ``near_gap_m``,
+      default one mean radius), theta the angle of the pair axis to the field: 0 for an
+      isotropic arrangement, > 0 when near neighbours line up along the field, -1/2 across.
+    * ``nn_gap_m``: quantiles (min, p10, p50, p90) of each particle's nearest surface gap [m].
+    * ``chain_fraction``: fraction of particles in chains, i.e. connected clusters of >= 3
+      particles linked by bonds with gap < ``chain_gap_m`` (default 10 % of the mean radius)
+      within ``chain_angle_deg`` of the field.
+    """
+    c = np.asarray(rve.centers_m, dtype=float)
+    a = np.asarray(rve.radii_m, dtype=float)
+    n = np.asarray(direction, dtype=float)
+    n = n / np.linalg.norm(n)
+    a_mean = float(a.mean())
+    near = a_mean if near_gap_m is None else near_gap_m
+    cg = 0.1 * a_mean if chain_gap_m is None else chain_gap_m
+    N = a.size
+    iu, ju = np.triu_indices(N, 1)
+    d = minimum_image(c[iu] - c[ju], rve.box_m)
+    r = np.linalg.norm(d, axis=1)
+    gap = r - a[iu] - a[ju]
+    cos = np.abs(d @ n) / r
+    sel = gap < near
+    P2 = float(np.mean(1.5 * cos[sel] ** 2 - 0.5)) if sel.any() else 0.0
+    nn = np.full(N, np.inf)
+    np.minimum.at(nn, iu, gap)
+    np.minimum.at(nn, ju, gap)
+    bond = (gap < cg) & (cos > math.cos(math.radians(chain_angle_deg)))
+    A = sp.coo_matrix((np.ones(bond.sum()), (iu[bond], ju[bond])), shape=(N, N))
+    _, lab = csgraph.connected_components(A, directed=False)
+    sizes = np.bincount(lab)
+    chain = float(np.mean(sizes[lab] >= 3))
+    q = np.percentile(nn, [10, 50, 90]) if N > 1 else [np.nan] * 3
+    return {"pair_anisotropy_P2": P2, "near_pairs": int(sel.sum()),
+            "nn_gap_m": {"min": float(nn.min()), "p10": float(q[0]), "p50": float(q[1]),
+                         "p90": float(q[2])},
+            "chain_fraction": chain}
+
+
+# ------------------------------------------------------------------------------------------
+# Field sweep
+# ------------------------------------------------------------------------------------------
+def _young_along(C_voigt, n):
+    """Young's modulus along unit vector n from a 6x6 Voigt stiffness (engineering shear) [Pa]."""
+    S = np.linalg.inv(C_voigt)
+    # uniaxial stress n n in Voigt form (11, 22, 33, 23, 13, 12); S maps it to the engineering
+    # strains (gamma = 2 eps), whose product with the stress Voigt vector is n.eps.n
+    s = np.array([n[0] ** 2, n[1] ** 2, n[2] ** 2, n[1] * n[2], n[0] * n[2], n[0] * n[1]])
+    return 1.0 / float(s @ S @ s)
+
+
+def _perpendicular(n):
+    t = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = t - (t @ n) * n
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(n, e1)
+
+
+@dataclass(frozen=True, eq=False)
+class RelaxResult:
+    """Field sweep of the coupled RVE (SI units).
+
+    Attributes
+    ----------
+    steps : tuple of dict -- per field step (see :meth:`to_dict`)
+    rve : RVE -- the relaxed RVE at the last field step (saves with ``RVE.save``)
+    rves : tuple of RVE -- the relaxed RVE at every step
+    settings : dict -- the configuration of the run
+    """
+
+    steps: tuple
+    rve: RVE
+    rves: tuple
+    settings: dict
+    timings_s: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """JSON-serialisable: ``settings``, ``timings_s`` and ``steps`` (each with ``B_T``,
+        ``strain_mag`` (3x3), ``stress_mag_Pa`` (3x3), ``M_eff_A_per_m``,
+        ``E_eff_parallel_Pa``, ``E_eff_perpendicular_Pa``, ``min_gap_m``,
+        ``displacement_rms_m``, ``iterations``, ``contacts``, ``microstructure``...)."""
+        return {"settings": self.settings, "timings_s": self.timings_s,
+                "steps": [dict(s) for s in self.steps]}
+
+
+def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
+          matrix: ElasticMaterial = elastic(PDMS), boundary: str = "free", voxels: int | None = 32,
+          near_field: bool = False, elastic_model: str = "green", direction=(0.0, 0.0, 1.0),
+          min_gap_m: float | None = None, tol: float = 1e-6, max_iter: int = 60,
+          demag_factor=None, accuracy: float = 1e-6, cell_tol: float = 1e-6,
+          progress: bool = False) -> RelaxResult:
+    """Relax an RVE through increasing field steps (coupled magneto-mechanics).
+
+    Parameters
+    ----------
+    rve : RVE -- the as-placed (reference) RVE
+    B_steps_T : sequence of float -- applied flux density mu0 H per step [T], strictly
+        increasing and >= 0, along ``direction``
+    law, law_params : magnetization law (:func:`micro.magnetization.get_law`) and parameters
+    matrix : ElasticMaterial -- the matrix (E_Pa > 0, nu); particles are rigid
+    boundary : {"free", "strain"} -- zero mean stress (free magnetostriction ``strain_mag``)
+        or zero mean strain (``strain_mag`` = 0, the mean stress in ``stress_mag_Pa``)
+    voxels : int or None -- voxels per edge of the cell FEM on the relaxed RVE (C_eff, mean
+        stress, strain); None skips it (no strain, no E_eff)
+    near_field : bool -- near-field magnetic forces beyond point dipoles (not implemented:
+        True is refused)
+    elastic_model : {"green", "fem"} -- displaceability from the periodic elastic Green's
+        function (fast) or from the voxel FEM (3N cell solves at ``voxels``)
+    direction : (3,) -- field direction
+    min_gap_m : float -- contact gap [m] (default 5 % of the mean radius)
+    tol, max_iter : Newton tolerance (in radii) and iteration budget per step
+    demag_factor, accuracy : passed to :func:`micro.dipoles.solve`
+    cell_tol : CG tolerance of the cell FEM
+
+    Returns
+    -------
+    RelaxResult
+
+    Raises
+    ------
+    InputError -- steps not increasing, matrix modulus <= 0, unknown options.
+    ConvergenceError -- a step does not converge or particles overlap.
+    """
+    t_all = time.perf_counter()
+    B = np.asarray(check_finite("B_steps_T", B_steps_T, "T"), dtype=float).ravel()
+    if B.size == 0:
+        raise InputError("B_steps_T must hold at least one field step [T]")
+    if np.any(B < 0) or np.any(np.diff(B) <= 0):
+        raise InputError(f"B_steps_T must be >= 0 T and strictly increasing, got "
+                         f"{np.array2string(B, precision=4)}")
+    _check_matrix(matrix)
+    check_choice("boundary", boundary, BOUNDARIES)
+    check_choice("elastic_model", elastic_model, ELASTIC_MODELS)
+    if near_field:
+        raise InputError("near_field=True is not implemented: the forces are point-dipole "
+                         "forces (use near_field=False)")
+    if voxels is None and elastic_model == "fem":
+        raise InputError("elastic_model='fem' needs voxels")
+    n = np.asarray(direction, dtype=float)
+    if n.shape != (3,) or not np.linalg.norm(n) > 0:
+        raise InputError(f"direction must be a nonzero 3-vector, got {direction!r}")
+    n = n / np.linalg.norm(n)
+    t = {"displaceability": 0.0, "relax": 0.0, "cell": 0.0}
+    t0 = time.perf_counter()
+    if elastic_model == "green":
+        M = green_displaceability(rve, matrix)
+    else:
+        M = fem_displaceability(rve, voxels, matrix)
+    t["displaceability"] = time.perf_counter() - t0
+    e1, e2 = _perpendicular(n)
+    steps, rves = [], []
+    u = np.zeros((rve.n, 3))
+    for Bk in B:
+        t0 = time.perf_counter()
+        eq = equilibrium(rve, Bk * n, M, law=law, law_params=law_params, min_gap_m=min_gap_m,
+                         u0_m=u, tol=tol, max_iter=max_iter, demag_factor=demag_factor,
+                         accuracy=accuracy, matrix=matrix)
+        t["relax"] += time.perf_counter() - t0
+        u = eq.displacement_m
+        r_rel = replace(rve, centers_m=eq.centers_m,
+                        params={**dict(rve.params), "relaxed_B_T": float(Bk),
+                                "relaxed_boundary": boundary})
+        rves.append(r_rel)
+        st = eq.state
+        rec = {"B_T": float(Bk),
+               "M_eff_A_per_m": float(np.asarray(st.M_eff_A_per_m) @ n),
+               "M_eff_vector_A_per_m": np.asarray(st.M_eff_A_per_m).tolist(),
+               "displacement_rms_m": float(np.sqrt(np.mean(np.sum(u ** 2, axis=1)))),
+               "displacement_max_m": float(np.sqrt(np.sum(u ** 2, axis=1)).max()),
+               "iterations": int(eq.iterations), "residual_evaluations": int(eq.evaluations),
+               "contacts": [list(p) for p in eq.contacts], "n_contacts": len(eq.contacts),
+               "virial_stress_Pa": np.asarray(st.virial_stress_Pa).tolist()}
+        ms = microstructure(r_rel, n)
+        rec["min_gap_m"] = ms["nn_gap_m"]["min"]
+        rec["microstructure"] = ms
+        rec["strain_mag"] = rec["stress_mag_Pa"] = None
+        rec["E_eff_parallel_Pa"] = rec["E_eff_perpendicular_Pa"] = None
+        if voxels is not None:
+            t0 = time.perf_counter()
+            forces = st.total_force_N + eq.contact_force_N
+            # contact forces are pairwise too: their virial joins the dipoles'
+            vir = np.asarray(st.virial_stress_Pa, dtype=float).copy()
+            g0 = min_gap_m if min_gap_m is not None else 0.05 * float(np.mean(rve.radii_m))
+            for (_, _, dv, fv) in _pair_contact_forces(eq.centers_m, np.asarray(rve.radii_m),
+                                                       rve.box_m, g0, matrix):
+                vir -= np.outer(dv, fv) / rve.box_m ** 3
+            res = homogenize_mesh(voxelize(r_rel, voxels), forces_N=forces, virial_stress_Pa=vir,
+                                  matrix=matrix, rigid=True, tol=cell_tol)
+            t["cell"] += time.perf_counter() - t0
+            C = res.C_eff_Pa
+            rec["stress_mag_Pa"] = np.asarray(res.stress_mag_Pa).tolist()
+            rec["strain_mag"] = (np.asarray(res.strain_mag).tolist() if boundary == "free"
+                                 else np.zeros((3, 3)).tolist())
+            rec["E_eff_parallel_Pa"] = _young_along(C, n)
+            rec["E_eff_perpendicular_Pa"] = 0.5 * (_young_along(C, e1) + _young_along(C, e2))
+            rec["E_eff_isotropic_Pa"] = float(res.E_eff_Pa)
+            rec["C_eff_Pa"] = np.asarray(C).tolist()
+        steps.append(rec)
+        if progress:
+            print(f"B = {Bk:.3f} T: {eq.iterations} Newton its, u_rms "
+                  f"{rec['displacement_rms_m']:.3g} m, contacts {rec['n_contacts']}", flush=True)
+    t["total"] = time.perf_counter() - t_all
+    settings = {"law": law if isinstance(law, str) else getattr(law, "name", str(law)),
+                "law_params": dict(law_params or {}), "matrix_E_Pa": matrix.E_Pa,
+                "matrix_nu": matrix.nu, "boundary": boundary, "voxels": voxels,
+                "near_field": near_field, "elastic_model": elastic_model,
+                "direction": n.tolist(), "min_gap_m": min_gap_m, "tol": tol,
+                "n_particles": rve.n, "box_m": rve.box_m, "phi": rve.phi,
+                "demag_factor": demag_factor}
+    return RelaxResult(steps=tuple(steps), rve=rves[-1], rves=tuple(rves), settings=settings,
+                       timings_s=t)
+
+
+def _pair_contact_forces(x, a, box, g0, matrix):
+    """(i, j, d_ij, force on i from j) of the contact barrier pairs (see :func:`_contact`)."""
+    k_c = _contact_stiffness(a, matrix)
+    out = []
+    i, j, d, r, g = _pairs(x, a, box, g0)
+    for p, q, dv, rv, gv in zip(i, j, d, r, g):
+        kc = 2.0 * k_c[p] * k_c[q] / (k_c[p] + k_c[q])
+        phi, _ = _barrier(gv, g0, kc)
+        out.append((p, q, dv, phi * dv / rv))
+    return out
+
+
+def _contact_stiffness(a, matrix):
+    """Penalty stiffness per particle [N/m]: 50 x the elastic spring 1/U0 of the sphere in the
+    matrix. The dipole force at contact of saturated Fe spheres, ~0.5 mu0 Ms^2 a^2, displaces a
+    sphere by up to ~3 radii against a 0.1 MPa matrix: 50 x stiffer keeps the overlap of the
+    default g0 = 5 % of a radius below g0 (no interpenetration), and a constant stiffness keeps
+    the Newton steps exact."""
+    return 50.0 / rigid_sphere_displaceability(a, _shear(matrix), matrix.nu)
