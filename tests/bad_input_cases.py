@@ -480,6 +480,79 @@ CASES = [
     C("bench", "--json", "adir", words=("--json", "directory")),
 ]
 
+# Every key of every table of a study file, each with one bad value (the rve evaluator, which
+# checks the most): (table, key, bad TOML value, words of the message).
+STUDY_KEYS = [
+    ("study", "name", "1", ("name", "string")),
+    ("study", "fem", '"yes"', ("fem", "true or false")),
+    ("study", "description", "[1]", ("description", "string")),
+    ("study", "voxels", "2", ("voxels", "[4, 256]")),
+    ("grid", "distribution", '"gamma"', ("distribution", "gamma")),
+    ("grid", "mean_radius_m", "1e-2", ("mean_radius_m",)),
+    ("grid", "gsd", "0.5", ("gsd",)),
+    ("grid", "shell_thickness_m", "-1e-9", ("shell_thickness_m",)),
+    ("grid", "gap_m", '"wide"', ("gap_m",)),
+    ("grid", "colour", "1", ("colour",)),
+    ("rve", "placement", '"magic"', ("placement", "magic")),
+    ("rve", "cluster_density", "0.9", ("cluster_density",)),
+    ("rve", "chain_length", "0.5", ("chain_length",)),
+    ("rve", "chain_spread_deg", "400", ("chain_spread_deg", "deg")),
+    ("rve", "agglomerated_fraction", "2", ("agglomerated_fraction",)),
+    ("rve", "max_attempts", "0", ("max_attempts",)),
+    ("rve", "r_min_m", "-1", ("r_min_m",)),
+    ("rve", "r_max_m", "1", ("r_max_m",)),
+    ("rve", "core_density_kg_m3", "0", ("core_density_kg_m3",)),
+    ("rve", "shell_density_kg_m3", "1e9", ("shell_density_kg_m3",)),
+    ("rve", "core_sigma_Am2_kg", "1e9", ("core_sigma_Am2_kg",)),
+    ("rve", "shell_sigma_Am2_kg", "-1", ("shell_sigma_Am2_kg",)),
+    ("rve", "calibrate_sigma_Am2_kg", "0", ("calibrate_sigma_Am2_kg",)),
+    ("magnetics", "accuracy", "0", ("accuracy",)),
+    ("magnetics", "summation", '"fast"', ("summation", "fast")),
+    ("magnetics", "max_iter", "0", ("max_iter",)),
+    ("magnetics", "damping", "2", ("damping",)),
+    ("magnetics", "precondition", "1", ("precondition", "true or false")),
+    ("magnetics", "demag_factor", "1.5", ("demag_factor",)),
+    ("magnetics", "rho_kg_m3", "-1", ("rho_kg_m3",)),
+    ("magnetics", "sigma_s_Am2_kg", "1e9", ("sigma_s_Am2_kg",)),
+    ("magnetics", "c_powder", "0", ("c_powder",)),
+    ("law", "T_K", "-5", ("T_K",)),
+    ("law", "chi_i", "0", ("chi_i",)),
+    ("law", "measurement_time_s", "0", ("measurement_time_s",)),
+    ("cell", "tol", "0.5", ("tol", "0.01")),
+    ("cell", "method", '"magic"', ("method", "magic")),
+    ("cell", "rigid", '"no"', ("rigid", "true or false")),
+    ("cell", "maxiter", "0", ("maxiter",)),
+    ("cell", "particle_nu", "0.5", ("particle_nu",)),
+    ("cell", "matrix_E_Pa", '"soft"', ("matrix_E_Pa",)),
+    ("rve_size", "realizations", "2", ("realizations", ">= 3")),
+    ("rve_size", "quantity", '"speed"', ("quantity", "speed")),
+    ("rve_size", "n_particles", "[10, 20, 0]", ("n_particles",)),
+    ("rve_size", "target", "1", ("target",)),
+]
+
+
+def _key_study(table: str, key: str, value: str) -> str:
+    head = RVE_STUDY
+    if table == "cell":
+        head = head.replace("n_particles = 10", "n_particles = 10\nfem = true")
+    if table == "study":
+        head = "\n".join(ln for ln in head.splitlines() if not ln.startswith(f"{key} ="))
+        return head.replace("[study]", f"[study]\n{key} = {value}") + "\n"
+    if table == "grid":
+        return head.replace("[grid]", f"[grid]\n{key} = {value}")
+    if table == "rve_size":
+        rs = {"n_particles": "[10, 20, 40]", "realizations": "4", key: value}
+        return head + "[rve_size]\n" + "".join(f"{k} = {v}\n" for k, v in rs.items())
+    if table == "law":
+        return head.replace("[grid]", '[grid]\nlaw = "regime"') + f"[law]\n{key} = {value}\n"
+    return head + f"[{table}]\n{key} = {value}\n"
+
+
+for _t, _k, _v, _w in STUDY_KEYS:
+    _name = f"k_{_t}_{_k}.toml"
+    STUDIES[_name] = _key_study(_t, _k, _v)
+    CASES.append(C("batch", _name, "--out", "t.h5", words=(_name, f"[{_t}]", *_w)))
+
 # the study of the subprocess case: random sequential addition cannot reach phi = 0.55, so
 # every realization fails the same way in the workers
 STUDIES["s_run_jam.toml"] = RVE_STUDY.replace("phi = 0.02", "phi = 0.55").replace(
@@ -536,19 +609,44 @@ def _run_inprocess(case: Case, d: Path):
     return code, err.getvalue()
 
 
-def _run_subprocess(case: Case, d: Path):
+def _limit_memory(nbytes: int):
+    def set_limit():
+        import resource
+        resource.setrlimit(resource.RLIMIT_AS, (nbytes, nbytes))
+    return set_limit
+
+
+def _run_subprocess(case: Case, d: Path, pythonpath: str | None = None, timeout: float = 300,
+                    memory_bytes: int | None = None):
+    """``mapsim`` as a process; with ``pythonpath`` another source tree (the baseline), with a
+    time and memory limit: a case that exceeds them is judged ``runaway``."""
     env = dict(os.environ, PYTHONWARNINGS="ignore")
-    p = subprocess.run([sys.executable, "-m", "homogenize.cli", *case.argv], cwd=d, env=env,
-                       capture_output=True, text=True, timeout=300)
+    if pythonpath:
+        env["PYTHONPATH"] = pythonpath
+    try:
+        p = subprocess.run([sys.executable, "-m", "homogenize.cli", *case.argv], cwd=d,
+                           env=env, capture_output=True, text=True, timeout=timeout,
+                           preexec_fn=_limit_memory(memory_bytes) if memory_bytes else None)
+    except subprocess.TimeoutExpired:
+        return "runaway", f"still running after {timeout:g} s"
+    if memory_bytes and "MemoryError" in p.stderr:
+        return "runaway", f"MemoryError above {memory_bytes / 2 ** 30:g} GiB\n" + p.stderr
+    if p.returncode < 0:
+        return "runaway", f"killed by signal {-p.returncode}"
     return p.returncode, p.stderr
 
 
-def run_case(case: Case, case_dir: Path, fixtures: Path) -> Outcome:
-    """Run ``case`` in ``case_dir`` (a fresh copy of ``fixtures``) and judge it."""
+def run_case(case: Case, case_dir: Path, fixtures: Path, baseline: str | None = None) -> Outcome:
+    """Run ``case`` in ``case_dir`` (a fresh copy of ``fixtures``) and judge it; with
+    ``baseline`` (a source tree), run it as a limited process on that code instead."""
     prepare(case_dir, fixtures)
     before = _snapshot(case_dir)
     t0 = time.perf_counter()
-    code, err = (_run_subprocess if case.subprocess else _run_inprocess)(case, case_dir)
+    if baseline:
+        code, err = _run_subprocess(case, case_dir, baseline, timeout=120,
+                                    memory_bytes=6 * 2 ** 30)
+    else:
+        code, err = (_run_subprocess if case.subprocess else _run_inprocess)(case, case_dir)
     dt = time.perf_counter() - t0
     after = _snapshot(case_dir)
     lost = [k for k, v in before.items() if after.get(k) != v
@@ -558,7 +656,9 @@ def run_case(case: Case, case_dir: Path, fixtures: Path) -> Outcome:
     left = [k for k in created if k not in allowed]
     lines = [ln for ln in err.splitlines() if ln.strip()]
     o = Outcome(case, code, err, "clean", seconds=dt, created=created)
-    if "Traceback" in err or (isinstance(code, str) and code.startswith("exception")):
+    if code == "runaway":
+        o.verdict, o.detail = "runaway", err.splitlines()[0]
+    elif "Traceback" in err or (isinstance(code, str) and code.startswith("exception")):
         o.verdict, o.detail = "traceback", (lines[-1] if lines else str(code))
     elif lost:
         o.verdict, o.detail = "lost", f"input changed or removed: {lost}"
@@ -583,17 +683,21 @@ def run_case(case: Case, case_dir: Path, fixtures: Path) -> Outcome:
 # a successful run may rewrite these (the table and its side-car on resume)
 _RESULT_FILES = {"table.h5", "table.manifest.json"}
 
-VERDICTS = ("clean", "traceback", "silent", "wrong", "left", "lost")
+VERDICTS = ("clean", "traceback", "silent", "wrong", "left", "lost", "runaway")
 
 
-def run_all(work: Path) -> list:
+def run_all(work: Path, baseline: str | None = None) -> list:
     fixtures = build_fixtures(work / "fixtures")
     for name, text in STUDIES.items():          # the subprocess study, added after CASES
         (fixtures / name).write_text(text)
-    return [run_case(c, work / f"case{i:03d}", fixtures) for i, c in enumerate(CASES)]
+    out = []
+    for i, c in enumerate(CASES):
+        out.append(run_case(c, work / f"case{i:03d}", fixtures, baseline))
+        shutil.rmtree(work / f"case{i:03d}", ignore_errors=True)
+    return out
 
 
-def report(outcomes: list) -> str:
+def _table(outcomes: list) -> list:
     by = {}
     for o in outcomes:
         by.setdefault(o.case.cmd, []).append(o)
@@ -608,6 +712,11 @@ def report(outcomes: list) -> str:
                     + " |")
     rows.append(f"| **all** | **{len(outcomes)}** | "
                 + " | ".join(f"**{tot[v]}**" for v in VERDICTS) + " |")
+    return rows
+
+
+def report(outcomes: list, baseline: tuple | None = None) -> str:
+    rows = _table(outcomes)
     bad = [o for o in outcomes if o.verdict != "clean"]
     n_ok = sum(o.case.code == 0 for o in outcomes)
     text = [
@@ -626,11 +735,23 @@ def report(outcomes: list) -> str:
         "Verdicts: **clean** as expected; **traceback** an exception reached the user; "
         "**silent** exit 0 where a refusal was due (silently wrong); **wrong** another exit "
         "code, more than one line, or a message missing the words; **left** files left "
-        "behind; **lost** an input changed or disappeared.",
+        "behind; **lost** an input changed or disappeared; **runaway** (baseline only) killed "
+        "after 120 s or 6 GiB.",
         "",
         *rows,
         "",
     ]
+    if baseline:
+        rev, base = baseline
+        text += [f"### The same cases on the code before this work ({rev})", "",
+                 "Run by `python tests/bad_input_cases.py --baseline REV` (the tree of REV from "
+                 "`git archive`, each case a process limited to 120 s and 6 GiB; fixtures made "
+                 "by the current code):", "", *_table(base), ""]
+        worse = [o for o in base if o.verdict not in ("clean", "wrong")]
+        if worse:
+            text += ["Not clean before (tracebacks, silent, files left, data lost, runaway):", ""]
+            text += [f"- `{o.case.id}`: {o.verdict} ({o.detail[:160]})" for o in worse]
+            text += [""]
     if bad:
         text += ["## Not clean", ""]
         text += [f"- `{o.case.id}`: {o.verdict} ({o.detail})" for o in bad]
@@ -653,11 +774,25 @@ def report(outcomes: list) -> str:
     return "\n".join(text)
 
 
-def main() -> int:
+def main(argv=None) -> int:
+    import argparse
     import tempfile
+    ap = argparse.ArgumentParser(description="run the bad-input cases, write "
+                                             "results/reliability.md")
+    ap.add_argument("--baseline", default=None, metavar="REV",
+                    help="also run every case on the code of git revision REV")
+    args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
-        outcomes = run_all(Path(tmp))
-    md = report(outcomes)
+        outcomes = run_all(Path(tmp) / "now")
+        base = None
+        if args.baseline:
+            tree = Path(tmp) / "tree"
+            tree.mkdir()
+            arch = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline],
+                                  capture_output=True, check=True).stdout
+            subprocess.run(["tar", "-x", "-C", str(tree)], input=arch, check=True)
+            base = (args.baseline, run_all(Path(tmp) / "base", baseline=str(tree)))
+    md = report(outcomes, base)
     out = ROOT / "results" / "reliability.md"
     out.parent.mkdir(exist_ok=True)
     out.write_text(md, encoding="utf-8")
