@@ -95,13 +95,13 @@ _RULES = {
     "placement": ("enum", ("auto", "rsa", "compress")),
     "distribution": ("enum", ("lognormal", "monodisperse")),
     "gap_m": ("float", 0.0, 1e-3, "m", False),
-    "cluster_size": ("int", 2, 10 ** 6),
-    "cluster_density": ("float", 0.0, 0.74, "", True),
-    "chain_length": ("float", 1.0, 1e6, "", False),
+    "cluster_size": ("int", 2, 5000),
+    "cluster_density": ("float", 0.0, 0.6, "", True),
+    "chain_length": ("float", 2.0, 1e4, "", False),
     "chain_direction": ("vec3",),
-    "chain_spread_deg": ("float", 0.0, 180.0, "deg", False),
+    "chain_spread_deg": ("float", 0.0, 90.0, "deg", False),
     "agglomerated_fraction": ("float", 0.0, 1.0, "", False),
-    "max_attempts": ("int", 1, 10 ** 8),
+    "max_attempts": ("int", 1, 10 ** 9),
     "mean_radius_m": _R, "r_min_m": _R, "r_max_m": _R,
     "gsd": ("float", 1.0, 10.0, "", True),
     "shell_thickness_m": ("float", 0.0, 1e-3, "m", False),
@@ -109,11 +109,11 @@ _RULES = {
     "core_sigma_Am2_kg": _SIGMA, "calibrate_sigma_Am2_kg": _SIGMA,
     "shell_sigma_Am2_kg": ("float", 0.0, 300.0, "A m^2/kg", False),
     # magnetics (micro.dipoles.solve)
-    "tol": _TOL, "accuracy": _TOL,
+    "tol": _TOL, "accuracy": ("float", 1e-12, 1e-2, "", False),
     "method": ("enum", METHODS),
     "summation": ("enum", SUMMATIONS),
     "max_iter": ("int", 1, 10 ** 5),
-    "damping": ("float", 0.0, 1.0, "", True),
+    "damping": ("float", 0.0, 1.99, "", True),
     "precondition": ("bool",),
     "demag_factor": ("float", 0.0, 1.0, "", False),
     "rho_kg_m3": _RHO, "sigma_s_Am2_kg": _SIGMA,
@@ -392,8 +392,8 @@ def parse_study(text: str, path: str = "<study>") -> Study:
         raise InputError(f"{path}: [study] realizations must be >= 2 (a standard deviation "
                          f"needs two), got {s['realizations']}")
     n_particles = s.get("n_particles", 100)
-    if not 1 <= n_particles <= 10 ** 8:
-        raise InputError(f"{path}: [study] n_particles must be in [1, 100000000], "
+    if not 1 <= n_particles <= 5 * 10 ** 7:
+        raise InputError(f"{path}: [study] n_particles must be in [1, 50000000], "
                          f"got {n_particles}")
     voxels = s.get("voxels", 16)
     if not 4 <= voxels <= 256:
@@ -450,9 +450,9 @@ def parse_study(text: str, path: str = "<study>") -> Study:
             raise InputError(f"{path}: [rve_size] n_particles must be a non-empty list of "
                              f"particle counts")
         for n in sizes:
-            if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 10 ** 8:
+            if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 5 * 10 ** 7:
                 raise InputError(f"{path}: [rve_size] n_particles must be integers in "
-                                 f"[1, 100000000], got {n!r}")
+                                 f"[1, 50000000], got {n!r}")
         if len(sizes) < 3:
             raise InputError(f"{path}: [rve_size] n_particles needs at least three sizes (a "
                              f"power-law fit with an error estimate), got {sizes}")

@@ -80,7 +80,7 @@ STUDIES = {
     "s_real_huge.toml": RVE_STUDY.replace("realizations = 2", "realizations = 1000000000"),
     "s_seed.toml": RVE_STUDY.replace("seed = 3", "seed = -1"),
     "s_npart0.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 0"),
-    "s_npart_huge.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 90000000"),
+    "s_npart_huge.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 40000000"),
     "s_voxels.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 10\nfem = true\n"
                                        "voxels = 1000"),
     "s_voxels_mem.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 10\nfem = true\n"

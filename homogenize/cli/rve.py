@@ -71,7 +71,7 @@ def register(sub, formatter):
     g.add_argument("--phi", type=float_in("--phi", 0.0, 0.6, lo_open=True), default=0.0175,
                    help="particle volume fraction [1] (outer volumes / box volume), met exactly "
                         "by choosing the box edge")
-    g.add_argument("--n", type=int_in("--n", 1, 10 ** 9),
+    g.add_argument("--n", type=int_in("--n", 1, 5 * 10 ** 7),
                    default=2000, help="number of particles [1]")
     g.add_argument("--seed", type=int_in("--seed", 0, 2 ** 63 - 1),
                    default=0, help="random seed (same seed, same RVE)")
@@ -121,24 +121,24 @@ def register(sub, formatter):
                    default="dispersed", help="isolated particles, compact clusters or chains")
     g.add_argument("--gap", type=float_in("--gap", 0.0, _R_MAX, "m"), default=0.0,
                    help="minimum surface-to-surface distance between particles [m]")
-    g.add_argument("--cluster-size", type=int_in("--cluster-size", 2, 10 ** 6), default=20,
+    g.add_argument("--cluster-size", type=int_in("--cluster-size", 2, 5000), default=20,
                    help="clusters: particles per cluster [1]")
-    g.add_argument("--cluster-density", type=float_in("--cluster-density", 0.0, 0.74, lo_open=True),
+    g.add_argument("--cluster-density", type=float_in("--cluster-density", 0.0, 0.6, lo_open=True),
                    default=0.5,
                    help="clusters: internal packing density [1] (solid volume / "
                         "gyration-equivalent sphere)")
-    g.add_argument("--chain-length", type=float_in("--chain-length", 1.0, 1e6), default=5.0,
+    g.add_argument("--chain-length", type=float_in("--chain-length", 2.0, 1e4), default=5.0,
                    help="chains: mean particles per chain [1] (geometric distribution)")
     g.add_argument("--chain-direction", type=float_in("--chain-direction", -1e6, 1e6), nargs=3,
                    default=(0.0, 0.0, 1.0),
                    metavar=("X", "Y", "Z"), help="chains: axis direction [1]")
-    g.add_argument("--chain-spread", type=float_in("--chain-spread", 0.0, 180.0, "deg"),
+    g.add_argument("--chain-spread", type=float_in("--chain-spread", 0.0, 90.0, "deg"),
                    default=0.0,
                    help="chains: RMS misalignment of the chain axes [deg] (Fisher distribution)")
     g.add_argument("--agglomerated-fraction", type=float_in("--agglomerated-fraction", 0.0, 1.0),
                    default=1.0,
                    help="clusters/chains: fraction of particles that are agglomerated [1]")
-    g.add_argument("--max-attempts", type=int_in("--max-attempts", 1, 10 ** 8), default=200_000,
+    g.add_argument("--max-attempts", type=int_in("--max-attempts", 1, 10 ** 9), default=200_000,
                    help="random positions tried per body before declaring a jam [1]")
     g.add_argument("--placement", choices=("auto", "rsa", "compress"), default="auto",
                    help="rsa: random sequential addition; compress: grow and relax (dispersed "
@@ -325,7 +325,7 @@ def _add_magnetics_options(parser) -> None:
                         "metallic boundary, internal field = applied field)")
     g.add_argument("--tol", type=float_in("--tol", 1e-14, 1e-2), default=1e-8,
                    help="relative residual of the self-consistent moments [-] (default: 1e-8)")
-    g.add_argument("--accuracy", type=float_in("--accuracy", 1e-14, 1e-2), default=1e-6,
+    g.add_argument("--accuracy", type=float_in("--accuracy", 1e-12, 1e-2), default=1e-6,
                    help="relative accuracy of the periodic dipole sums [-] (default: 1e-6)")
     g.add_argument("--solver", dest="mag_method", default="anderson", choices=METHODS,
                    help="nonlinear solver for the moments (default: anderson)")
