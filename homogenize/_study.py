@@ -469,9 +469,10 @@ def parse_study(text: str, path: str = "<study>") -> Study:
             raise InputError(f"{path}: [rve_size] target_rel_precision must be in (0, 1), "
                              f"got {prec:g}")
         quantity = r.get("quantity", "f_eff_N_m3")
-        if quantity not in _evaluate.QUANTITIES:
-            raise InputError(f"{path}: [rve_size] quantity must be one of "
-                             f"{', '.join(_evaluate.QUANTITIES)}; got {quantity!r}")
+        hits = [q for q in _evaluate.QUANTITIES if q == quantity or q.startswith(quantity + "_")]
+        if quantity not in _evaluate.QUANTITIES and len(hits) != 1:
+            raise InputError(f"{path}: [rve_size] quantity must be one of (or a unique prefix "
+                             f"of) {', '.join(_evaluate.QUANTITIES)}; got {quantity!r}")
         comp = r.get("component", "z")
         if comp not in ("x", "y", "z", "norm", ""):
             raise InputError(f"{path}: [rve_size] component must be x, y, z or norm; got {comp!r}")
