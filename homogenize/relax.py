@@ -107,13 +107,19 @@ def _particle_translation(mesh, W, p):
 
 
 def fem_displaceability(rve, voxels: int, matrix: ElasticMaterial = elastic(PDMS), *,
-                        tol: float = 1e-8, particles=None) -> np.ndarray:
+                        tol: float = 1e-8, particles=None, directions=(0, 1, 2)) -> np.ndarray:
     """Displaceability of rigid particles from the periodic voxel cell FEM, (3N, 3N) [m/N].
 
     A unit force on particle j (spread over its voxels, balanced by a uniform counter-load,
     zero mean strain) is solved with :func:`homogenize.cell.homogenize_mesh` (rigid particles,
     deflated CG); column (j, d) holds the mean nodal displacement of every particle. Costs 3N
-    cell solves; ``particles`` (indices) restricts the loaded particles (other columns zero).
+    cell solves; ``particles`` (indices) and ``directions`` restrict the loaded particles and
+    force directions (other columns zero).
+
+    Conventions as in the cell FEM: the counter-load acts on every voxel, the particle's own
+    included (net force ``(1 - phi_p) F`` on it), and the nodal fluctuation has zero mean; both
+    differ from the Green's function's by O(phi) in the self terms and cancel in the relative
+    displacements of balanced forces.
     """
     _check_matrix(matrix)
     mesh = voxelize(rve, voxels)
@@ -122,7 +128,7 @@ def fem_displaceability(rve, voxels: int, matrix: ElasticMaterial = elastic(PDMS
     loaded = range(N) if particles is None else particles
     # unit force scaled to the matrix: displacements ~ 1/(G a), keeps CG in its usual range
     for j in loaded:
-        for d in range(3):
+        for d in directions:
             F = np.zeros((N, 3))
             F[j, d] = 1.0
             res = homogenize_mesh(mesh, forces_N=F, matrix=matrix, rigid=True, cases=(),
@@ -158,20 +164,32 @@ def _barrier(g, g0, kc):
     d = g0 - g
     if d < w:
         return 0.5 * kc * d * d / w, -kc * d / w
-    return kc * (d - 0.5 * w), -kc
+    return kc * (d - 0.5 * w), -kc           # (w = 0: pairs placed in contact, linear)
 
 
-def _contact(centers, radii, box, g0, k_c):
+def _activation_gap(X_ref, radii, box, i, j, g0):
+    """Gap where the penalty of pair (i, j) starts: g0, or the pair's as-placed gap if smaller
+    (particles placed closer than g0 are not pushed apart at zero field) [m]."""
+    if X_ref is None or len(i) == 0:
+        return np.full(len(i), g0)
+    d = minimum_image(X_ref[i] - X_ref[j], box)
+    return np.minimum(g0, np.maximum(np.linalg.norm(d, axis=1) - radii[i] - radii[j], 0.0))
+
+
+def _contact(centers, radii, box, g0, k_c, X_ref=None):
     """Barrier forces (N, 3) [N], stiffness dF/dx (3N, 3N) [N/m] and energy [J] of the pairs
     closer than ``g0`` (see :func:`_barrier`; ``k_c`` per particle [N/m])."""
     N = radii.size
     F = np.zeros((N, 3))
     K = np.zeros((3 * N, 3 * N))
     i, j, d, r, g = _pairs(centers, radii, box, g0)
+    ga = _activation_gap(X_ref, radii, box, i, j, g0)
     e = 0.0
-    for a, b, dv, rv, gv in zip(i, j, d, r, g):
+    for a, b, dv, rv, gv, g0p in zip(i, j, d, r, g, ga):
+        if gv >= g0p:
+            continue
         kc = 2.0 * k_c[a] * k_c[b] / (k_c[a] + k_c[b])
-        phi, dphi = _barrier(gv, g0, kc)
+        phi, dphi = _barrier(gv, g0p, kc)
         n = dv / rv
         F[a] += phi * n
         F[b] -= phi * n
@@ -182,7 +200,7 @@ def _contact(centers, radii, box, g0, k_c):
         K[sb, sb] += Kab
         K[sa, sb] -= Kab
         K[sb, sa] -= Kab
-        e += _barrier_energy(gv, g0, kc)
+        e += _barrier_energy(gv, g0p, kc)
     return F, K, e
 
 
@@ -191,7 +209,7 @@ def _barrier_energy(g, g0, kc):
     w = 0.1 * g0
     d = g0 - g
     if d < w:
-        return kc * d ** 3 / (6.0 * w)
+        return kc * d ** 3 / (6.0 * w) if w > 0 else 0.0
     return kc * w * w / 6.0 + kc * (0.5 * (d * d - w * w) - 0.5 * w * (d - w))
 
 
@@ -271,7 +289,8 @@ def magnetic_coenergy_J(state, B_T) -> float:
 
 def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None,
                 u0_m=None, tol=1e-6, max_iter=60, demag_factor=None, accuracy=1e-6,
-                magnetic_tol=1e-10, matrix: ElasticMaterial = elastic(PDMS)) -> Equilibrium:
+                magnetic_tol=1e-10, matrix: ElasticMaterial = elastic(PDMS), fd_gap=0.25,
+                max_fd=12) -> Equilibrium:
     """Solve ``u = M F(X + u)`` at one applied field (see the module docstring).
 
     Parameters
@@ -284,6 +303,9 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
     u0_m : (N, 3) initial displacements [m] (continuation from the previous step)
     tol : float -- converged when max |u - M F| < tol * mean radius
     matrix : the matrix material (only for the penalty stiffness scale)
+    fd_gap, max_fd : the Jacobian's magnetic stiffness by differences of the full forces for at
+        most ``max_fd`` particles closer than ``fd_gap`` mean radii to a neighbour (cost: 3 dipole
+        solves per particle); the Jacobian only steers the iteration, the residual is exact
 
     Raises
     ------
@@ -310,17 +332,18 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
                            tol=magnetic_tol, accuracy=accuracy, initial_moments_Am2=last["m"],
                            **law_params)
         last["m"] = st.moments_Am2
-        Fc, Kc, _ = _contact(x, a, L, g0, k_c)
+        Fc, Kc, _ = _contact(x, a, L, g0, k_c, X)
         return st, Fc, Kc
 
     def magnetic_stiffness(u, st):
-        """dF/dx: forward differences of the full self-consistent periodic forces for the
-        particles with a neighbour closer than one radius (where the moments respond strongly
-        to the positions), frozen-moment pair stiffness for the others."""
+        """dF/dx: forward differences of the full self-consistent periodic forces for (up to
+        ``max_fd``) particles with a neighbour closer than ``fd_gap`` radii, where the moments
+        respond strongly to the positions; frozen-moment pair stiffness for the others (each
+        difference column costs one dipole solve)."""
         x = X + u
         K = _dipole_pair_stiffness(x, st.moments_Am2, a, L)
-        ii, jj, _, _, _ = _pairs(x, a, L, a_mean)
-        close = np.unique(np.concatenate([ii, jj]))
+        ii, jj, _, _, _ = _pairs(x, a, L, fd_gap * a_mean)
+        close = np.unique(np.concatenate([ii, jj]))[:max_fd]
         if close.size == 0:
             return K
         F0 = st.total_force_N.ravel()
@@ -354,7 +377,7 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
     # particles snap through to contact where the field makes the as-placed branch unstable.
     r = -resid(y)
     rn = float(np.abs(r).max())
-    dt = 1.0
+    dt = 1.0e3       # start as Newton; the pseudo-time damping enters when the residual rises
     n_newton = 0
     Kmag, k_mag = None, 0
     ok = rn < tol
@@ -362,28 +385,21 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
         n_newton += 1
         u = y.reshape(N, 3) * a_mean
         x = X + u
-        _, Kc, _ = _contact(x, a, L, g0, k_c)
+        _, Kc, _ = _contact(x, a, L, g0, k_c, X)
         if Kmag is None or (n_newton - k_mag) >= 5:
             Kmag, k_mag = magnetic_stiffness(u, last["state"]), n_newton
         K = Kc + Kmag
         J = (1.0 + 1.0 / dt) * np.eye(3 * N) - M @ K
         dy = np.linalg.solve(J, r)
-        # trust region in physical terms: no particle moves by more than half of its current
-        # smallest surface gap (nor by more than 0.2 radii), so a snap-through towards contact
-        # is followed in steps instead of jumping into an overlap
-        step = np.linalg.norm(dy.reshape(N, 3), axis=1) * a_mean
-        nn = np.full(N, np.inf)
-        ii, jj, _, _, gg = _pairs(x, a, L, 0.5 * a_mean)
-        np.minimum.at(nn, ii, gg)
-        np.minimum.at(nn, jj, gg)
-        lim = np.minimum(0.25 * nn, 0.2 * a)       # both partners may move: a quarter each
-        scale = float(min(1.0, np.min(lim / np.maximum(step, 1e-300))))
+        # trust region in physical terms: no pair closes more than half of its current gap
+        # (plus a tenth of the contact layer) in one step, so a snap-through towards contact is
+        # followed in steps instead of jumping into an overlap
+        ii, jj, dd, rr, gg = _pairs(x, a, L, 0.5 * a_mean)
+        du = dy.reshape(N, 3) * a_mean
+        approach = -np.einsum("ij,ij->i", du[ii] - du[jj], dd / rr[:, None])
+        allowed = 0.5 * np.maximum(gg, 0.0) + 0.1 * g0
+        scale = float(min(1.0, np.min(allowed / np.maximum(approach, 1e-300), initial=1.0)))
         y_new = y + scale * dy
-        for _ in range(30):                           # never step into an overlap
-            if _pairs(X + y_new.reshape(N, 3) * a_mean, a, L, 0.0)[0].size == 0:
-                break
-            scale *= 0.5
-            y_new = y + scale * dy
         r_new = -resid(y_new)
         rn_new = float(np.abs(r_new).max())
         if not np.isfinite(rn_new):
@@ -405,10 +421,11 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
     st, Fc, _ = forces(u)
     x = X + u
     i, j, d, rr, g = _pairs(x, a, L, g0)
-    if np.any(g < 0):
+    if np.any(g < -g0):
         k = int(np.argmin(g))
         raise ConvergenceError(
-            f"particles {i[k]} and {j[k]} overlap by {-g[k]:.3g} m after relaxation at "
+            f"particles {i[k]} and {j[k]} overlap by {-g[k]:.3g} m (more than the contact "
+            f"layer {g0:.3g} m) after relaxation at "
             f"B = {np.linalg.norm(np.atleast_1d(B_T)):.4g} T: the contact penalty is too soft "
             f"for these forces (raise min_gap_m)", hist)
     return Equilibrium(displacement_m=u, centers_m=np.mod(x, L), state=st, contact_force_N=Fc,
@@ -606,7 +623,8 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
             vir = np.asarray(st.virial_stress_Pa, dtype=float).copy()
             g0 = min_gap_m if min_gap_m is not None else 0.05 * float(np.mean(rve.radii_m))
             for (_, _, dv, fv) in _pair_contact_forces(eq.centers_m, np.asarray(rve.radii_m),
-                                                       rve.box_m, g0, matrix):
+                                                       rve.box_m, g0, matrix,
+                                                       np.asarray(rve.centers_m)):
                 vir -= np.outer(dv, fv) / rve.box_m ** 3
             res = homogenize_mesh(voxelize(r_rel, voxels), forces_N=forces, virial_stress_Pa=vir,
                                   matrix=matrix, rigid=True, tol=cell_tol)
@@ -635,14 +653,17 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
                        timings_s=t)
 
 
-def _pair_contact_forces(x, a, box, g0, matrix):
-    """(i, j, d_ij, force on i from j) of the contact barrier pairs (see :func:`_contact`)."""
+def _pair_contact_forces(x, a, box, g0, matrix, X_ref=None):
+    """(i, j, d_ij, force on i from j) of the contact penalty pairs (see :func:`_contact`)."""
     k_c = _contact_stiffness(a, matrix)
     out = []
     i, j, d, r, g = _pairs(x, a, box, g0)
-    for p, q, dv, rv, gv in zip(i, j, d, r, g):
+    ga = _activation_gap(X_ref, a, box, i, j, g0)
+    for p, q, dv, rv, gv, g0p in zip(i, j, d, r, g, ga):
+        if gv >= g0p:
+            continue
         kc = 2.0 * k_c[p] * k_c[q] / (k_c[p] + k_c[q])
-        phi, _ = _barrier(gv, g0, kc)
+        phi, _ = _barrier(gv, g0p, kc)
         out.append((p, q, dv, phi * dv / rv))
     return out
 
