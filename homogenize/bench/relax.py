@@ -1,0 +1,72 @@
+"""Benchmark of the coupled RVE (:mod:`homogenize.relax`).
+
+Records (``bench_records(quick)``, format of :mod:`homogenize.bench`):
+
+* ``relax_sweep``: a 100-particle RVE (phi = 0.1, Fe 25 nm, PDMS) through 10 field steps with
+  the cell FEM at 48^3 on every relaxed RVE (quick: 30 particles, 4 steps, 24^3); extra keys:
+  time per field step, per Newton iteration, share of the FEM; ``reference`` is the budget of
+  the issue (600 s full, scaled by steps x voxels^3 for quick), so ``ratio`` > 1 is within it.
+* ``relax_green_vs_fem``: the periodic Green's-function displaceability against the voxel FEM
+  (rigid particles) on the same small RVE: time of each and the relative error of the
+  displaceability matrix (``max_rel_error``: Frobenius norm of the difference / of the FEM).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from micro import Monodisperse, RVE, generate_rve
+from micro.materials import PDMS, ElasticMaterial, elastic
+from homogenize.relax import fem_displaceability, green_displaceability, relax
+
+__all__ = ["bench_records"]
+
+
+def _sweep(quick: bool) -> dict:
+    n, steps, vox = (30, 4, 24) if quick else (100, 10, 48)
+    rve = generate_rve(0.1, n, 7, distribution=Monodisperse(25e-9))
+    B = np.linspace(0.12, 1.2, steps)
+    t0 = time.perf_counter()
+    res = relax(rve, B, law="linear", matrix=elastic(PDMS), voxels=vox)
+    dt = time.perf_counter() - t0
+    its = sum(s["iterations"] for s in res.steps)
+    budget = 600.0 * (steps / 10) * (vox / 48) ** 3 if quick else 600.0
+    return {"name": "relax_sweep", "n": n, "seconds": dt, "reference": "issue budget (10 min)",
+            "reference_seconds": budget, "ratio": budget / dt, "max_rel_error": None,
+            "field_steps": steps, "voxels": vox,
+            "seconds_per_field_step": dt / steps,
+            "seconds_per_newton_iteration": res.timings_s["relax"] / max(its, 1),
+            "newton_iterations": its, "seconds_cell_fem": res.timings_s["cell"],
+            "seconds_relax": res.timings_s["relax"],
+            "seconds_displaceability": res.timings_s["displaceability"],
+            "contacts_last_step": res.steps[-1]["n_contacts"],
+            "displacement_rms_last_m": res.steps[-1]["displacement_rms_m"]}
+
+
+def _green_vs_fem(quick: bool) -> dict:
+    L = 200e-9
+    c = np.array([[50, 50, 50], [50, 50, 115], [120, 60, 60], [130, 140, 120]]) * 1e-9
+    n_p, vox = (3, 20) if quick else (4, 32)
+    rve = RVE.from_spheres(L, c[:n_p], [25e-9] * n_p)
+    mat = ElasticMaterial(1.0e6, 0.45)
+    t0 = time.perf_counter()
+    Mf = fem_displaceability(rve, vox, mat, tol=1e-7)
+    t_fem = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    Mg = green_displaceability(rve, mat)
+    t_green = time.perf_counter() - t0
+    err = float(np.linalg.norm(Mf - Mg) / np.linalg.norm(Mf))
+    # relative displacement of the closest pair under equal and opposite forces along z
+    D = np.zeros(3 * n_p)
+    D[2], D[5] = 1.0, -1.0
+    rel_f, rel_g = D @ Mf @ D, D @ Mg @ D
+    return {"name": "relax_green_vs_fem", "n": n_p, "seconds": t_green,
+            "reference": f"voxel FEM displaceability {vox}^3 (3N cell solves)",
+            "reference_seconds": t_fem, "ratio": t_fem / t_green, "max_rel_error": err,
+            "pair_relative_compliance_rel_error": float(abs(rel_g / rel_f - 1.0))}
+
+
+def bench_records(quick: bool) -> list[dict]:
+    """The relax records (see the module docstring)."""
+    return [_sweep(quick), _green_vs_fem(quick)]
