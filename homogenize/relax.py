@@ -58,6 +58,7 @@ from .cell import homogenize_mesh
 from .mesh import voxelize
 
 __all__ = ["relax", "RelaxResult", "equilibrium", "Equilibrium", "fem_displaceability",
+           "magnetostriction_curve",
            "green_displaceability", "microstructure", "magnetic_coenergy_J", "BOUNDARIES",
            "ELASTIC_MODELS"]
 
@@ -675,3 +676,43 @@ def _contact_stiffness(a, matrix):
     default g0 = 5 % of a radius below g0 (no interpenetration), and a constant stiffness keeps
     the Newton steps exact."""
     return 50.0 / rigid_sphere_displaceability(a, _shear(matrix), matrix.nu)
+
+
+def magnetostriction_curve(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
+                           matrix: ElasticMaterial = elastic(PDMS), voxels: int = 32,
+                           demag_factor=None, direction=(0.0, 0.0, 1.0), **relax_kw) -> dict:
+    """Free magnetostriction of an RVE along the field, relaxed and affine, against B.
+
+    What a diagnosis cause (e.g. ``microstructure_evolution``) needs: for each field step the
+    strain along the field of the relaxed RVE (:func:`relax`, ``boundary="free"``) and of the
+    RVE with the particles as placed (same dipole solve and cell FEM, no relaxation), the
+    magnetization along the field and the Young's modulus along the field of both.
+
+    Returns
+    -------
+    dict of lists (one entry per step): ``B_T``, ``strain_relaxed``, ``strain_affine`` [-],
+    ``M_eff_relaxed_A_per_m``, ``M_eff_affine_A_per_m`` [A/m], ``E_parallel_relaxed_Pa``,
+    ``E_parallel_affine_Pa`` [Pa]; and ``result`` (the :class:`RelaxResult`).
+    """
+    n = np.asarray(direction, dtype=float)
+    n = n / np.linalg.norm(n)
+    res = relax(rve, B_steps_T, law=law, law_params=law_params, matrix=matrix, voxels=voxels,
+                demag_factor=demag_factor, direction=n, **relax_kw)
+    mesh = voxelize(rve, voxels)
+    out = {k: [] for k in ("B_T", "strain_relaxed", "strain_affine", "M_eff_relaxed_A_per_m",
+                           "M_eff_affine_A_per_m", "E_parallel_relaxed_Pa",
+                           "E_parallel_affine_Pa")}
+    for s in res.steps:
+        st = solve_dipoles(rve, s["B_T"] * n, 0.0, law, demag_factor=demag_factor,
+                           **dict(law_params or {}))
+        aff = homogenize_mesh(mesh, forces_N=st.total_force_N,
+                              virial_stress_Pa=st.virial_stress_Pa, matrix=matrix, rigid=True)
+        out["B_T"].append(s["B_T"])
+        out["strain_relaxed"].append(float(n @ np.asarray(s["strain_mag"]) @ n))
+        out["strain_affine"].append(float(n @ np.asarray(aff.strain_mag) @ n))
+        out["M_eff_relaxed_A_per_m"].append(s["M_eff_A_per_m"])
+        out["M_eff_affine_A_per_m"].append(float(np.asarray(st.M_eff_A_per_m) @ n))
+        out["E_parallel_relaxed_Pa"].append(s["E_eff_parallel_Pa"])
+        out["E_parallel_affine_Pa"].append(_young_along(aff.C_eff_Pa, n))
+    out["result"] = res
+    return out

@@ -11,6 +11,7 @@ from micro.materials import ElasticMaterial
 from homogenize._green import (free_displaceability, periodic_displaceability,
                                rigid_sphere_displaceability)
 from homogenize.relax import (equilibrium, fem_displaceability, green_displaceability,
+                              magnetostriction_curve,
                               magnetic_coenergy_J, microstructure, relax)
 from homogenize import relax as R
 
@@ -299,3 +300,18 @@ def test_nonconvergence_raises_with_history():
     with pytest.raises(ConvergenceError) as e:
         equilibrium(pair(2), [0, 0, 1.0], M, law="linear", matrix=SOFT, max_iter=1)
     assert len(e.value.residual_history) >= 2
+
+
+def test_magnetostriction_curve_stiff_matrix_limit():
+    """A matrix 1e4 x stiffer moves the particles 1e4 x less: relaxed -> affine (the limit that
+    separates restructuring from the affine magnetostriction); the soft matrix adds to it."""
+    L = 240e-9
+    c = np.array([[60, 60, 60], [60, 60, 125], [170, 150, 100], [160, 170, 175]]) * 1e-9
+    rve = RVE.from_spheres(L, c, [A] * 4)
+    stiff = magnetostriction_curve(rve, [0.3], law="linear", matrix=ElasticMaterial(1e9, 0.49),
+                                   voxels=12)
+    # the strain itself scales as 1/E; their ratio is 1 to the particle displacement / gap
+    # (~1e-5 here) and the cell tolerance (1e-6 relative)
+    assert stiff["strain_relaxed"][0] == pytest.approx(stiff["strain_affine"][0], rel=1e-3)
+    soft = magnetostriction_curve(rve, [0.3], law="linear", matrix=SOFT, voxels=12)
+    assert soft["M_eff_relaxed_A_per_m"][0] > soft["M_eff_affine_A_per_m"][0]
