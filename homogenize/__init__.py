@@ -1,12 +1,15 @@
-"""mapsim.homogenize: the RVE scale and above (FEM homogenization, tables, macro solvers).
+"""mapsim.homogenize: the RVE scale and above (cell FEM, batch tables, macro solvers,
+applications).
 
-Public API is what ``__all__`` lists; modules starting with ``_`` are private.
+Public API is what ``__all__`` lists; modules starting with ``_`` are private. The subpackages
+``macro``, ``experiments``, ``studies``, ``bench`` and ``cli`` are imported on their own.
 """
-# FEM homogenization (owner: FEM helper)
-from .cell import CellResult, Material, homogenize_mesh, homogenize_rve
+from .cell import CellConfig, CellResult, Material, homogenize, homogenize_mesh, homogenize_rve
 from .mesh import VoxelMesh, voxelize
+from .tables import Table, read_table, run_batch
+from ._study import Study, load_study
 
 __all__: list[str] = [
-    # FEM homogenization
-    "CellResult", "Material", "homogenize_rve", "homogenize_mesh", "VoxelMesh", "voxelize",
+    "CellConfig", "CellResult", "Material", "homogenize", "homogenize_rve", "homogenize_mesh",
+    "VoxelMesh", "voxelize", "Table", "read_table", "run_batch", "Study", "load_study",
 ]

@@ -12,9 +12,16 @@ from .particles import (CoreShell, Histogram, LogNormal, Monodisperse, default_d
 __all__ = ["InputError", "ConvergenceError"]
 __all__ += ["RVE", "generate_rve", "describe", "LogNormal", "Histogram", "Monodisperse",
             "CoreShell", "default_distribution"]
-from .magnetization import get_law
-from .dipoles import (DipoleSum, MagneticState, applied_gradient,
-                      dipole_field_direct, dipole_pair_interactions, solve)
+from .particles import ParticleConfig, place
+from .materials import FE, FE3O4, PDMS, SEED, Constituent, ElasticMaterial
+from .magnetization import DEFAULT_LAW, LAW_NAMES, get_law, particle_regime
+from .demag import (cylinder_demag_factors, ellipsoid_demag_factors, prism_demag_factors,
+                    spheroid_demag_factors)
+from .dipoles import (DipoleSum, FieldConfig, MagneticState, applied_gradient,
+                      dipole_field_direct, dipole_pair_interactions, magnetize, solve)
 
-__all__ += ["get_law", "solve", "MagneticState", "DipoleSum",
-            "applied_gradient", "dipole_field_direct", "dipole_pair_interactions"]
+__all__ += ["ParticleConfig", "place", "FE", "FE3O4", "PDMS", "SEED", "Constituent",
+            "ElasticMaterial", "DEFAULT_LAW", "LAW_NAMES", "get_law", "particle_regime",
+            "prism_demag_factors", "cylinder_demag_factors", "spheroid_demag_factors",
+            "ellipsoid_demag_factors", "FieldConfig", "magnetize", "solve", "MagneticState",
+            "DipoleSum", "applied_gradient", "dipole_field_direct", "dipole_pair_interactions"]

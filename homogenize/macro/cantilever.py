@@ -21,6 +21,7 @@ from homogenize.macro import closed_form as cf
 from homogenize.macro.fem import Material, box_mesh, linear_solve, neo_hookean_solve, \
     probe_displacement
 from micro._validate import InputError, check_choice, check_positive
+from micro.materials import PDMS
 
 __all__ = ["Strip", "CantileverResult", "MODELS", "beam_divisions", "solve_cantilever",
            "tip_deflection_m"]
@@ -233,8 +234,9 @@ def _solve_fem(strip, material, load, total, model, order, divisions, nz, aspect
                             sol.n_dof, sol.n_elements, sol.solver, sol.iterations)
 
 
-def tip_deflection_m(f_N_m3, length_m, width_m, thickness_m, E_Pa=2.0e6, nu=0.45, *,
-                     model="fem", density_kg_m3=1210.0, gravity_m_s2=0.0, **fem_options):
+def tip_deflection_m(f_N_m3, length_m, width_m, thickness_m, E_Pa=PDMS.E_Pa, nu=PDMS.nu, *,
+                     model="fem", density_kg_m3=PDMS.density_kg_m3, gravity_m_s2=0.0,
+                     **fem_options):
     """Tip deflection [m] of a clamped strip under the body force ``f_N_m3`` [N/m^3].
 
     Vectorised over ``f_N_m3``. Linear models scale one solution; the others are solved per

@@ -20,9 +20,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from skfem import (Basis, ElementTetP1, ElementTetP2, ElementVector, LinearForm, MeshTet, asm,
                    condense)
-from skfem.models.elasticity import lame_parameters, linear_elasticity
+from skfem.models.elasticity import linear_elasticity
 
-from micro._validate import InputError, check_choice, check_finite, check_positive, check_range
+from micro.materials import ElasticMaterial
+
+from micro._validate import InputError, check_choice, check_finite, check_positive
 import pyamg
 from skfem import BilinearForm
 from skfem.helpers import ddot, grad
@@ -34,26 +36,9 @@ __all__ = ["Material", "FEMSolution", "box_mesh", "vector_basis", "load_vector",
 DIRECT_MAX_DOFS = 60000
 
 
-@dataclass(frozen=True)
-class Material:
-    """Isotropic elastic solid.
-
-    E_Pa : Young's modulus [Pa]; nu : Poisson ratio [-], in (-1, 0.5);
-    density_kg_m3 : mass density [kg/m^3] (self-weight only).
-    """
-    E_Pa: float = 2.0e6
-    nu: float = 0.45
-    density_kg_m3: float = 1210.0
-
-    def __post_init__(self):
-        check_positive("E_Pa", self.E_Pa, "Pa")
-        check_range("nu", self.nu, -1.0, 0.5, "", lo_open=True, hi_open=True)
-        check_positive("density_kg_m3", self.density_kg_m3, "kg/m^3", allow_zero=True)
-
-    @property
-    def lame_Pa(self) -> tuple[float, float]:
-        """(lambda, mu) [Pa]."""
-        return lame_parameters(self.E_Pa, self.nu)
+#: The isotropic elastic solid of every solver (E [Pa], nu, density [kg/m^3]; defaults: the
+#: seed's PDMS): one class for the whole project, :class:`micro.materials.ElasticMaterial`.
+Material = ElasticMaterial
 
 
 @dataclass(frozen=True)
