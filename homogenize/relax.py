@@ -627,9 +627,12 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
                                                        rve.box_m, g0, matrix,
                                                        np.asarray(rve.centers_m)):
                 vir -= np.outer(dv, fv) / rve.box_m ** 3
-            res = homogenize_mesh(voxelize(r_rel, voxels), forces_N=forces, virial_stress_Pa=vir,
-                                  matrix=matrix, rigid=True, tol=cell_tol)
+            res = _cell(voxelize(r_rel, voxels), forces, vir, matrix, cell_tol)
             t["cell"] += time.perf_counter() - t0
+            if isinstance(res, str):          # the cell FEM failed on this geometry
+                rec["cell_error"] = res
+                steps.append(rec)
+                continue
             C = res.C_eff_Pa
             rec["stress_mag_Pa"] = np.asarray(res.stress_mag_Pa).tolist()
             rec["strain_mag"] = (np.asarray(res.strain_mag).tolist() if boundary == "free"
@@ -652,6 +655,20 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
                 "demag_factor": demag_factor}
     return RelaxResult(steps=tuple(steps), rve=rves[-1], rves=tuple(rves), settings=settings,
                        timings_s=t)
+
+
+def _cell(mesh, forces, virial, matrix, tol):
+    """Cell FEM with rigid particles on a relaxed RVE; the reference solver when the fast AMG
+    hierarchy breaks down (touching rigid particles can make its coarse matrix indefinite);
+    the error message if both fail."""
+    errors = []
+    for solver in ("fast", "reference"):
+        try:
+            return homogenize_mesh(mesh, forces_N=forces, virial_stress_Pa=virial, matrix=matrix,
+                                   rigid=True, tol=tol, solver=solver)
+        except (np.linalg.LinAlgError, RuntimeError, ValueError) as exc:
+            errors.append(f"{solver}: {exc}")
+    return "cell FEM failed on the relaxed RVE (" + "; ".join(errors) + ")"
 
 
 def _pair_contact_forces(x, a, box, g0, matrix, X_ref=None):
