@@ -17,6 +17,7 @@ Exit codes (documented in the README):
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from micro._validate import EXIT_CONVERGENCE, EXIT_INPUT, ConvergenceError, InputError
@@ -75,5 +76,11 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"mapsim {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:             # `mapsim ... | head`: the reader left; say nothing
+        try:
+            sys.stdout = open(os.devnull, "w")     # no second error while Python flushes
+        except OSError:
+            pass
+        return 0
 
 
