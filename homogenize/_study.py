@@ -129,7 +129,7 @@ _RULES = {
     "rigid": ("bool",), "deflate": ("bool",), "maxiter": ("int", 1, 10 ** 6),
 }
 # the cell's tol shares the name of the dipoles' tol: both must be <= 1e-2
-_CELL_RULES = {"method": ("enum", ("centre", "fraction", "composite"))}
+_CELL_RULES = {"method": ("enum", ("composite", "laminate", "centre", "fraction"))}
 
 #: resident memory per realization held by the client [bytes] (task, future, stored results)
 _BYTES_PER_TASK = 4e3

@@ -10,6 +10,7 @@ from micro._io import manifest, write_json
 from micro._validate import InputError, check_finite, check_positive
 from micro.dipoles import solve
 from micro.magnetization import DEFAULT_LAW, LAW_NAMES, get_law
+from micro.materials import FE
 from micro.materials import ElasticMaterial as Material
 from micro.rve import RVE
 
@@ -123,7 +124,7 @@ def _cmd_phi_study(args) -> int:
         if not 0.0 < v <= 0.45:
             raise InputError(f"--phi values must be in (0, 0.45] (volume fraction), got {v:g}")
     _check_voxels("--voxels", args.voxels)
-    study = phi_study(phis, args.voxels, progress=not args.quiet)
+    study = phi_study(phis, args.voxels, progress=not args.quiet, method=args.method)
     study["manifest"] = manifest({"phi": phis, "voxels": args.voxels})
     if args.png:
         plot_phi_study(args.png, study)
@@ -144,8 +145,9 @@ def _cmd_dilute_study(args) -> int:
         raise InputError(f"--phi must be in (0, 0.05] (a dilute volume fraction), got {args.phi:g}")
     check_positive("--particle-E", args.particle_E, "Pa")
     study = dilute_convergence_study(ns, args.phi, particle_E_Pa=args.particle_E,
-                                     progress=not args.quiet)
-    study["manifest"] = manifest({"voxels": ns, "phi": args.phi, "particle_E_Pa": args.particle_E})
+                                     progress=not args.quiet, method=args.method)
+    study["manifest"] = manifest({"voxels": ns, "phi": args.phi, "particle_E_Pa": args.particle_E,
+                                  "method": args.method})
     if args.png:
         plot_dilute_convergence(args.png, study)
     write_json(args.json, study)
@@ -167,8 +169,10 @@ def register(sub, formatter):
                    help="particle volume fraction [1] (default 0.01)")
     d.add_argument("--particle-E", dest="particle_E",
                    type=float_in("--particle-E", *_MODULUS, "Pa"),
-                   default=20e6,
-                   help="particle Young's modulus [Pa] (default 20e6: contrast 10 to PDMS)")
+                   default=FE.E_Pa, help="particle Young's modulus [Pa] (default: Fe)")
+    d.add_argument("--method", default="composite",
+                   choices=("composite", "laminate", "centre", "fraction"),
+                   help="voxels cut by the sphere surface (see mapsim homogenize --help)")
     d.add_argument("--json", required=True, type=Path, help="result JSON file")
     d.add_argument("--png", type=Path, default=None, help="plot file (PNG)")
     d.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -182,6 +186,9 @@ def register(sub, formatter):
                    help="comma-separated particle volume fractions [1]")
     q.add_argument("--voxels", type=int_in("--voxels", *_VOXELS),
                    default=24, help="voxels per cube edge")
+    q.add_argument("--method", default="composite",
+                   choices=("composite", "laminate", "centre", "fraction"),
+                   help="voxels cut by a sphere surface (see mapsim homogenize --help)")
     q.add_argument("--json", required=True, type=Path, help="result JSON file")
     q.add_argument("--png", type=Path, default=None, help="plot file (PNG)")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -216,8 +223,14 @@ def register(sub, formatter):
                    default=0.29,
                    help="particle Poisson's ratio [1]")
     p.add_argument("--rigid", action="store_true", help="rigid particles (stiff limit)")
-    p.add_argument("--method", default="centre", choices=("centre", "fraction"),
-                   help="voxel phase: centre in sphere, or volume fraction of 4^3 sub-samples")
+    p.add_argument("--method", default="composite",
+                   choices=("composite", "laminate", "centre", "fraction"),
+                   help="voxels cut by a particle surface: 'composite' (exact volume fraction, "
+                        "Reuss average of Fe and PDMS: E_eff self-converged to 0.1-0.6 %% at "
+                        "24^3, the default), 'laminate' (Kabel-Merkert-Schneider laminate along "
+                        "the normal; overshoots with nodal elements), 'centre' (staircase: "
+                        "voxel is particle if its centre is), 'fraction' (staircase from 4^3 "
+                        "sub-samples)")
     p.add_argument("--tol", type=float_in("--tol", 1e-14, 1e-2), default=1e-6,
                    help="CG relative residual per load case [1] (default 1e-6; C_eff and "
                         "stress_mag are variational: their error is ~ tol^2)")

@@ -153,7 +153,7 @@ def build_stiffness_table(phis=STIFFNESS_PHIS, seeds=STIFFNESS_SEEDS, voxels=STI
                      f"of the {STIFFNESS_VOXELS}^3 grid",
         "matrix": {"E_Pa": MATRIX_E_PA, "nu": MATRIX_NU},
         "particle": {"E_Pa": PARTICLE_E_PA, "nu": PARTICLE_NU},
-        "solver": f"homogenize.cell.homogenize_rve (method 'centre', default tol {_cell_tol():g})",
+        "solver": f"homogenize.cell.homogenize_rve (method 'composite', default tol {_cell_tol():g})",
     }, time.perf_counter() - t0, argv)
     stiffness_table.cache_clear()
     return path

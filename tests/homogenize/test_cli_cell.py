@@ -83,9 +83,11 @@ def test_phi_study_shows_where_estimates_part(tmp_path):
     # dilute: FEM, dilute, Mori-Tanaka and Guth-Gold agree within a few percent of E_m ...
     for k in ("E_dilute_Pa", "E_mori_tanaka_Pa", "E_guth_gold_Pa"):
         assert abs(lo["E_fem_Pa"] - lo[k]) < 0.05 * 2e6
-    # ... at 30 % the stiff-sphere array lies far above Mori-Tanaka (the HS lower bound) and
-    # the dilute line, and within 25 % of Guth-Gold (measured: 3.1 vs 3.2 E_m at 12^3)
-    assert hi["E_fem_Pa"] > 1.3 * hi["E_mori_tanaka_Pa"] > 1.3 * hi["E_dilute_Pa"]
+    # ... at 30 % the stiff-sphere array lies above Mori-Tanaka (the HS lower bound), which
+    # lies above the dilute line, and within 25 % of Guth-Gold. With composite voxels the FEM
+    # is ~1.15-1.18 x Mori-Tanaka (the staircase gave > 1.3 x: its stiffening was 20-35 % too
+    # high); Mori-Tanaka is 1.17 x dilute at phi 0.3 (closed forms)
+    assert hi["E_fem_Pa"] > 1.1 * hi["E_mori_tanaka_Pa"] > 1.1 * hi["E_dilute_Pa"]
     assert abs(hi["E_fem_Pa"] / hi["E_guth_gold_Pa"] - 1) < 0.25
     assert hi["E_fem_Pa"] < hi["E_hs_upper_Pa"]
     assert (tmp_path / "phi.png").is_file()

@@ -1,0 +1,33 @@
+"""`mapsim relax`: the CLI over homogenize.relax (physics tested in test_relax.py)."""
+import json
+
+import numpy as np
+
+from homogenize.cli import main
+from micro.particles import Monodisperse, generate_rve
+
+
+def test_relax_writes_steps_and_a_loadable_rve(tmp_path, capsys):
+    rve = generate_rve(0.05, 8, 3, distribution=Monodisperse(25e-9))
+    src = tmp_path / "r.h5"
+    rve.save(src)
+    out, relaxed = tmp_path / "rel.json", tmp_path / "rel.h5"
+    assert main(["relax", str(src), "--B", "0:0.6:3", "--voxels", "8", "--json", str(out),
+                 "--out", str(relaxed), "--quiet"]) == 0
+    d = json.loads(out.read_text())
+    steps = d["steps"]
+    assert [s["B_T"] for s in steps] == [0.0, 0.3, 0.6]
+    # zero field: nothing moves; the field moves the particles
+    assert steps[0]["displacement_rms_m"] == 0.0 and steps[-1]["displacement_rms_m"] > 0.0
+    for k in ("strain_mag", "M_eff_A_per_m", "E_eff_parallel_Pa", "E_eff_perpendicular_Pa",
+              "min_gap_m", "iterations"):
+        assert k in steps[-1]
+    assert np.shape(steps[-1]["strain_mag"]) == (3, 3)
+    # the relaxed RVE opens with the other commands
+    assert main(["rve", "--load", str(relaxed)]) == 0
+    capsys.readouterr()
+    # bad input: decreasing steps, near-field, the output is the input
+    assert main(["relax", str(src), "--B", "1,0.5", "--json", str(tmp_path / "x.json")]) == 2
+    assert main(["relax", str(src), "--near-field", "on", "--json", str(tmp_path / "y.json")]) == 2
+    assert main(["relax", str(src), "--json", str(src)]) == 2
+    assert not (tmp_path / "x.json").exists() and not (tmp_path / "y.json").exists()
