@@ -28,6 +28,17 @@ def local_fields(result, case: str = "magnetic") -> dict:
         voigt_to_tensor(np.eye(6)[CASES.index(case)], engineering=True)
     eps = asm.element_mean_strain(w.ravel(), n, h) + E
     sig = asm.element_stress(result.fields["lambda_Pa"], result.fields["mu_Pa"], eps)
+    if "cut_voxels" in result.fields:
+        # composite voxels: the stress of the stiffness the solver used in each cut voxel
+        vox, C = result.fields["cut_voxels"], result.fields["cut_voxel_C_Pa"]
+        e = eps.reshape(-1, 3, 3)[vox]
+        ev = np.stack([e[:, 0, 0], e[:, 1, 1], e[:, 2, 2], 2 * e[:, 1, 2], 2 * e[:, 0, 2],
+                       2 * e[:, 0, 1]], axis=1)
+        s = np.einsum("vij,vj->vi", C, ev)
+        S = sig.reshape(-1, 3, 3)
+        S[vox] = np.stack([np.stack([s[:, 0], s[:, 5], s[:, 4]], axis=1),
+                           np.stack([s[:, 5], s[:, 1], s[:, 3]], axis=1),
+                           np.stack([s[:, 4], s[:, 3], s[:, 2]], axis=1)], axis=1)
     dev = sig - np.trace(sig, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) / 3.0
     vm = np.sqrt(1.5 * np.sum(dev * dev, axis=(-2, -1)))
     return {"stress_Pa": sig, "von_mises_Pa": vm, "displacement_m": w, "strain": eps,

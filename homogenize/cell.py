@@ -579,6 +579,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
             fields["magnetic_body_force_N_m3"] = b
     if keep_fields:
         fields["lambda_Pa"], fields["mu_Pa"] = lam, mu
+        if composite is not None:     # the cut voxels' own stiffness (Voigt, engineering shear)
+            fields["cut_voxels"], fields["cut_voxel_C_Pa"] = composite.vox, composite.C
     timings = dict(solver.timings)
     timings["solve"] = time.perf_counter() - t_solve
     timings["total"] = time.perf_counter() - t_start

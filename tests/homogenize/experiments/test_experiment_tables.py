@@ -50,11 +50,12 @@ def test_stiffness_table_within_hashin_shtrikman_bounds():
 
 def test_stiffness_table_dilute_limit_is_eshelby():
     """At phi -> 0 the stiffening per unit phi must approach Eshelby's dilute value for Fe in
-    PDMS (2.317 at nu = 0.45; Einstein's 2.5 at nu = 0.5), from above: voxel spheres of only
-    2.5-4 voxels' radius (phi <= 0.02, one sphere in a 24^3 cell) are cube-like, hence stiffer.
-    The committed resolution study (one sphere, phi = 0.02) gives +52 % at 2 voxels' radius,
-    +43 % at 2.7, +28 % at 4 and +18.5 % at 6.7: tolerance +50 % here, and the excess must
-    shrink with resolution at a rate between h^0.5 and h^1.5 (first-order staircase error)."""
+    PDMS (2.317 at nu = 0.45; Einstein's 2.5 at nu = 0.5). With composite voxels (exact volume
+    fractions, Reuss stiffness in cut voxels) the committed resolution study (one sphere,
+    phi = 0.02) gives -3.7 % at 2 voxels' radius and +2.9 .. +6.1 % from 2.7 to 6.7 voxels
+    (the O(phi) interaction of the periodic images at phi = 0.02 is of that size; the staircase
+    was +18 .. +52 %): within 10 % of Eshelby from 2.7 voxels' radius on, and self-converged
+    (spread of the slope over 2.7-6.7 voxels' radius below 4 %)."""
     import json
     from homogenize.cell import bulk_shear, eshelby_dilute, young_poisson
     Km, Gm = bulk_shear(T.MATRIX_E_PA, T.MATRIX_NU)
@@ -71,8 +72,12 @@ def test_stiffness_table_dilute_limit_is_eshelby():
     assert np.all(slope_fem > slope_esh) and np.all(slope_fem < 1.5 * slope_esh)
     study = json.loads((T.DATA_DIR / "filler_stiffness_resolution.json").read_text())
     excess = np.array([r["slope"] / r["slope_eshelby"] - 1.0 for r in study["rows"]])
-    assert np.all(np.diff(excess) < 0.01) and np.all(excess > 0)
-    assert 0.5 < study["rate_of_relative_excess_vs_h"] < 1.5
+    radius = np.array([r["radius_voxels"] for r in study["rows"]])
+    resolved = radius >= 2.6
+    assert np.all(np.abs(excess[resolved]) < 0.10)
+    slopes = np.array([r["slope"] for r in study["rows"]])[resolved]
+    # measured spread 3.1 %: the remaining error oscillates with the sphere against the grid
+    assert (slopes.max() - slopes.min()) / slopes.mean() < 0.04
 
 
 def test_filler_stiffness_ratio_interpolates_the_table():
