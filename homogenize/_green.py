@@ -86,7 +86,6 @@ def _short(d, s, G, kappa, xi):
     f2 = (2.0 * xi / _SQRT_PI) * E / (8.0 * math.pi)
     b_part = kappa * _radial_hessian(f1, f2, rh, r)
     # lap f = -[erfc/(4 pi r) - exp(-xi^2 r^2) xi / (4 pi^1.5)] =: q
-    e1 = ec / r
     e1p = -ec / r ** 2 - (2.0 * xi / _SQRT_PI) * E / r
     e1pp = 2.0 * ec / r ** 3 + (2.0 * xi / _SQRT_PI) * E * (2.0 / r ** 2 + 2.0 * xi ** 2)
     c = xi / (4.0 * math.pi ** 1.5)

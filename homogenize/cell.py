@@ -37,7 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 from tqdm import tqdm
 
-from micro._validate import ConvergenceError, InputError, check_finite, check_positive, check_range
+from micro._validate import ConvergenceError, InputError, check_finite, check_range
 from micro.materials import FE, PDMS, ElasticMaterial, elastic
 from micro.rve import minimum_image
 

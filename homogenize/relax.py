@@ -50,7 +50,7 @@ from scipy.constants import mu_0 as MU0
 
 from micro.dipoles import solve as solve_dipoles
 from micro.magnetization import DEFAULT_LAW
-from micro.materials import FE, PDMS, ElasticMaterial, elastic
+from micro.materials import PDMS, ElasticMaterial, elastic
 from micro.rve import RVE, minimum_image
 
 from ._green import periodic_displaceability, rigid_sphere_displaceability

@@ -41,7 +41,7 @@ from scipy.constants import mu_0 as MU0
 from . import _kernels as K
 from ._ewald import PeriodicSum
 from ._validate import ConvergenceError, InputError, check_choice, check_finite, check_positive, check_range
-from .magnetization import DEFAULT_LAW, LAW_NAMES, MagnetizationLaw, get_law
+from .magnetization import DEFAULT_LAW, MagnetizationLaw, get_law
 from .materials import SEED
 from .rve import minimum_image
 from scipy.spatial import cKDTree

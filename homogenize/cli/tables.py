@@ -6,6 +6,7 @@ from pathlib import Path
 
 from micro._io import manifest, write_json
 from micro._validate import InputError
+from micro.materials import FE, PDMS
 
 from homogenize.cli._common import (config_of, float_in, int_in, one_line_errors, parse_at,
                                     scheduler_address, write_snippet)
@@ -15,13 +16,10 @@ from homogenize.macro.exporters import ExportSpec, export_text
 from homogenize.tables import read_table
 from homogenize.tables import BatchError, run_batch
 from homogenize._study import load_study
-from homogenize.tables import read_table
 from homogenize._stats import summarize
 from homogenize.studies.rve_size import rve_size_study
-from homogenize.tables import BatchError
 from homogenize._stats import welch_permutation
 from homogenize.studies.chain import run_chain
-from micro._io import manifest, write_json
 
 _BATCH_DOC = """\
 Run a study (TOML file: grid of conditions x random realizations) on Dask and write the
@@ -241,6 +239,23 @@ def register(sub, formatter):
 
 
 # --------------------------------------------------------------------------- mapsim beam --table
+def _add_table_point_options(g, without: str) -> None:
+    """--table and the point (--phi, --B, --gradB, --at) at which it is interpolated."""
+    g.add_argument("--table", default=None, help=f"effective-parameter table (HDF5) "
+                                                 f"(default: none, {without})")
+    g.add_argument("--phi", type=float_in("--phi", 0.0, 0.74, lo_open=True), default=None,
+                   help="particle volume fraction [-] (default: none, required with --table)")
+    g.add_argument("--B", dest="B_T", type=float_in("--B", 0.0, 50.0, "T"), default=None,
+                   help="applied flux density at the strip [T] (default: none, required with "
+                        "--table)")
+    g.add_argument("--gradB", dest="gradB_T_per_m", type=float_in("--gradB", -1e4, 1e4, "T/m"),
+                   default=None,
+                   help="field gradient d|B|/dz [T/m] (default: none, required with --table)")
+    g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
+                   help="values of other grid axes with several values, e.g. "
+                        "arrangement=chains (default: none)")
+
+
 def add_beam_table_options(p) -> None:
     """Options of ``mapsim beam`` that take the body force from a batch table."""
     p.formatter_class = _own_defaults(p.formatter_class)
@@ -249,18 +264,7 @@ def add_beam_table_options(p) -> None:
         "With --table, the body force and its confidence interval are interpolated from the "
         "table at (--phi, --B, --gradB) and replace --body-force-N-m3; the interval is "
         "propagated to the tip deflection of every model.")
-    g.add_argument("--table", default=None, help="effective-parameter table (HDF5) "
-                                                 "(default: none, use --body-force-N-m3)")
-    g.add_argument("--phi", type=float_in("--phi", 0.0, 0.74, lo_open=True), default=None,
-                   help="particle volume fraction [-] (default: none, required with --table)")
-    g.add_argument("--B", dest="B_T", type=float_in("--B", 0.0, 50.0, "T"), default=None,
-                   help="applied flux density at the strip [T] (default: none, required with --table)")
-    g.add_argument("--gradB", dest="gradB_T_per_m", type=float_in("--gradB", -1e4, 1e4, "T/m"),
-                   default=None,
-                   help="field gradient d|B|/dz [T/m] (default: none, required with --table)")
-    g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
-                   help="values of other grid axes with several values, e.g. "
-                        "arrangement=chains (default: none)")
+    _add_table_point_options(g, "use --body-force-N-m3")
     g.add_argument("--E-from-table", action="store_true",
                    help="use the table's E_eff (FEM) and its interval instead of --E-Pa")
 
@@ -327,18 +331,9 @@ def add_export_table_options(p) -> None:
         "from a table (mapsim batch)",
         "With --table, the body force (and E, nu if the table holds FEM results) are "
         "interpolated at (--phi, --B, --gradB); explicit --E-Pa/--nu/--density-kg-m3 win. The "
-        "density defaults to the mixture (1 - phi) 1210 + phi 7870 kg/m^3.")
-    g.add_argument("--table", default=None, help="effective-parameter table (HDF5) "
-                                                 "(default: none, give the numbers)")
-    g.add_argument("--phi", type=float_in("--phi", 0.0, 0.74, lo_open=True), default=None,
-                   help="particle volume fraction [-] (default: none, required with --table)")
-    g.add_argument("--B", dest="B_T", type=float_in("--B", 0.0, 50.0, "T"), default=None,
-                   help="applied flux density [T] (default: none, required with --table)")
-    g.add_argument("--gradB", dest="gradB_T_per_m", type=float_in("--gradB", -1e4, 1e4, "T/m"),
-                   default=None,
-                   help="field gradient d|B|/dz [T/m] (default: none, required with --table)")
-    g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
-                   help="values of other grid axes with several values (default: none)")
+        f"density defaults to the mixture (1 - phi) {PDMS.density_kg_m3:g} + phi "
+        f"{FE.density_kg_m3:g} kg/m^3.")
+    _add_table_point_options(g, "give the numbers")
     g.add_argument("--bound", default="mean", choices=("mean", "low", "high"),
                    help="export the mean force or an end of its confidence interval (run the "
                         "macro model at both ends to propagate the interval)")

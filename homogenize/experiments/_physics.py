@@ -37,7 +37,6 @@ from homogenize.experiments.tables import Unavailable, filler_stiffness_ratio
 from homogenize.macro import closed_form
 from micro._io import atomic_write_text
 from micro._validate import InputError
-from micro._validate import InputError
 from scipy.interpolate import CubicSpline
 from scipy.constants import k as kB
 

@@ -55,7 +55,6 @@ import numpy as np
 from . import _physics as P
 from .io import Experiment
 from homogenize.experiments.tables import microstructure_stress_coefficient
-from homogenize.experiments.tables import microstructure_stress_coefficient
 
 __all__ = ["CAUSES", "DESCRIPTIONS", "VARIANTS", "ModelSpec", "Param", "parameters",
            "predict", "applicable", "LORENTZ_FACTOR"]

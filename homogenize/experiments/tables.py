@@ -63,12 +63,11 @@ import inspect
 from homogenize.cell import homogenize_rve
 from micro.particles import Monodisperse, generate_rve
 from types import SimpleNamespace
-from homogenize.cell import bulk_shear, eshelby_dilute, homogenize_rve, young_poisson
+from homogenize.cell import bulk_shear, eshelby_dilute, young_poisson
 from micro.dipoles import solve
 from micro._validate import InputError
 from micro._io import atomic_write_text, manifest, write_json
 from tqdm import tqdm
-from micro._io import manifest, write_json
 from scipy.interpolate import PchipInterpolator
 
 __all__ = ["STIFFNESS_PHIS", "STIFFNESS_SEEDS", "STIFFNESS_VOXELS", "RADIUS_VOXELS", "GAP_VOXELS",

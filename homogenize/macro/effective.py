@@ -6,7 +6,6 @@ macro models.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

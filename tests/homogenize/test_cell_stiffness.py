@@ -4,10 +4,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from homogenize.cell import (Material, bulk_shear, eshelby_dilute,
-                             hashin_shtrikman_bounds, homogenize_mesh, homogenize_rve,
+from homogenize.cell import (bulk_shear, hashin_shtrikman_bounds, homogenize_rve,
                              isotropic_stiffness_voigt, mori_tanaka)
-from homogenize.mesh import voxelize
 from micro._validate import InputError
 
 L = 1e-6

@@ -1,5 +1,4 @@
 """Self-consistent moments, forces and effective quantities of RVEs (micro.dipoles.solve)."""
-import argparse
 import math
 
 import numpy as np

@@ -1,5 +1,4 @@
 """Large-deformation (neo-Hookean, total Lagrangian) cantilever against the elastica."""
-import math
 
 import numpy as np
 import pytest
