@@ -28,7 +28,7 @@ from homogenize.macro.cantilever import MODELS
 from homogenize.macro.convergence import converged_tip
 from homogenize.macro.effective import magnetization_from_table, soft_sphere_magnetization
 from homogenize.macro.magnets import Coil, PermanentMagnet, body_force_along_strip
-from homogenize.tables import read_table
+from homogenize.tables import body_force_from_table, read_table
 from micro._io import atomic_path, manifest, write_json
 
 __all__ = ["register"]
@@ -188,11 +188,29 @@ def _channel(args) -> int:
         op = {"flow_rate_m3_s": args.flow_rate_m3_s, "pressure_drop_Pa": args.pressure_drop_Pa,
               "outlet_pressure_Pa": args.outlet_pressure_Pa, "liquid": liquid}
         if args.target_gap_m is not None:
-            t = field_for_target_gap(ceiling, geo.d_m, args.target_gap_m, **op)
+            field = {}
+            if args.table:         # the field B that gives the force, from the batch table
+                for name, v in (("--phi", args.phi), ("--gradB", args.gradB_T_per_m)):
+                    if v is None:
+                        raise InputError(f"{name} is required with --table")
+                table = read_table(args.table)
+                B_axis = sorted(float(b) for b in table.axes.get("B_T", ()))
+                if len(B_axis) < 2:
+                    raise InputError(f"{args.table}: needs at least two B_T values")
+                others = parse_at(args.table_at)
+                field = {"body_force_of_field": lambda B: body_force_from_table(
+                             table, args.phi, float(B), args.gradB_T_per_m, **others).mean,
+                         "field_range": (B_axis[0], B_axis[-1]), "field_unit": "T"}
+            t = field_for_target_gap(ceiling, geo.d_m, args.target_gap_m, **op, **field)
             flow = t.flow
             out["target_gap"] = t.to_dict()
             print(f"target smallest gap {args.target_gap_m:.4g} m: body force "
-                  f"{t.body_force_N_m3:.4g} N/m^3, reached at x = {t.x_target_m:.4g} m")
+                  f"{t.body_force_N_m3:.4g} N/m^3"
+                  + ("" if t.field is None else
+                     f" = B {t.field:.4g} T inside the polymer (the block's own demagnetization is not "
+                     f"included) at phi {args.phi:g}, dB/dz "
+                     f"{args.gradB_T_per_m:g} T/m (table {args.table})")
+                  + f", reached at x = {t.x_target_m:.4g} m")
         else:
             flow = solve_channel_flow(ceiling, geo.d_m, body_force_N_m3=args.body_force_N_m3,
                                       **op)
@@ -443,5 +461,15 @@ def register(sub, formatter) -> None:
                    help="find the body force that brings the smallest gap to this height [m] "
                         "(e.g. 10e-6 to 20e-6 to hold back cells) (default: none)")
     g.add_argument("--png", default=None, help="plot of gap and pressure along the channel")
+    g.add_argument("--table", default=None,
+                   help="with --target-gap-m: batch table whose body force(B) at --phi and "
+                        "--gradB gives the applied field needed (default: none, body force only)")
+    g.add_argument("--phi", type=float_in("--phi", 0.0, 0.74, lo_open=True), default=None,
+                   help="particle volume fraction for --table [-]")
+    g.add_argument("--gradB", dest="gradB_T_per_m",
+                   type=float_in("--gradB", -1e4, 1e4, "T/m"), default=None,
+                   help="field gradient d|B|/dz for --table [T/m]")
+    g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
+                   help="values of other grid axes of --table (default: none)")
     p.add_argument("--json", default=None, help="write the result to this JSON file")
-    p.set_defaults(func=_channel, outputs=("json", "png"))
+    p.set_defaults(func=_channel, outputs=("json", "png"), inputs=("table",))

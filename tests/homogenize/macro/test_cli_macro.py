@@ -58,3 +58,23 @@ def test_export_refuses_directory(tmp_path, capsys):
     rc = main(["export", "--to", "abaqus", "--body-force-N-m3", "1", "--E-Pa", "2e6", "--nu",
                "0.45", "--density-kg-m3", "1000", "--out", str(tmp_path)])
     assert rc == 2 and "directory" in capsys.readouterr().err
+
+
+def test_channel_flow_and_target_gap(tmp_path, capsys):
+    """`mapsim channel` with a flow: the coupled flow and the body force for a target gap; with
+    a table, the applied field that gives that force (monotone inversion of the table)."""
+    import json as _json
+    out = tmp_path / "ch.json"
+    q = 1.6667e-10                                        # 10 uL/min
+    assert main(["channel", "--flow-rate-m3-s", str(q), "--target-gap-m", "30e-6",
+                 "--json", str(out), "--png", str(tmp_path / "ch.png")]) == 0
+    d = _json.loads(out.read_text())
+    # mass conservation: the imposed flow rate is the flow through the channel
+    assert d["flow"]["flow_rate_m3_s"] == pytest.approx(q, rel=1e-9)
+    # the smallest gap sits at the target, at the outlet, and the body force pulls downwards
+    assert d["target_gap"]["flow"]["min_gap_overall_m"] == pytest.approx(30e-6, rel=1e-3)
+    assert d["target_gap"]["body_force_N_m3"] > 0
+    assert (tmp_path / "ch.png").read_bytes()[:4] == b"\x89PNG"
+    # bad input: both operating points, a target without flow
+    assert main(["channel", "--flow-rate-m3-s", str(q), "--pressure-drop-Pa", "10"]) == 2
+    assert main(["channel", "--target-gap-m", "30e-6"]) == 2
