@@ -61,6 +61,8 @@ import fcntl
 import json
 import math
 import os
+import signal
+import threading
 import sys
 import tomllib
 import zipfile
@@ -310,8 +312,21 @@ def _dask_client(scheduler: str | None, workers: int | None, processes: bool):
                   dashboard_address="127.0.0.1:0")
     if processes:
         # loopback only; one numba/BLAS thread per worker process (no oversubscription)
-        kwargs.update(host="127.0.0.1", env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
-    with LocalCluster(**kwargs) as cluster, Client(cluster) as client:
+        # workers log errors only: their warnings on cancelled tasks after Ctrl-C are noise
+        # (failures reach the user through this process)
+        kwargs.update(host="127.0.0.1", env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+                                             "DASK_LOGGING__DISTRIBUTED": "error"})
+    # Ctrl-C reaches the whole process group: worker processes started while SIGINT is
+    # ignored keep ignoring it (Python installs its KeyboardInterrupt handler only over the
+    # default disposition), so only this process reacts -- one line, no worker tracebacks
+    ignore = processes and threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if ignore else None
+    try:
+        cluster = LocalCluster(**kwargs)
+    finally:
+        if ignore:
+            signal.signal(signal.SIGINT, previous)
+    with cluster, Client(cluster) as client:
         yield client
 
 
