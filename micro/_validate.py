@@ -7,10 +7,12 @@ range. The CLI turns an ``InputError`` into one line on stderr and exit code 2.
 from __future__ import annotations
 
 import math
+import os
+import stat
 
 import numpy as np
 
-__all__ = ["InputError", "ConvergenceError", "EXIT_INPUT", "EXIT_CONVERGENCE", "check_finite", "check_positive", "check_range", "check_choice"]
+__all__ = ["InputError", "ConvergenceError", "check_regular_file", "EXIT_INPUT", "EXIT_CONVERGENCE", "check_finite", "check_positive", "check_range", "check_choice"]
 
 
 #: Exit code of the CLI for unusable input (:class:`InputError`).
@@ -78,3 +80,22 @@ def check_choice(name: str, value, choices) -> str:
     if value not in choices:
         raise InputError(f"{name} must be one of {', '.join(map(str, choices))}; got {value!r}")
     return value
+
+
+def check_regular_file(path, label: str, max_bytes: int, missing: str = "does not exist",
+                       unreadable: str = "cannot be examined") -> None:
+    """Refuse a file to read that is missing, not a regular file (a device such as /dev/zero
+    would be read forever, a FIFO would block) or larger than ``max_bytes``, before it is
+    opened. ``label`` starts every message (e.g. ``"--data x.csv"``)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise InputError(f"{label} {missing}") from None
+    except OSError as exc:
+        raise InputError(f"{label}: {unreadable} ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(f"{label} must be a regular file (this is a device, pipe or "
+                         f"directory)")
+    if st.st_size > max_bytes:
+        raise InputError(f"{label} is {st.st_size / 2 ** 20:.1f} MiB, more than the "
+                         f"{max_bytes / 2 ** 20:g} MiB allowed")

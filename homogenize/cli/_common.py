@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from micro._io import atomic_write_text
-from micro._validate import InputError
+from micro._validate import InputError, check_regular_file
 
 from homogenize._budget import check_memory, machine_memory_bytes
 
@@ -161,19 +161,7 @@ def check_input_file(opt: str, path, max_bytes: int = 64 * 2 ** 20) -> None:
     /dev/zero would be read forever, a FIFO would block) before it is opened."""
     if path is None:
         return
-    p = Path(path)
-    try:
-        st = os.stat(p)
-    except FileNotFoundError:
-        raise InputError(f"{opt} {p} does not exist") from None
-    except OSError as exc:
-        raise InputError(f"{opt} {p}: cannot be examined ({exc.strerror})") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise InputError(f"{opt} {p} must be a regular file (this is a device, pipe or "
-                         f"directory)")
-    if st.st_size > max_bytes:
-        raise InputError(f"{opt} {p} is {st.st_size / 2 ** 20:.1f} MiB, more than the "
-                         f"{max_bytes / 2 ** 20:g} MiB allowed")
+    check_regular_file(path, f"{opt} {Path(path)}", max_bytes)
 
 
 def check_output_dir(opt: str, path) -> None:

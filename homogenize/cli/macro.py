@@ -270,6 +270,20 @@ def _check_channel_size(args) -> None:
                  "use fewer layers --nc")
 
 
+def _channel_geometry_options(g) -> None:
+    """The channel's geometry (the seed paper's Fig. 4 block; defaults its channel)."""
+    g.add_argument("--a-m", dest="a_m", type=_length("--a-m", 1.0), default=5e-3,
+                   help="channel width a [m]")
+    g.add_argument("--b-m", dest="b_m", type=_length("--b-m", 1.0), default=50e-6,
+                   help="channel height b [m]")
+    g.add_argument("--c-m", dest="c_m", type=_length("--c-m", 1.0), default=0.5e-3,
+                   help="polymer thickness above the channel c [m]")
+    g.add_argument("--d-m", dest="d_m", type=_length("--d-m", 1.0), default=10e-3,
+                   help="channel length d [m]")
+    g.add_argument("--wall-m", dest="wall_m", type=_length("--wall-m", 1.0), default=None,
+                   help="side-wall width [m] (default max(a/2, 2 (b + c)))")
+
+
 def _material_options(p):
     p.add_argument("--E-Pa", dest="E_Pa", type=_E, default=2.0e6,
                    help="Young's modulus of the composite [Pa]")
@@ -343,13 +357,7 @@ def register(sub, formatter) -> None:
     g.add_argument("--thickness-m", dest="thickness_m", type=_length("--thickness-m", 1.0),
                    default=1e-3,
                    help="cantilever thickness [m]")
-    g.add_argument("--a-m", dest="a_m", type=_length("--a-m", 1.0), default=5e-3, help="channel width a [m]")
-    g.add_argument("--b-m", dest="b_m", type=_length("--b-m", 1.0), default=50e-6, help="channel height b [m]")
-    g.add_argument("--c-m", dest="c_m", type=_length("--c-m", 1.0), default=0.5e-3,
-                   help="polymer above the channel c [m]")
-    g.add_argument("--d-m", dest="d_m", type=_length("--d-m", 1.0), default=10e-3, help="channel length d [m]")
-    g.add_argument("--wall-m", dest="wall_m", type=_length("--wall-m", 1.0), default=None,
-                   help="side-wall width [m] (default max(a/2, 2 (b + c)))")
+    _channel_geometry_options(g)
     add_export_table_options(p)
     p.set_defaults(func=wrap_export(_export), outputs=("out",), inputs=("table",))
 
@@ -426,13 +434,7 @@ def register(sub, formatter) -> None:
                     "ceiling deflection and relative cross-section reduction (3D linear FEM).")
     p.add_argument("--body-force-N-m3", dest="body_force_N_m3", type=_F, default=40e3,
                    help="body force towards the glass [N/m^3]")
-    p.add_argument("--a-m", dest="a_m", type=_length("--a-m", 1.0), default=5e-3, help="channel width a [m]")
-    p.add_argument("--b-m", dest="b_m", type=_length("--b-m", 1.0), default=50e-6, help="channel height b [m]")
-    p.add_argument("--c-m", dest="c_m", type=_length("--c-m", 1.0), default=0.5e-3,
-                   help="polymer thickness above the channel c [m]")
-    p.add_argument("--d-m", dest="d_m", type=_length("--d-m", 1.0), default=10e-3, help="channel length d [m]")
-    p.add_argument("--wall-m", dest="wall_m", type=_length("--wall-m", 1.0), default=None,
-                   help="side-wall width [m] (default max(a/2, 2 (b + c)))")
+    _channel_geometry_options(p)
     _material_options(p)
     p.add_argument("--order", type=int, default=2, choices=(1, 2), help="tetrahedron degree")
     p.add_argument("--nc", type=int_in("--nc", 1, 64), default=2,

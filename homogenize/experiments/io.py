@@ -9,14 +9,13 @@ from __future__ import annotations
 
 import csv
 import math
-import stat
 import tomllib
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
 
-from micro._validate import InputError
+from micro._validate import InputError, check_regular_file
 from micro._io import atomic_write_text
 
 __all__ = ["KINDS", "REQUIRED", "OPTIONAL", "MEASURED", "Matrix", "Particles", "Setup",
@@ -272,18 +271,8 @@ def load_experiment(toml_path) -> Experiment:
 
 def _check_regular(path: Path, what: str) -> None:
     """A file we read must be a regular file of bounded size (not a device, FIFO, directory)."""
-    try:
-        st = path.stat()
-    except FileNotFoundError:
-        raise InputError(f"{path}: {what} not found") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise InputError(f"{path}: {what} must be a regular file (this is a device, pipe or "
-                         f"directory)")
-    if st.st_size > MAX_FILE_BYTES:
-        raise InputError(f"{path}: {what} is {st.st_size / 2 ** 20:.1f} MiB, more than the "
-                         f"{MAX_FILE_BYTES / 2 ** 20:g} MiB allowed")
+    check_regular_file(path, f"{path}: {what}", MAX_FILE_BYTES, missing="not found",
+                       unreadable="cannot read")
 
 
 def _check_plausible(path, kind, cols, specimen, down, lines, matrix, particles) -> None:
