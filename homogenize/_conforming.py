@@ -17,18 +17,26 @@ from micro.materials import FE, PDMS
 from homogenize._effective_media import lame
 from homogenize.cell import voigt_to_tensor
 from scipy.sparse.linalg import splu
-from skfem import Basis, BilinearForm, ElementTetP2, ElementVector, LinearForm, MeshTet
+from dataclasses import replace
+
+from skfem import (Basis, BilinearForm, ElementTetP2, ElementVector, LinearForm, MeshTet,
+                   MeshTet2)
 from skfem.helpers import ddot, sym_grad, trace
 
 __all__ = ["conforming_tet_mesh", "homogenize_conforming"]
 
 
 def conforming_tet_mesh(box_m: float, centers_m, radii_m, mesh_size_m: float, *,
-                        curvature_elements: int = 0):
-    """(points (M, 3) [m], tets (T, 4), phase (T,) 0 matrix / 1 particle) from gmsh.
+                        curvature_elements: int = 0, geometry_order: int = 1):
+    """(points (M, 3) [m], tets (T, 4), phase (T,) 0 matrix / 1 particle[, midnodes]) from gmsh.
 
     ``curvature_elements`` > 0 refines the sphere surfaces to that many elements per 2 pi of
-    curvature (gmsh ``Mesh.MeshSizeFromCurvature``), so small spheres keep their volume."""
+    curvature (gmsh ``Mesh.MeshSizeFromCurvature``), so small spheres keep their volume.
+    ``geometry_order=2``: gmsh places the edge mid-nodes on the sphere surfaces (10-node
+    tetrahedra); a fourth item ``midnodes`` maps each edge (sorted pair of point indices) to its
+    mid-node position, so the mesh is curved and the spheres keep their volume to O(h^4)."""
+    if geometry_order not in (1, 2):
+        raise InputError(f"geometry_order must be 1 or 2, got {geometry_order}")
     try:
         import gmsh
     except ImportError:
@@ -64,18 +72,24 @@ def conforming_tet_mesh(box_m: float, centers_m, radii_m, mesh_size_m: float, *,
             gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", int(curvature_elements))
             gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
         gmsh.model.mesh.generate(3)
+        if geometry_order == 2:
+            gmsh.model.mesh.setOrder(2)          # mid-nodes snapped onto the geometry
         tags, coords, _ = gmsh.model.mesh.getNodes()
         pts = coords.reshape(-1, 3)
         index = {int(t): i for i, t in enumerate(tags)}
-        tets, phase = [], []
+        tets, phase, mids = [], [], []
         ball_set = set(balls)
+        etype, nn = (4, 4) if geometry_order == 1 else (11, 10)   # 4- / 10-node tetrahedron
         for dim, tag in gmsh.model.getEntities(3):
             etypes, _, enodes = gmsh.model.mesh.getElements(dim, tag)
             for et, en in zip(etypes, enodes):
-                if et != 4:   # 4-node tetrahedron
+                if et != etype:
                     continue
-                t = np.array([index[int(v)] for v in en], dtype=np.int64).reshape(-1, 4)
+                t10 = np.array([index[int(v)] for v in en], dtype=np.int64).reshape(-1, nn)
+                t = t10[:, :4]
                 tets.append(t)
+                if nn == 10:
+                    mids.append(t10[:, 4:])
                 # the fragment keeps the sphere tags for the inclusions
                 inside = tag in ball_set
                 if not inside:
@@ -89,17 +103,46 @@ def conforming_tet_mesh(box_m: float, centers_m, radii_m, mesh_size_m: float, *,
     used = np.unique(np.concatenate(tets))
     remap = -np.ones(pts.shape[0], dtype=np.int64)
     remap[used] = np.arange(used.size)
-    return pts[used], remap[np.concatenate(tets)], np.concatenate(phase)
+    T = remap[np.concatenate(tets)]
+    if geometry_order == 1:
+        return pts[used], T, np.concatenate(phase)
+    # which vertex pair each mid-node belongs to: the pair whose straight midpoint is nearest
+    # (no assumption on gmsh's local edge numbering)
+    P, MID = pts[used], pts[np.concatenate(mids)]
+    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    straight = np.stack([0.5 * (P[T[:, i]] + P[T[:, j]]) for i, j in pairs], axis=1)  # (T,6,3)
+    d = np.linalg.norm(MID[:, :, None, :] - straight[:, None, :, :], axis=-1)          # (T,6,6)
+    which = np.argmin(d, axis=2)
+    midnodes = {}
+    for e in range(T.shape[0]):
+        for k in range(6):
+            i, j = pairs[which[e, k]]
+            midnodes[tuple(sorted((int(T[e, i]), int(T[e, j]))))] = MID[e, k]
+    return P, T, np.concatenate(phase), midnodes
 
 
 def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDMS.E_Pa, PDMS.nu),
-                          particle=(FE.E_Pa, FE.nu), curvature_elements: int = 0) -> dict:
+                          particle=(FE.E_Pa, FE.nu), curvature_elements: int = 0,
+                          geometry_order: int = 1) -> dict:
     """C_eff (6x6 Voigt, Pa) of the periodic cell with P2 tetrahedra on a conforming gmsh mesh
-    (``curvature_elements``: see :func:`conforming_tet_mesh`)."""
-    pts, tets, phase = conforming_tet_mesh(box_m, centers_m, radii_m, mesh_size_m,
-                                           curvature_elements=curvature_elements)
+    (``curvature_elements``, ``geometry_order``: see :func:`conforming_tet_mesh`; order 2 gives
+    isoparametric P2 elements on curved sphere surfaces)."""
+    got = conforming_tet_mesh(box_m, centers_m, radii_m, mesh_size_m,
+                              curvature_elements=curvature_elements,
+                              geometry_order=geometry_order)
+    pts, tets, phase = got[:3]
     L = float(box_m)
-    m = MeshTet(pts.T / L, tets.T)           # unit cell; stiffness is scale-free in 3D up to L
+    m = MeshTet(np.ascontiguousarray(pts.T / L), np.ascontiguousarray(tets.T))           # unit cell; stiffness is scale-free in 3D up to L
+    if geometry_order == 2:
+        # skfem orders the phase after sorting each element's vertices; the mesh keeps the
+        # element order, so the phase array still matches
+        m2 = MeshTet2.from_mesh(m)
+        nv = m.p.shape[1]
+        doflocs = m2.doflocs.copy()
+        for e in range(m.edges.shape[1]):
+            key = tuple(sorted((int(m.edges[0, e]), int(m.edges[1, e]))))
+            doflocs[:, nv + e] = got[3][key] / L
+        m = replace(m2, doflocs=doflocs)
     basis = Basis(m, ElementVector(ElementTetP2()))
     lm, mm = lame(*matrix)
     lp, mp = lame(*particle)
@@ -128,7 +171,7 @@ def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDM
     pin = np.unique(master[basis.nodal_dofs[:, 0]])
     free = np.setdiff1d(np.arange(Kp.shape[0]), pin)
     lu = splu(Kp[free][:, free].tocsc())
-    vol = _tet_volume(pts / L, tets)
+    vol = basis.dx.sum(axis=1)               # element volumes (curved elements included)
     Es = [voigt_to_tensor(np.eye(6)[j], engineering=True) for j in range(6)]
     fs, ws = [], []
     for E in Es:
@@ -157,6 +200,3 @@ def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDM
             "phi_mesh": float(vol[phase == 1].sum() / vol.sum())}
 
 
-def _tet_volume(p, t):
-    a, b, c, d = (p[t[:, i]] for i in range(4))
-    return np.abs(np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))) / 6.0
