@@ -9,6 +9,10 @@ and the quantities it returns, all listed in :data:`QUANTITIES` with their unit 
   (:func:`micro.particles.generate_rve`), solve the self-consistent dipoles
   (:func:`micro.dipoles.solve`) and optionally the FEM cell problem
   (:func:`homogenize.cell.homogenize_rve`).
+* :class:`RelaxEvaluator` (``evaluator = "relax"``): the coupled RVE whose particles move
+  (:func:`homogenize.relax.relax`): for each realization one random RVE relaxed through the
+  study's B_T values as field steps (continuation); each grid point stores its step
+  (magnetostriction, M_eff, stiffness along and across the field, gaps, displacements).
 * :class:`SyntheticEvaluator` (``evaluator = "synthetic"``): normal outputs with a known mean
   and standard deviation (:func:`synthetic_truth`), for testing the batch machinery and the
   statistics against exact answers.
@@ -17,6 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import json
 import math
 import os
 import time
@@ -37,7 +42,8 @@ from micro.magnetization import get_law
 from micro.particles import generate_rve
 from homogenize.cell import homogenize_rve
 
-__all__ = ["QUANTITIES", "get_evaluator", "RVEEvaluator", "SyntheticEvaluator", "synthetic_truth"]
+__all__ = ["QUANTITIES", "get_evaluator", "RVEEvaluator", "RelaxEvaluator", "SyntheticEvaluator",
+           "synthetic_truth"]
 
 # name -> (unit, per-realization shape, description)
 QUANTITIES = {
@@ -53,6 +59,22 @@ QUANTITIES = {
     "strain_mag": ("1", (3, 3), "strain of a stress-free sample, -C_eff^-1 stress_mag (FEM)"),
     "volume_m3": ("m^3", (), "RVE box volume"),
     "phi_rve": ("1", (), "particle volume fraction of the generated RVE"),
+    # relax evaluator (particles that move; field along z)
+    "strain_parallel": ("1", (), "free magnetostriction strain along the field, relaxed RVE "
+                                 "(cell FEM)"),
+    "strain_perpendicular": ("1", (), "free magnetostriction strain across the field (mean of "
+                                      "the two transverse axes), relaxed RVE (cell FEM)"),
+    "strain_affine_parallel": ("1", (), "free magnetostriction strain along the field of the "
+                                        "RVE as placed (particles fixed, cell FEM)"),
+    "M_eff_affine_A_per_m": ("A/m", (), "magnetization along the field of the RVE as placed"),
+    "E_eff_parallel_Pa": ("Pa", (), "Young's modulus along the field after restructuring "
+                                    "(cell FEM)"),
+    "E_eff_perpendicular_Pa": ("Pa", (), "Young's modulus across the field after "
+                                         "restructuring (cell FEM)"),
+    "min_gap_m": ("m", (), "smallest surface gap between particles after relaxation"),
+    "displacement_rms_m": ("m", (), "rms particle displacement from the as-placed positions"),
+    "n_contacts": ("1", (), "particle pairs in contact (inside the contact layer)"),
+    "chain_fraction": ("1", (), "fraction of particles in aligned contact chains of >= 3"),
 }
 
 # Seed-paper values used by the synthetic model, so that its numbers look like the real ones.
@@ -65,9 +87,11 @@ def get_evaluator(name: str, *, fem: bool = False, **options):
     """The evaluator of a study's ``evaluator`` key (``options``: its ``[synthetic]`` table)."""
     if name == "rve":
         return RVEEvaluator(fem=fem)
+    if name == "relax":
+        return RelaxEvaluator(fem=fem)
     if name == "synthetic":
         return SyntheticEvaluator(**options)
-    raise InputError(f"unknown evaluator {name!r}; allowed: rve, synthetic")
+    raise InputError(f"unknown evaluator {name!r}; allowed: rve, relax, synthetic")
 
 
 def _check_finite_result(out: dict, task) -> dict:
@@ -359,4 +383,149 @@ class RVEEvaluator:
                                   virial_stress_Pa=state.virial_stress_Pa, **s["cell"])
             out.update(E_eff_Pa=cell.E_eff_Pa, nu_eff=cell.nu_eff,
                        stress_mag_Pa=cell.stress_mag_Pa, strain_mag=cell.strain_mag)
+        return _check_finite_result(out, task)
+
+
+# --------------------------------------------------------------------------- relax
+_RELAX_AXES = ("phi", "B_T", "law", "matrix_E_Pa")
+#: [relax] keys -> keyword of homogenize.relax.relax (matrix_E_Pa / matrix_nu build the matrix)
+_RELAX_KEYS = ("elastic_model", "boundary", "min_gap_m", "tol", "max_iter", "demag_factor",
+               "accuracy", "cell_tol", "matrix_E_Pa", "matrix_nu")
+_RELAX_CACHE: dict = {}
+_RELAX_CACHE_SIZE = 4
+
+
+def _relax_sweep(rve, B_steps, law, law_params, matrix, fem: bool, voxels: int, opts: dict):
+    """Relaxed (and, with the cell FEM, as-placed) quantities at every field step."""
+    from homogenize.relax import magnetostriction_curve, relax
+    if fem:
+        curve = magnetostriction_curve(rve, B_steps, law=law, law_params=law_params,
+                                       matrix=matrix, voxels=voxels, **opts)
+        return curve["result"], curve
+    return relax(rve, B_steps, law=law, law_params=law_params, matrix=matrix, voxels=None,
+                 **opts), None
+
+
+@dataclass(frozen=True)
+class RelaxEvaluator:
+    """Particles that move: one random RVE per realization relaxed through the field steps.
+
+    Grid axes: ``phi`` and ``B_T`` (required; B_T strictly increasing: the field steps of one
+    continuation, every step of a realization relaxes the same RVE), ``law`` and
+    ``matrix_E_Pa`` (optional), and the particle keys of the rve evaluator (``distribution``,
+    ``mean_radius_m``, ``arrangement``, ...). ``[relax]``: ``elastic_model`` (``green``, the
+    fast periodic Green's function, default; or ``fem``, needs ``fem = true``), ``boundary``
+    (``free``/``strain``), ``min_gap_m``, ``tol``, ``max_iter``, ``demag_factor``, ``accuracy``,
+    ``cell_tol``, ``matrix_E_Pa`` (default the seed's PDMS, 2 MPa), ``matrix_nu`` (0.45).
+    ``fem = true`` runs the cell FEM (``voxels``) on the relaxed RVE at every step: strain along
+    and across the field, E along and across, and the same strain for the RVE as placed.
+    Field along z. The sweep over all B values is computed once per worker process and each
+    grid point picks its step (results do not depend on which worker computes which point).
+    """
+
+    fem: bool = False
+
+    @property
+    def id(self) -> str:
+        return f"relax-1{'-fem' if self.fem else ''}-{_source_hash(self.fem)}"
+
+    def check(self, study) -> None:
+        names = dict(study.axes)
+        for req in ("phi", "B_T"):
+            if req not in names:
+                raise InputError(f"{study.path}: [grid] missing key '{req}' (required by the "
+                                 f"relax evaluator)")
+        B = [float(b) for b in names["B_T"]]
+        if any(b2 <= b1 for b1, b2 in zip(B, B[1:])):
+            raise InputError(f"{study.path}: [grid] B_T must be strictly increasing for the "
+                             f"relax evaluator (the field steps of one continuation, >= 0 T), "
+                             f"got {B}")
+        gen_keys = ((_signature_keys(generate_rve) - {"phi", "n", "seed", "distribution",
+                                                      "composition", "progress"})
+                    | set(_DIST_KEYS) | set(_COMP_KEYS))
+        for axis in names:
+            if axis not in _RELAX_AXES and axis not in gen_keys:
+                raise InputError(f"{study.path}: [grid] unknown key '{axis}' for the relax "
+                                 f"evaluator; allowed: "
+                                 f"{', '.join(sorted(set(_RELAX_AXES) | gen_keys))}")
+        for k in study.rve:
+            if k not in gen_keys:
+                raise InputError(f"{study.path}: [rve] unknown key '{k}'; allowed: "
+                                 f"{', '.join(sorted(gen_keys))}")
+        for t in ("magnetics", "cell"):
+            if getattr(study, t):
+                k = next(iter(getattr(study, t)))
+                raise InputError(f"{study.path}: [{t}] {k}: the relax evaluator takes its "
+                                 f"solver options in [relax] (allowed: {', '.join(_RELAX_KEYS)})")
+        for k in study.relax:
+            if k not in _RELAX_KEYS:
+                raise InputError(f"{study.path}: [relax] unknown key '{k}'; allowed: "
+                                 f"{', '.join(_RELAX_KEYS)}")
+        if "matrix_E_Pa" in study.relax and "matrix_E_Pa" in names:
+            raise InputError(f"{study.path}: [relax] matrix_E_Pa is also a grid axis; give it "
+                             f"in one place")
+        if study.relax.get("elastic_model") == "fem" and not study.fem:
+            raise InputError(f"{study.path}: [relax] elastic_model = \"fem\" needs [study] "
+                             f"fem = true (the voxel FEM at [study] voxels)")
+        nu = study.relax.get("matrix_nu", 0.45)
+        if not -1.0 < nu <= 0.5:
+            raise InputError(f"{study.path}: [relax] matrix_nu must be in (-1, 0.5], got {nu}")
+        for law in names.get("law", (DEFAULT_LAW,)):
+            try:
+                get_law(law, **study.law)
+            except (InputError, TypeError, ValueError) as exc:
+                raise InputError(f"{study.path}: [grid] law / [law]: {exc}") from None
+        rve_axes = [(a, v) for a, v in study.axes if a in gen_keys]
+        for combo in itertools.product(*(v for _, v in rve_axes)):
+            try:
+                _rve_kwargs({**study.rve, **dict(zip((a for a, _ in rve_axes), combo))})
+            except (InputError, TypeError, ValueError) as exc:
+                raise InputError(f"{study.path}: [grid]/[rve] particle parameters: {exc}") from None
+
+    def __call__(self, task) -> dict:
+        from micro.materials import ElasticMaterial
+        point = dict(task.point)
+        s = task.settings
+        opts = dict(s["relax"])
+        phi = point.pop("phi")
+        B = float(point.pop("B_T"))
+        law = point.pop("law", DEFAULT_LAW)
+        E = float(point.pop("matrix_E_Pa", opts.pop("matrix_E_Pa", 2.0e6)))
+        opts.pop("matrix_E_Pa", None)
+        matrix = ElasticMaterial(E, float(opts.pop("matrix_nu", 0.45)))
+        kwargs = _rve_kwargs({**s["rve"], **point})
+        seed = task.seed_int()
+        B_steps = [float(b) for b in s["B_steps_T"]]
+        ck = json.dumps({"seed": seed, "point": {k: v for k, v in task.point.items()
+                                                 if k != "B_T"}, "settings": s},
+                        sort_keys=True, default=str)
+        hit = _RELAX_CACHE.get(ck)
+        if hit is None:
+            rve = generate_rve(phi, s["n_particles"], seed, **kwargs)
+            res, curve = _relax_sweep(rve, B_steps, law, s["law"], matrix, s["fem"],
+                                      s["voxels"], opts)
+            hit = (rve, res, curve)
+            while len(_RELAX_CACHE) >= _RELAX_CACHE_SIZE:
+                _RELAX_CACHE.pop(next(iter(_RELAX_CACHE)))
+            _RELAX_CACHE[ck] = hit
+        rve, res, curve = hit
+        k = min(range(len(B_steps)), key=lambda i: abs(B_steps[i] - B))
+        st = res.steps[k]
+        ms = st["microstructure"]
+        out = {"M_eff_A_per_m": st["M_eff_vector_A_per_m"],
+               "virial_stress_Pa": st["virial_stress_Pa"],
+               "min_gap_m": st["min_gap_m"], "displacement_rms_m": st["displacement_rms_m"],
+               "n_contacts": float(st["n_contacts"]), "chain_fraction": ms["chain_fraction"],
+               "volume_m3": rve.volume_m3, "phi_rve": rve.phi}
+        if s["fem"]:
+            if st.get("cell_error"):
+                raise RuntimeError(f"B = {B:g} T: {st['cell_error']}")
+            eps = np.asarray(st["strain_mag"], dtype=float)
+            out.update(strain_mag=eps, strain_parallel=eps[2, 2],
+                       strain_perpendicular=0.5 * (eps[0, 0] + eps[1, 1]),
+                       stress_mag_Pa=st["stress_mag_Pa"],
+                       E_eff_parallel_Pa=st["E_eff_parallel_Pa"],
+                       E_eff_perpendicular_Pa=st["E_eff_perpendicular_Pa"],
+                       strain_affine_parallel=curve["strain_affine"][k],
+                       M_eff_affine_A_per_m=curve["M_eff_affine_A_per_m"][k])
         return _check_finite_result(out, task)

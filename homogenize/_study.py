@@ -7,7 +7,8 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
     seed = 20130402                # study seed (integer >= 0)
     realizations = 8               # random RVEs per grid point (>= 2, for a standard deviation)
     n_particles = 200              # particles per RVE (the RVE size)
-    evaluator = "rve"              # "rve" (particles -> dipoles -> FEM) or "synthetic"
+    evaluator = "rve"              # "rve" (particles -> dipoles -> FEM), "relax" (particles
+                                   # that move: coupled RVE through the B steps) or "synthetic"
     fem = false                    # run the FEM homogenization (E_eff, nu_eff, stress_mag)
     voxels = 16                    # FEM voxels per RVE edge (when fem = true)
     confidence = 0.95              # level of the confidence intervals in the table
@@ -23,6 +24,9 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
     [law]        # fixed parameters of micro.magnetization.get_law
     [magnetics]  # fixed keywords of micro.dipoles.solve (tol, accuracy, method, ...)
     [cell]       # fixed keywords of homogenize.cell.homogenize_rve (matrix_E_Pa, ...)
+    [relax]      # evaluator = "relax" only: keywords of homogenize.relax.relax (elastic_model,
+                 # boundary, min_gap_m, tol, max_iter, demag_factor, accuracy, cell_tol,
+                 # matrix_E_Pa, matrix_nu); see homogenize/studies/relax_example.toml
 
     [synthetic]  # evaluator = "synthetic" only: work_seconds = CPU seconds per realization
 
@@ -37,6 +41,9 @@ The grid is the Cartesian product of the axes, taken in the canonical order of
 :data:`AXIS_ORDER` (then alphabetical for other axes), C order (last axis fastest). Grid point
 ``g`` realization ``r`` gets the seed ``SeedSequence(study seed, spawn_key=(g, r))``: independent
 streams, reproducible one by one, whatever the number of workers or the order of execution.
+With ``evaluator = "relax"`` the B_T axis is the sequence of field steps of one continuation:
+every B value of a realization relaxes the SAME random RVE, so its seed is that of the grid
+point at the first B value (``Task.seed_group``), and B_T must be strictly increasing.
 """
 from __future__ import annotations
 
@@ -63,20 +70,20 @@ __all__ = ["Study", "Task", "load_study", "parse_study", "AXIS_ORDER"]
 # Canonical order of the common axes; the grid index (and hence the seeds) does not depend on
 # the order in which the axes are written in the file.
 AXIS_ORDER = ("phi", "distribution", "mean_radius_m", "gsd", "shell_thickness_m",
-              "arrangement", "law", "B_T", "gradB_T_per_m")
+              "arrangement", "law", "matrix_E_Pa", "B_T", "gradB_T_per_m")
 
 # Units of the common axes (others: taken from their name, "1" if none can be told).
 AXIS_UNITS = {"phi": "1", "mean_radius_m": "m", "shell_thickness_m": "m", "B_T": "T",
-              "gradB_T_per_m": "T/m", "gsd": "1"}
+              "gradB_T_per_m": "T/m", "gsd": "1", "matrix_E_Pa": "Pa"}
 
 _STUDY_KEYS = {
     "name": str, "seed": int, "realizations": int, "n_particles": int, "evaluator": str,
     "fem": bool, "voxels": int, "confidence": float, "description": str,
 }
-_TABLES = ("study", "grid", "rve", "law", "magnetics", "cell", "rve_size", "synthetic")
+_TABLES = ("study", "grid", "rve", "law", "magnetics", "cell", "relax", "rve_size", "synthetic")
 _RVE_SIZE_KEYS = {"n_particles": list, "realizations": int, "quantity": str, "component": str,
                   "target_rel_precision": float}
-EVALUATORS = ("rve", "synthetic")
+EVALUATORS = ("rve", "relax", "synthetic")
 
 
 # Value rules of the known keys of [rve], [magnetics], [cell], [law] (and of the same keys as
@@ -127,6 +134,9 @@ _RULES = {
     # cell (homogenize.cell.homogenize_rve)
     "matrix_E_Pa": _MOD, "particle_E_Pa": _MOD, "matrix_nu": _NU, "particle_nu": _NU,
     "rigid": ("bool",), "deflate": ("bool",), "maxiter": ("int", 1, 10 ** 6),
+    # relax (homogenize.relax.relax; tol, max_iter, accuracy, demag_factor, matrix_* above)
+    "elastic_model": ("enum", ("green", "fem")), "boundary": ("enum", ("free", "strain")),
+    "min_gap_m": ("float", 0.0, 1e-3, "m", True), "cell_tol": _TOL,
 }
 # the cell's tol shares the name of the dipoles' tol: both must be <= 1e-2
 _CELL_RULES = {"method": ("enum", ("composite", "laminate", "centre", "fraction"))}
@@ -215,6 +225,7 @@ class Study:
     law: dict = field(default_factory=dict)
     magnetics: dict = field(default_factory=dict)
     cell: dict = field(default_factory=dict)
+    relax: dict = field(default_factory=dict)        # [relax] (evaluator = "relax")
     rve_size: RveSizeSpec | None = None
     synthetic: dict = field(default_factory=dict)   # options of the synthetic evaluator
 
@@ -237,15 +248,38 @@ class Study:
 
     def settings(self) -> dict:
         """Everything besides the grid point that determines one realization's result."""
-        return {"n_particles": self.n_particles, "fem": self.fem, "voxels": self.voxels,
-                "rve": self.rve, "law": self.law, "magnetics": self.magnetics, "cell": self.cell}
+        s = {"n_particles": self.n_particles, "fem": self.fem, "voxels": self.voxels,
+             "rve": self.rve, "law": self.law, "magnetics": self.magnetics, "cell": self.cell}
+        if self.evaluator == "relax":
+            # the whole continuation path determines the result at each of its steps
+            s["relax"] = self.relax
+            s["B_steps_T"] = [float(b) for b in dict(self.axes)["B_T"]]
+        return s
 
     def tasks(self) -> list["Task"]:
         """All realizations in grid order (point-major), each with its own seed."""
         settings = self.settings()
+        groups = self._seed_groups()
         return [Task(grid_index=g, realization=r, point=p, settings=settings,
-                     study_seed=self.seed)
+                     study_seed=self.seed, seed_group=groups[g])
                 for g, p in enumerate(self.points()) for r in range(self.realizations)]
+
+    def _seed_groups(self) -> list:
+        """Per grid point, the grid index whose seeds it uses: itself, or for the relax
+        evaluator the point with the same other axes at the first B value (one RVE per
+        continuation path)."""
+        P = self.n_points
+        if self.evaluator != "relax":
+            return list(range(P))
+        names = self.axis_names
+        k = names.index("B_T")
+        shape = self.grid_shape
+        out = []
+        for g in range(P):
+            idx = list(np.unravel_index(g, shape))
+            idx[k] = 0
+            out.append(int(np.ravel_multi_index(tuple(idx), shape)))
+        return out
 
     def replace(self, **changes) -> "Study":
         return dataclasses.replace(self, **changes)
@@ -257,7 +291,8 @@ class Study:
                 "evaluator": self.evaluator, "fem": self.fem, "voxels": self.voxels,
                 "confidence": self.confidence, "axes": {a: list(v) for a, v in self.axes},
                 "rve": self.rve, "law": self.law, "magnetics": self.magnetics,
-                "cell": self.cell, "synthetic": self.synthetic, "study_file_text": self.text}
+                "cell": self.cell, "relax": self.relax, "synthetic": self.synthetic,
+                "study_file_text": self.text}
 
 
 @dataclass(frozen=True)
@@ -269,10 +304,13 @@ class Task:
     point: dict
     settings: dict
     study_seed: int
+    seed_group: int | None = None     # grid index whose seeds this task shares (relax)
 
     def seed_sequence(self) -> np.random.SeedSequence:
-        """``SeedSequence(study seed, spawn_key=(grid index, realization index))``."""
-        return np.random.SeedSequence(self.study_seed, spawn_key=(self.grid_index, self.realization))
+        """``SeedSequence(study seed, spawn_key=(grid index, realization index))``; the grid
+        index is ``seed_group`` when set (all field steps of one relax realization)."""
+        g = self.grid_index if self.seed_group is None else self.seed_group
+        return np.random.SeedSequence(self.study_seed, spawn_key=(g, self.realization))
 
     def seed_int(self) -> int:
         """A 63-bit integer seed drawn from :meth:`seed_sequence` (for APIs that take an int)."""
@@ -427,8 +465,10 @@ def parse_study(text: str, path: str = "<study>") -> Study:
     axes.sort(key=lambda av: (rank.get(av[0], len(AXIS_ORDER)), av[0]))
 
     tables = {}
-    for t in ("rve", "law", "magnetics", "cell"):
+    for t in ("rve", "law", "magnetics", "cell", "relax"):
         tab = doc.get(t, {})
+        if t == "relax" and tab and evaluator != "relax":
+            raise InputError(f"{path}: [relax] is given but [study] evaluator = {evaluator!r}")
         for k, v in tab.items():
             if k in dict(axes):
                 raise InputError(f"{path}: [{t}] {k} is also a grid axis; give it in one place")

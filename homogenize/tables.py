@@ -31,7 +31,11 @@ Dimensions: one per grid axis, in the study's canonical order (e.g. ``phi``, ``a
   ``long_name``;
 * for each quantity Q (``f_eff_N_m3``, ``phi_eff``, ``d_eff``, ``M_eff_A_per_m``,
   ``virial_stress_Pa``, ``volume_m3``, ``phi_rve``; with ``fem = true`` also ``E_eff_Pa``,
-  ``nu_eff``, ``stress_mag_Pa``, ``strain_mag``): ``Q_mean``, ``Q_sd`` (sample sd, ddof 1),
+  ``nu_eff``, ``stress_mag_Pa``, ``strain_mag``; with ``evaluator = "relax"``:
+  ``M_eff_A_per_m``, ``virial_stress_Pa``, ``min_gap_m``, ``displacement_rms_m``,
+  ``n_contacts``, ``chain_fraction``, and with ``fem = true`` ``strain_mag``,
+  ``strain_parallel``, ``strain_perpendicular``, ``stress_mag_Pa``, ``E_eff_parallel_Pa``,
+  ``E_eff_perpendicular_Pa``, ``strain_affine_parallel``, ``M_eff_affine_A_per_m``): ``Q_mean``, ``Q_sd`` (sample sd, ddof 1),
   ``Q_ci_low``, ``Q_ci_high`` (Student-t interval of the mean at the study's confidence), shape
   (*grid, [i, [j]]), and the per-realization values ``Q`` (*grid, realization, [i, [j]]); each
   with ``units`` and ``long_name``;

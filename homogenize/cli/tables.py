@@ -28,7 +28,13 @@ effective-parameter table (HDF5; open with xarray.open_dataset(path, engine="h5n
 Each realization is stored as soon as it finishes in <out stem>.parts/; running the same
 command again after an interruption (Ctrl-C, killed workers) resumes without recomputing.
 The table is identical whatever the number of workers. Exit codes: 0 done, 1 some
-realizations failed (the others are kept), 2 bad input, 130 interrupted."""
+realizations failed (the others are kept), 2 bad input, 130 interrupted.
+
+Evaluators ([study] evaluator): "rve" (particles -> dipoles -> FEM, the default), "relax"
+(particles that move: each realization one RVE relaxed through the B_T values as field steps;
+magnetostriction along and across the field, M_eff, E along and across the field after
+restructuring, smallest gap, rms displacement against B; example:
+homogenize/studies/relax_example.toml) and "synthetic" (known answers, for tests)."""
 
 _RVE_SIZE_DOC = """\
 Representative volume (Kanit et al. 2003): run the study at each RVE size of its [rve_size]
