@@ -419,11 +419,15 @@ class RelaxEvaluator:
     ``cell_tol``, ``matrix_E_Pa`` (default the seed's PDMS, 2 MPa), ``matrix_nu`` (0.45).
     ``fem = true`` runs the cell FEM (``voxels``) on the relaxed RVE at every step: strain along
     and across the field, E along and across, and the same strain for the RVE as placed.
-    Field along z. The sweep over all B values is computed once per worker process and each
-    grid point picks its step (results do not depend on which worker computes which point).
+    Field along z. The sweep over all B values is computed once (run_batch submits the steps
+    of one realization together, ``sweeps``; a per-process cache of the last sweeps serves the
+    steps) and each grid point picks its step: results do not depend on which worker computes
+    which point.
     """
 
     fem: bool = False
+    #: run_batch submits all field steps of one realization as one task (one sweep each)
+    sweeps = True
 
     @property
     def id(self) -> str:

@@ -299,6 +299,24 @@ def _run_task(task: Task, evaluator):
                         isinstance(exc, InputError))
 
 
+def _run_group(tasks, evaluator):
+    """Several realizations in one worker call, in order (the field steps of one relax
+    continuation: the evaluator computes the sweep once and each step picks its point)."""
+    return [_run_task(t, evaluator) for t in tasks]
+
+
+def _task_groups(todo, evaluator):
+    """Tasks submitted together: one per realization, or for an evaluator with ``sweeps``
+    (relax) all grid points of one seed group and realization, so that one worker computes
+    each continuation once."""
+    if not getattr(evaluator, "sweeps", False):
+        return [[tk] for tk in todo]
+    groups: dict = {}
+    for t, k in todo:
+        groups.setdefault((t.seed_group, t.realization), []).append((t, k))
+    return list(groups.values())
+
+
 @contextlib.contextmanager
 def _dask_client(scheduler: str | None, workers: int | None, processes: bool):
     from dask.distributed import Client, LocalCluster
@@ -404,14 +422,20 @@ def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, c
             from dask.distributed import as_completed
             by_key = {}
             futures = []
-            for t, k in todo:
-                fut = cl.submit(_run_task, t, evaluator, key=f"mapsim-{k}", retries=retries,
-                                pure=False)
-                by_key[fut.key] = (t, k)
+            for group in _task_groups(todo, evaluator):
+                if len(group) == 1:
+                    (t, k), = group
+                    fut = cl.submit(_run_task, t, evaluator, key=f"mapsim-{k}",
+                                    retries=retries, pure=False)
+                else:
+                    fut = cl.submit(_run_group, [t for t, _ in group], evaluator,
+                                    key=f"mapsim-{group[0][1]}-{len(group)}",
+                                    retries=retries, pure=False)
+                by_key[fut.key] = group
                 futures.append(fut)
             stored = 0
             for fut in as_completed(futures):
-                t, k = by_key[fut.key]
+                group = by_key[fut.key]
                 # a result held by a worker that died after finishing is "lost": the scheduler
                 # recomputes it because this client still holds the future, so wait for it;
                 # only an error (after retries) or a cancellation is a failure
@@ -423,16 +447,18 @@ def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, c
                         result = fut.result()
                     except Exception as e:          # cancelled, or failed on recomputation
                         exc = e
-                if isinstance(result, _Failure):
-                    failures.append((t, result))
-                elif exc is not None:
-                    failures.append((t, _Failure(type(exc).__name__,
-                                                 (str(exc).strip().splitlines() or [""])[0],
-                                                 False)))
-                else:
-                    _write_part(_part_path(parts, t, k), t, k, result)
-                    stored += 1
-                    bar.update(1)
+                results = result if len(group) > 1 and exc is None else [result] * len(group)
+                for (t, k), res in zip(group, results):
+                    if isinstance(res, _Failure):
+                        failures.append((t, res))
+                    elif exc is not None:
+                        failures.append((t, _Failure(type(exc).__name__,
+                                                     (str(exc).strip().splitlines() or [""])[0],
+                                                     False)))
+                    else:
+                        _write_part(_part_path(parts, t, k), t, k, res)
+                        stored += 1
+                        bar.update(1)
                 fut.release()
                 if _stop_after is not None and stored >= _stop_after:
                     raise KeyboardInterrupt        # tests: an interruption after some results
