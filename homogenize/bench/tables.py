@@ -7,6 +7,12 @@ clock starts, so the figure is the steady-state throughput; the two set-ups alte
 each keeps its fastest run (the machine is shared). ``max_rel_error`` is the largest
 relative difference between the two tables: 0, since the table must not depend on the number
 of workers.
+
+The second record is the batch OVERHEAD at production size (2000 particles per RVE, FEM on): the
+same realizations are first computed one after another in this process by the evaluator alone
+(one numba thread, like a worker), then as a ``mapsim batch`` on 1 and on 2 workers. The
+overhead is ``t_batch / (sum of single-RVE times / workers) - 1``: scheduling, serialization,
+table writing and the per-worker start, everything that is not the physics (target < 10 %).
 """
 from __future__ import annotations
 
@@ -31,6 +37,22 @@ evaluator = "rve"
 [grid]
 phi = 0.035
 B_T = [0.05, 0.5]
+gradB_T_per_m = 1.78
+"""
+
+
+_STUDY_FEM = """
+[study]
+name = "bench-overhead"
+seed = 7
+realizations = {R}
+n_particles = {N}
+evaluator = "rve"
+fem = true
+voxels = {V}
+[grid]
+phi = 0.035
+B_T = 0.1
 gradB_T_per_m = 1.78
 """
 
@@ -86,4 +108,57 @@ def bench_records(quick: bool) -> list[dict]:
         # the speed-up needs two free cores: the 1-minute load average tells whether it had them
         "load_average_1min": [load_before, os.getloadavg()[0]],
         "cpu_count": os.cpu_count(),
-    }]
+    }] + overhead_records(quick)
+
+
+def _single_times(study) -> list[float]:
+    """Each realization computed alone in this process, one numba thread (as a batch worker)."""
+    import numba
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        ev = RVEEvaluator(fem=True)
+        ev(study.replace(seed=study.seed + 1).tasks()[0])          # warm-up, not timed
+        out = []
+        for task in study.tasks():
+            t0 = time.perf_counter()
+            ev(task)
+            out.append(time.perf_counter() - t0)
+        return out
+    finally:
+        numba.set_num_threads(threads)
+
+
+def overhead_records(quick: bool) -> list[dict]:
+    """Batch overhead of ``mapsim batch`` at production RVE size, 1 and 2 workers."""
+    from dask.distributed import Client
+
+    R, N, V = (2, 300, 12) if quick else (4, 2000, 24)
+    study = parse_study(_STUDY_FEM.format(R=R, N=N, V=V), "bench-overhead.toml")
+    load_before = os.getloadavg()[0]
+    singles = _single_times(study)
+    total = float(sum(singles))
+    recs = []
+    with tempfile.TemporaryDirectory() as d:
+        for w in (1, 2):
+            with _cluster(w) as cluster, Client(cluster) as client:
+                client.run(_warm, study.replace(seed=study.seed + 1).tasks()[0])
+                t0 = time.perf_counter()
+                run_batch(study, Path(d) / f"w{w}.h5", client=client, progress=False)
+                t = time.perf_counter() - t0
+            ideal = total / min(w, len(singles))
+            recs.append({
+                "name": f"tables: batch overhead, {len(singles)} RVEs of {N} particles + FEM "
+                        f"{V}^3, {w} worker{'s' if w > 1 else ''}",
+                "n": len(singles), "seconds": t,
+                "reference": f"sum of the single-RVE compute times / {w} (same realizations, "
+                             "evaluator alone, 1 numba thread)",
+                "reference_seconds": ideal, "ratio": ideal / t,
+                "overhead_fraction": t / ideal - 1.0, "target_overhead_fraction": 0.10,
+                "max_rel_error": None, "single_rve_seconds": singles,
+                "load_average_1min": [load_before, os.getloadavg()[0]],
+                "cpu_count": os.cpu_count(),
+                "note": "2 workers need 2 free cores; on a loaded machine the 2-worker figure "
+                        "measures the load, not the batch" if w > 1 else None,
+            })
+    return recs
