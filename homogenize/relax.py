@@ -31,9 +31,16 @@ through the cell FEM (:func:`homogenize.cell.homogenize_mesh`, rigid particles) 
 magnetic forces and pairwise virial: ``C_eff`` (stiffness along and across the field after
 restructuring), the magnetic mean stress and, with ``boundary="free"``, the free
 magnetostriction ``strain_mag = -C_eff^-1 stress_mag`` (zero mean stress); with
-``boundary="strain"`` the mean strain stays zero and the mean stress is reported. The affine
-strain (~1e-3 .. 1e-2) is not fed back into the magnetics (it changes pair distances by that
-relative amount, against the gap changes of tens of per cent that restructuring makes).
+``boundary="strain"`` the mean strain is the prescribed ``E`` (default zero, a clamped cell) and
+the mean stress ``C_eff : E + stress_mag`` is reported. The affine strain (~1e-3 .. 1e-2) is not
+fed back into the magnetics (it changes pair distances by that relative amount, against the gap
+changes of tens of per cent that restructuring makes).
+
+Near field (``near_field=True``): close pairs (surface gap below two mean radii) get the exact
+two-sphere force minus the point-dipole force (:mod:`micro.nearfield`, multipole expansion,
+chord permeability of each sphere's law at its local field) on top of the periodic point
+dipoles; the corrections are pairwise, so they conserve momentum and join the virial. Their
+part of the Jacobian comes from the same finite differences as the magnetic stiffness.
 """
 from __future__ import annotations
 
@@ -45,16 +52,18 @@ import numpy as np
 import scipy.sparse.csgraph as csgraph
 import scipy.sparse as sp
 
-from micro._validate import ConvergenceError, InputError, check_choice, check_finite
+from micro._validate import (ConvergenceError, InputError, check_choice, check_finite,
+                             check_range)
 from scipy.constants import mu_0 as MU0
 
 from micro.dipoles import solve as solve_dipoles
 from micro.magnetization import DEFAULT_LAW
 from micro.materials import PDMS, ElasticMaterial, elastic
+from micro.nearfield import MU_MAX, chord_permeability, near_field_correction_N
 from micro.rve import RVE, minimum_image
 
 from ._green import periodic_displaceability, rigid_sphere_displaceability
-from .cell import homogenize_mesh
+from .cell import homogenize_mesh, tensor_to_voigt, voigt_to_tensor
 from .mesh import voxelize
 
 __all__ = ["relax", "RelaxResult", "equilibrium", "Equilibrium", "fem_displaceability",
@@ -250,6 +259,64 @@ def _dipole_pair_stiffness(x, moments, a, box, near=2.0):
 
 
 # ------------------------------------------------------------------------------------------
+# Near-field magnetic forces beyond point dipoles
+# ------------------------------------------------------------------------------------------
+#: Near-field pairs: full correction up to a surface gap of NEAR_FIELD_GAPS[0] mean radii,
+#: tapered (cos^2) to zero at NEAR_FIELD_GAPS[1]; beyond, the correction is below ~1.5 % of
+#: the point-dipole pair force (mu_r = 1000; less for smaller mu_r).
+NEAR_FIELD_GAPS = (1.0, 2.0)
+
+
+def _taper(gap, g1, g2):
+    if gap <= g1:
+        return 1.0
+    if gap >= g2:
+        return 0.0
+    return math.cos(0.5 * math.pi * (gap - g1) / (g2 - g1)) ** 2
+
+
+def _near_field_forces(x, a, box, state, gap_floor_m, mu_max=MU_MAX, tol=1e-6):
+    """Pairwise near-field corrections to the periodic point-dipole forces (N, 3) [N] and the
+    list of (i, j, d_ij, force on i) for the virial.
+
+    Each close pair (surface gap below ``NEAR_FIELD_GAPS[1]`` mean radii, minimum image) gets
+    :func:`micro.nearfield.near_field_correction_N`: the exact two-sphere force minus the
+    two-point-dipole force, for the spheres' chord permeabilities
+    (:func:`micro.nearfield.chord_permeability`, capped at ``mu_max``) in the background field of
+    the pair, i.e. the mean of the two local fields without the partner's dipole field. Gaps
+    below ``gap_floor_m`` (inside the contact layer) are evaluated at ``gap_floor_m``.
+    """
+    N = a.size
+    F = np.zeros((N, 3))
+    pairs_out = []
+    a_mean = float(a.mean())
+    g1, g2 = NEAR_FIELD_GAPS[0] * a_mean, NEAR_FIELD_GAPS[1] * a_mean
+    i, j, d, r, g = _pairs(x, a, box, g2)
+    if i.size == 0:
+        return F, pairs_out
+    m = np.asarray(state.moments_Am2, dtype=float)
+    H = np.asarray(state.H_local_A_m, dtype=float)
+    vol = 4.0 / 3.0 * math.pi * a ** 3
+    mu = chord_permeability(m, H, vol, mu_max)
+    for p, q, dv, rv, gv in zip(i, j, d, r, g):
+        w = _taper(gv, g1, g2)
+        if w == 0.0 or mu[p] <= 1.0 or mu[q] <= 1.0:
+            continue
+        n = dv / rv
+        # the partner's open-space dipole field at each sphere (d = x_p - x_q)
+        Hq = (3.0 * (m[q] @ n) * n - m[q]) / (4.0 * math.pi * rv ** 3)
+        Hp = (3.0 * (m[p] @ n) * n - m[p]) / (4.0 * math.pi * rv ** 3)
+        Hbg = 0.5 * ((H[p] - Hq) + (H[q] - Hp))
+        r_eval = max(rv, a[p] + a[q] + gap_floor_m)
+        Fp = w * near_field_correction_N(n * r_eval, a[p], a[q], Hbg, float(mu[p]),
+                                         float(mu[q]), tol=tol)
+        F[p] += Fp
+        F[q] -= Fp
+        pairs_out.append((p, q, dv, Fp))
+    return F, pairs_out
+
+
+# ------------------------------------------------------------------------------------------
 # Equilibrium at one field
 # ------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
@@ -262,6 +329,8 @@ class Equilibrium:
     centers_m : (N, 3) relaxed centres, wrapped into the cell [m]
     state : MagneticState at the relaxed positions
     contact_force_N : (N, 3) penalty forces [N]
+    near_field_force_N : (N, 3) near-field corrections beyond point dipoles [N] (None when off);
+        near_field_pairs : their pairs (i, j, d_ij [m], force on i [N]) for the virial
     iterations : Newton iterations; residual_history : relative residual per residual evaluation
     """
 
@@ -273,6 +342,8 @@ class Equilibrium:
     evaluations: int
     residual_history: tuple
     contacts: tuple
+    near_field_force_N: np.ndarray | None = None
+    near_field_pairs: tuple = ()
 
 
 def _rve_at(rve, centers):
@@ -291,7 +362,8 @@ def magnetic_coenergy_J(state, B_T) -> float:
 def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None,
                 u0_m=None, tol=1e-6, max_iter=60, demag_factor=None, accuracy=1e-6,
                 magnetic_tol=1e-10, matrix: ElasticMaterial = elastic(PDMS), fd_gap=0.25,
-                max_fd=12) -> Equilibrium:
+                max_fd=12, near_field: bool = False,
+                near_field_mu_max: float = MU_MAX) -> Equilibrium:
     """Solve ``u = M F(X + u)`` at one applied field (see the module docstring).
 
     Parameters
@@ -307,6 +379,9 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
     fd_gap, max_fd : the Jacobian's magnetic stiffness by differences of the full forces for at
         most ``max_fd`` particles closer than ``fd_gap`` mean radii to a neighbour (cost: 3 dipole
         solves per particle); the Jacobian only steers the iteration, the residual is exact
+    near_field : bool -- add the near-field corrections beyond point dipoles of close pairs
+        (:func:`_near_field_forces`, :mod:`micro.nearfield`) to the magnetic forces
+    near_field_mu_max : cap of the chord relative permeability in the near-field model
 
     Raises
     ------
@@ -322,7 +397,16 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
         raise InputError(f"min_gap_m must be > 0 m, got {min_gap_m}")
     k_c = _contact_stiffness(a, matrix)
     law_params = dict(law_params or {})
-    last = {"m": None, "state": None, "Fc": None}
+    last = {"m": None, "state": None, "Fc": None, "nf": None}
+    nf_floor = 0.1 * g0         # near-field forces inside the contact layer: at this gap
+
+    def magnetic(x, st):
+        """Total magnetic force (N, 3): periodic point dipoles (+ near-field corrections)."""
+        if not near_field:
+            return st.total_force_N, None
+        Fn, pairs_nf = _near_field_forces(x, a, L, st, nf_floor, near_field_mu_max)
+        return st.total_force_N + Fn, (Fn, tuple(pairs_nf))
+
     if M.shape != (3 * N, 3 * N):
         raise InputError(f"M must have shape ({3 * N}, {3 * N}) [m/N], got {M.shape}")
     hist = []
@@ -347,7 +431,7 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
         close = np.unique(np.concatenate([ii, jj]))[:max_fd]
         if close.size == 0:
             return K
-        F0 = st.total_force_N.ravel()
+        F0 = magnetic(x, st)[0].ravel()
         h = 1e-4 * a_mean
         for p in close:
             for c in range(3):
@@ -357,14 +441,15 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
                                     demag_factor=demag_factor, tol=magnetic_tol,
                                     accuracy=accuracy, initial_moments_Am2=st.moments_Am2,
                                     **law_params)
-                K[:, 3 * p + c] = (sp_.total_force_N.ravel() - F0) / h
+                K[:, 3 * p + c] = (magnetic(x + du, sp_)[0].ravel() - F0) / h
         return K
 
     def resid(y):
         u = y.reshape(N, 3) * a_mean
         st, Fc, _ = forces(u)
-        last["state"], last["Fc"] = st, Fc
-        r = (u.ravel() - M @ (st.total_force_N + Fc).ravel()) / a_mean
+        Fm, nf = magnetic(X + u, st)
+        last["state"], last["Fc"], last["nf"] = st, Fc, nf
+        r = (u.ravel() - M @ (Fm + Fc).ravel()) / a_mean
         hist.append(float(np.abs(r).max()))
         return r
 
@@ -421,6 +506,7 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
             + ", ".join(f"{v:.1e}" for v in hist[-4:]) + ")", hist)
     st, Fc, _ = forces(u)
     x = X + u
+    _, nf = magnetic(x, st)
     i, j, d, rr, g = _pairs(x, a, L, g0)
     if np.any(g < -g0):
         k = int(np.argmin(g))
@@ -431,7 +517,9 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
             f"for these forces (raise min_gap_m)", hist)
     return Equilibrium(displacement_m=u, centers_m=np.mod(x, L), state=st, contact_force_N=Fc,
                        iterations=n_newton, evaluations=len(hist), residual_history=tuple(hist),
-                       contacts=tuple((int(p), int(q)) for p, q in zip(i, j)))
+                       contacts=tuple((int(p), int(q)) for p, q in zip(i, j)),
+                       near_field_force_N=None if nf is None else nf[0],
+                       near_field_pairs=() if nf is None else nf[1])
 
 
 # ------------------------------------------------------------------------------------------
@@ -530,7 +618,8 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
           near_field: bool = False, elastic_model: str = "green", direction=(0.0, 0.0, 1.0),
           min_gap_m: float | None = None, tol: float = 1e-6, max_iter: int = 60,
           demag_factor=None, accuracy: float = 1e-6, cell_tol: float = 1e-6,
-          progress: bool = False) -> RelaxResult:
+          progress: bool = False, mean_strain=None,
+          near_field_mu_max: float = MU_MAX) -> RelaxResult:
     """Relax an RVE through increasing field steps (coupled magneto-mechanics).
 
     Parameters
@@ -541,11 +630,18 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
     law, law_params : magnetization law (:func:`micro.magnetization.get_law`) and parameters
     matrix : ElasticMaterial -- the matrix (E_Pa > 0, nu); particles are rigid
     boundary : {"free", "strain"} -- zero mean stress (free magnetostriction ``strain_mag``)
-        or zero mean strain (``strain_mag`` = 0, the mean stress in ``stress_mag_Pa``)
+        or the prescribed mean strain ``mean_strain`` (default zero: a clamped cell); each step
+        reports ``mean_strain`` and ``mean_stress_Pa`` (3x3): free: the magnetostriction and
+        zero; strain: the prescribed strain and ``C_eff : mean_strain + stress_mag_Pa``
+    mean_strain : (3, 3) symmetric, or None -- prescribed mean (small) strain of the cell for
+        ``boundary="strain"`` [-], |entries| <= 0.1. It enters the mean stress linearly; like
+        the free magnetostriction it is not fed back into the particle positions of the
+        magnetics (an affine strain changes pair distances by its own relative amount)
     voxels : int or None -- voxels per edge of the cell FEM on the relaxed RVE (C_eff, mean
         stress, strain); None skips it (no strain, no E_eff)
-    near_field : bool -- near-field magnetic forces beyond point dipoles (not implemented:
-        True is refused)
+    near_field : bool -- add the near-field corrections beyond point dipoles of close pairs
+        (exact two-sphere multipole forces minus point-dipole ones, :mod:`micro.nearfield`,
+        chord permeability capped at ``near_field_mu_max``; pairwise additive)
     elastic_model : {"green", "fem"} -- displaceability from the periodic elastic Green's
         function (fast) or from the voxel FEM (3N cell solves at ``voxels``)
     direction : (3,) -- field direction
@@ -573,9 +669,11 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
     _check_matrix(matrix)
     check_choice("boundary", boundary, BOUNDARIES)
     check_choice("elastic_model", elastic_model, ELASTIC_MODELS)
-    if near_field:
-        raise InputError("near_field=True is not implemented: the forces are point-dipole "
-                         "forces (use near_field=False)")
+    if not isinstance(near_field, (bool, np.bool_)):
+        raise InputError(f"near_field must be True or False, got {near_field!r}")
+    check_range("near_field_mu_max", near_field_mu_max, 1.0, 1e6, "(relative permeability)",
+                lo_open=True)
+    E_mean = _check_mean_strain(mean_strain, boundary)
     if voxels is None and elastic_model == "fem":
         raise InputError("elastic_model='fem' needs voxels")
     n = np.asarray(direction, dtype=float)
@@ -596,7 +694,8 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
         t0 = time.perf_counter()
         eq = equilibrium(rve, Bk * n, M, law=law, law_params=law_params, min_gap_m=min_gap_m,
                          u0_m=u, tol=tol, max_iter=max_iter, demag_factor=demag_factor,
-                         accuracy=accuracy, matrix=matrix)
+                         accuracy=accuracy, matrix=matrix, near_field=bool(near_field),
+                         near_field_mu_max=near_field_mu_max)
         t["relax"] += time.perf_counter() - t0
         u = eq.displacement_m
         r_rel = replace(rve, centers_m=eq.centers_m,
@@ -615,13 +714,24 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
         ms = microstructure(r_rel, n)
         rec["min_gap_m"] = ms["nn_gap_m"]["min"]
         rec["microstructure"] = ms
+        if near_field:
+            Fn = eq.near_field_force_N
+            Fp = st.total_force_N
+            rec["near_field_pairs"] = len(eq.near_field_pairs)
+            rec["near_field_force_max_N"] = float(np.abs(Fn).max()) if Fn is not None else 0.0
+            rec["point_dipole_force_max_N"] = float(np.abs(Fp).max())
         rec["strain_mag"] = rec["stress_mag_Pa"] = None
+        rec["mean_strain"] = rec["mean_stress_Pa"] = None
         rec["E_eff_parallel_Pa"] = rec["E_eff_perpendicular_Pa"] = None
         if voxels is not None:
             t0 = time.perf_counter()
             forces = st.total_force_N + eq.contact_force_N
             # contact forces are pairwise too: their virial joins the dipoles'
             vir = np.asarray(st.virial_stress_Pa, dtype=float).copy()
+            if near_field and eq.near_field_force_N is not None:
+                forces = forces + eq.near_field_force_N
+                for (_, _, dv, fv) in eq.near_field_pairs:      # pairwise: virial too
+                    vir -= np.outer(dv, fv) / rve.box_m ** 3
             g0 = min_gap_m if min_gap_m is not None else 0.05 * float(np.mean(rve.radii_m))
             for (_, _, dv, fv) in _pair_contact_forces(eq.centers_m, np.asarray(rve.radii_m),
                                                        rve.box_m, g0, matrix,
@@ -634,9 +744,20 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
                 steps.append(rec)
                 continue
             C = res.C_eff_Pa
-            rec["stress_mag_Pa"] = np.asarray(res.stress_mag_Pa).tolist()
-            rec["strain_mag"] = (np.asarray(res.strain_mag).tolist() if boundary == "free"
-                                 else np.zeros((3, 3)).tolist())
+            sig_mag = np.asarray(res.stress_mag_Pa, dtype=float)
+            rec["stress_mag_Pa"] = sig_mag.tolist()
+            if boundary == "free":
+                rec["strain_mag"] = np.asarray(res.strain_mag).tolist()
+                rec["mean_strain"] = rec["strain_mag"]
+                rec["mean_stress_Pa"] = np.zeros((3, 3)).tolist()
+            else:
+                # mean stress of the cell at the prescribed mean strain E: C_eff : E + stress_mag
+                # (the free case is the E at which it vanishes, E = strain_mag)
+                sv = np.asarray(C) @ tensor_to_voigt(E_mean, engineering=True) \
+                    + tensor_to_voigt(sig_mag)
+                rec["strain_mag"] = E_mean.tolist()
+                rec["mean_strain"] = E_mean.tolist()
+                rec["mean_stress_Pa"] = voigt_to_tensor(sv).tolist()
             rec["E_eff_parallel_Pa"] = _young_along(C, n)
             rec["E_eff_perpendicular_Pa"] = 0.5 * (_young_along(C, e1) + _young_along(C, e2))
             rec["E_eff_isotropic_Pa"] = float(res.E_eff_Pa)
@@ -649,12 +770,32 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
     settings = {"law": law if isinstance(law, str) else getattr(law, "name", str(law)),
                 "law_params": dict(law_params or {}), "matrix_E_Pa": matrix.E_Pa,
                 "matrix_nu": matrix.nu, "boundary": boundary, "voxels": voxels,
-                "near_field": near_field, "elastic_model": elastic_model,
+                "near_field": bool(near_field), "elastic_model": elastic_model,
+                "near_field_mu_max": float(near_field_mu_max) if near_field else None,
+                "mean_strain": E_mean.tolist() if boundary == "strain" else None,
                 "direction": n.tolist(), "min_gap_m": min_gap_m, "tol": tol,
                 "n_particles": rve.n, "box_m": rve.box_m, "phi": rve.phi,
                 "demag_factor": demag_factor}
     return RelaxResult(steps=tuple(steps), rve=rves[-1], rves=tuple(rves), settings=settings,
                        timings_s=t)
+
+
+def _check_mean_strain(mean_strain, boundary):
+    """The prescribed mean strain (3, 3) [-] of ``boundary="strain"`` (zero if None)."""
+    if mean_strain is None:
+        return np.zeros((3, 3))
+    if boundary != "strain":
+        raise InputError(f"mean_strain is prescribed only with boundary='strain' (boundary "
+                         f"{boundary!r} has zero mean stress)")
+    E = np.asarray(check_finite("mean_strain", mean_strain, "(strain)"), dtype=float)
+    if E.shape != (3, 3):
+        raise InputError(f"mean_strain must be a 3x3 strain tensor, got shape {E.shape}")
+    if np.abs(E - E.T).max() > 1e-12 * max(np.abs(E).max(), 1e-300):
+        raise InputError("mean_strain must be symmetric (a small-strain tensor)")
+    if np.abs(E).max() > 0.1:
+        raise InputError(f"mean_strain entries must be in [-0.1, 0.1] (small strain), got "
+                         f"max |E| = {np.abs(E).max():g}")
+    return 0.5 * (E + E.T)
 
 
 def _cell(mesh, forces, virial, matrix, tol):

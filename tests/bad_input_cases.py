@@ -477,6 +477,18 @@ CASES = [
     C("bench", "--only", "foo", words=("--only",)),
     C("bench", "--json", "fifo", words=("--json", "not a regular file")),
     C("bench", "--json", "adir", words=("--json", "directory")),
+    # ------------------------------------------------------------------ relax
+    C("relax", "rve.h5", "--B", "1,0.5", "--json", "o.json", words=("strictly increasing",)),
+    C("relax", "rve.h5", "--B", "0:1:x", "--json", "o.json", words=("--B", "START:STOP:COUNT")),
+    C("relax", "rve.h5", "--matrix-E", "0", "--json", "o.json", words=("--matrix-E",)),
+    C("relax", "rve.h5", "--near-field", "maybe", "--json", "o.json", words=("--near-field",)),
+    C("relax", "rve.h5", "--mean-strain", "0,0,0,0,0,0", "--json", "o.json",
+      words=("--mean-strain", "--boundary strain")),
+    C("relax", "rve.h5", "--boundary", "strain", "--mean-strain", "1e-3,0", "--json", "o.json",
+      words=("--mean-strain", "six")),
+    C("relax", "rve.h5", "--boundary", "strain", "--mean-strain", "0.5,0,0,0,0,0", "--json",
+      "o.json", words=("mean_strain", "0.1")),
+    C("relax", "rve.h5", "--json", "rve.h5", words=("--json", "input")),
 ]
 
 # Every key of every table of a study file, each with one bad value (the rve evaluator, which

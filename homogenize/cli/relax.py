@@ -22,9 +22,20 @@ by field step (Newton on the particle displacements, contact penalty), with the 
 from the periodic elastic Green's function of rigid spheres (fast) or the voxel FEM; then the
 cell FEM on the relaxed RVE gives the free magnetostriction and the stiffness along and across
 the field. The JSON has per field step B_T, strain_mag (3x3), M_eff_A_per_m,
-E_eff_parallel_Pa, E_eff_perpendicular_Pa, min_gap_m, displacement_rms_m, iterations and the
-microstructure descriptors. Not modelled: particle rotation, near-field forces beyond point
-dipoles (--near-field on is refused)."""
+E_eff_parallel_Pa, E_eff_perpendicular_Pa, min_gap_m, displacement_rms_m, iterations, the
+mean strain and mean stress of the cell and the microstructure descriptors.
+
+--boundary free: zero mean stress (free magnetostriction). --boundary strain: the prescribed
+mean strain --mean-strain (default zero: a clamped cell); the mean stress C_eff : E + the
+magnetic stress is reported (the strain is not fed back into the particle positions).
+
+--near-field on: close pairs (surface gap below two mean radii) get the exact force of two
+magnetizable spheres (two-centre multipole expansion, converged in the number of multipoles;
+checked against an axisymmetric FEM to 0.15 %) minus the point-dipole force, on top of the
+periodic point dipoles. Limits: pairwise additive (no three-body near field), linear spheres
+with the chord permeability of their law at their local field (so near contact it overrates
+saturating particles, whose gap region saturates), permeability capped at 1000, gaps inside
+the contact layer evaluated at a tenth of it. Not modelled: particle rotation."""
 
 
 def _steps(text: str) -> np.ndarray:
@@ -42,15 +53,32 @@ def _steps(text: str) -> np.ndarray:
                          f"{text!r}") from None
 
 
+def _mean_strain(text, boundary):
+    """``"xx,yy,zz,yz,xz,xy"`` (tensor components) -> symmetric 3x3 strain, or None."""
+    if text is None:
+        return None
+    if boundary != "strain":
+        raise InputError("--mean-strain needs --boundary strain (--boundary free has zero "
+                         "mean stress)")
+    try:
+        v = [float(t) for t in text.split(",")]
+        if len(v) != 6:
+            raise ValueError
+    except ValueError:
+        raise InputError(f"--mean-strain must be six comma-separated strain components "
+                         f"xx,yy,zz,yz,xz,xy [-], got {text!r}") from None
+    xx, yy, zz, yz, xz, xy = v
+    return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+
+
 def _cmd(args) -> int:
     steps = _steps(args.B)
-    if args.near_field == "on":
-        raise InputError("--near-field on: near-field forces beyond point dipoles are not "
-                         "implemented (use off)")
+    E = _mean_strain(args.mean_strain, args.boundary)
     matrix = ElasticMaterial(args.matrix_E, args.matrix_nu)
     rve = RVE.load(args.rve)
     res = relax(rve, steps, law=args.law, matrix=matrix, boundary=args.boundary,
                 voxels=args.voxels, elastic_model=args.elastic_model,
+                near_field=args.near_field == "on", mean_strain=E,
                 progress=not args.quiet)
     out = res.to_dict()
     out["rve_file"] = str(args.rve)
@@ -60,11 +88,14 @@ def _cmd(args) -> int:
         res.rve.save(args.out)
     if args.png:
         _plot(args.png, out)
-    print(f"{'B [T]':>8} {'strain_zz':>11} {'M_eff [A/m]':>12} {'E_par [Pa]':>11} "
-          f"{'E_perp [Pa]':>11} {'min gap [m]':>11} {'u_rms [m]':>10} {'it':>3}")
+    print(f"{'B [T]':>8} {'strain_zz':>11} {'stress_zz':>11} {'M_eff [A/m]':>12} "
+          f"{'E_par [Pa]':>11} {'E_perp [Pa]':>11} {'min gap [m]':>11} {'u_rms [m]':>10} "
+          f"{'it':>3}")
     for s in out["steps"]:
         sz = s["strain_mag"][2][2] if s.get("strain_mag") is not None else float("nan")
-        print(f"{s['B_T']:8.3g} {sz:11.3e} {s['M_eff_A_per_m']:12.4g} "
+        tz = (s["mean_stress_Pa"][2][2] if s.get("mean_stress_Pa") is not None
+              else float("nan"))
+        print(f"{s['B_T']:8.3g} {sz:11.3e} {tz:11.3e} {s['M_eff_A_per_m']:12.4g} "
               f"{(s.get('E_eff_parallel_Pa') or float('nan')):11.4g} "
               f"{(s.get('E_eff_perpendicular_Pa') or float('nan')):11.4g} "
               f"{s['min_gap_m']:11.3e} {s['displacement_rms_m']:10.3e} {s['iterations']:3d}")
@@ -109,14 +140,21 @@ def register(sub, formatter):
                    type=float_in("--matrix-nu", -1.0, 0.5, "", lo_open=True, hi_open=True),
                    default=PDMS.nu, help="matrix Poisson's ratio [-]")
     p.add_argument("--boundary", choices=("free", "strain"), default="free",
-                   help="zero mean stress (free magnetostriction) or zero mean strain")
+                   help="zero mean stress (free magnetostriction) or the prescribed mean "
+                        "strain --mean-strain (default zero: clamped)")
+    p.add_argument("--mean-strain", dest="mean_strain", default=None,
+                   help="with --boundary strain: prescribed mean strain xx,yy,zz,yz,xz,xy "
+                        "(tensor components, |each| <= 0.1) [-]; unset: zero")
     p.add_argument("--voxels", type=int_in("--voxels", 8, 96), default=32,
                    help="voxels per edge of the cell FEM on the relaxed RVE")
     p.add_argument("--elastic-model", dest="elastic_model", choices=("green", "fem"),
                    default="green", help="matrix response: periodic Green's function (fast) or "
                                          "voxel FEM")
     p.add_argument("--near-field", dest="near_field", choices=("on", "off"), default="off",
-                   help="near-field magnetic forces beyond point dipoles (not implemented)")
+                   help="near-field magnetic forces beyond point dipoles: exact two-sphere "
+                        "(multipole) force minus the point-dipole force for pairs closer than "
+                        "two mean radii; pairwise, chord permeability of the law (capped at "
+                        "1000), so it overrates saturating particles near contact")
     p.add_argument("--json", required=True, help="result JSON file")
     p.add_argument("--out", default=None, help="write the relaxed RVE (HDF5) here")
     p.add_argument("--png", default=None, help="plot of strain and displacement against B")

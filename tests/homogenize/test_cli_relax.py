@@ -26,8 +26,31 @@ def test_relax_writes_steps_and_a_loadable_rve(tmp_path, capsys):
     # the relaxed RVE opens with the other commands
     assert main(["rve", "--load", str(relaxed)]) == 0
     capsys.readouterr()
-    # bad input: decreasing steps, near-field, the output is the input
+    # bad input: decreasing steps, a mean strain without the strain boundary or with the wrong
+    # number of components, the output is the input
     assert main(["relax", str(src), "--B", "1,0.5", "--json", str(tmp_path / "x.json")]) == 2
-    assert main(["relax", str(src), "--near-field", "on", "--json", str(tmp_path / "y.json")]) == 2
+    assert main(["relax", str(src), "--mean-strain", "0,0,0,0,0,0",
+                 "--json", str(tmp_path / "y.json")]) == 2
+    assert main(["relax", str(src), "--boundary", "strain", "--mean-strain", "0,0,0,0,0",
+                 "--json", str(tmp_path / "z.json")]) == 2
     assert main(["relax", str(src), "--json", str(src)]) == 2
-    assert not (tmp_path / "x.json").exists() and not (tmp_path / "y.json").exists()
+    for f in ("x.json", "y.json", "z.json"):
+        assert not (tmp_path / f).exists()
+
+
+def test_relax_near_field_and_prescribed_strain(tmp_path, capsys):
+    rve = generate_rve(0.05, 6, 5, distribution=Monodisperse(25e-9))
+    src = tmp_path / "r.h5"
+    rve.save(src)
+    out = tmp_path / "nf.json"
+    assert main(["relax", str(src), "--B", "0,0.3", "--voxels", "8", "--near-field", "on",
+                 "--boundary", "strain", "--mean-strain", "1e-3,0,0,0,0,0", "--json", str(out),
+                 "--quiet"]) == 0
+    d = json.loads(out.read_text())
+    assert d["settings"]["near_field"] is True and d["settings"]["boundary"] == "strain"
+    for s in d["steps"]:
+        assert np.allclose(s["mean_strain"], np.diag([1e-3, 0, 0]), rtol=0, atol=0)
+        assert np.shape(s["mean_stress_Pa"]) == (3, 3)
+    # zero field: the mean stress is the elastic one, C_eff : E, tension along x
+    assert d["steps"][0]["mean_stress_Pa"][0][0] > 0
+    assert "stress_zz" in capsys.readouterr().out

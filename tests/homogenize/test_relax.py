@@ -253,7 +253,70 @@ def test_strain_boundary_keeps_zero_strain():
               boundary="strain")
     s = r.steps[0]
     assert np.all(np.asarray(s["strain_mag"]) == 0.0)
+    assert np.all(np.asarray(s["mean_strain"]) == 0.0)
     assert np.abs(np.asarray(s["stress_mag_Pa"])).max() > 0
+
+
+def test_strain_boundary_mean_stress_against_free_case():
+    """Clamped cell (prescribed mean strain 0): the mean stress is what it takes to hold the
+    free magnetostriction back, sigma = -C_eff : strain_free (same relaxed particles, since the
+    fluctuations are solved at zero mean strain in both cases); prescribing strain_free itself
+    gives zero mean stress; at zero field nothing moves and the mean stress is C_eff : E."""
+    from homogenize.cell import tensor_to_voigt, voigt_to_tensor
+    rve = pair(2, 20e-9, 200e-9)
+    kw = dict(law="linear", matrix=SOFT, voxels=12)
+    free = relax(rve, [0.0, 0.1], **kw).steps
+    clamp = relax(rve, [0.0, 0.1], boundary="strain", **kw).steps
+    eps_f = np.asarray(free[1]["strain_mag"])
+    C = np.asarray(clamp[1]["C_eff_Pa"])
+    sig = np.asarray(clamp[1]["mean_stress_Pa"])
+    assert np.all(np.asarray(clamp[1]["mean_strain"]) == 0.0)
+    need = -voigt_to_tensor(C @ tensor_to_voigt(eps_f, engineering=True))
+    assert np.abs(sig - need).max() < 1e-9 * np.abs(sig).max()
+    # along the field the pair attracts: free -> contraction, clamped -> tension held
+    assert eps_f[2, 2] < 0 and sig[2, 2] > 0
+    assert np.abs(np.asarray(free[1]["mean_stress_Pa"])).max() == 0.0
+    held = relax(rve, [0.1], boundary="strain", mean_strain=eps_f, **kw).steps[0]
+    assert np.abs(np.asarray(held["mean_stress_Pa"])).max() < 1e-9 * np.abs(sig).max()
+    assert np.allclose(held["mean_strain"], eps_f, rtol=0, atol=0)
+    # zero field: no displacement, no magnetic stress; the mean stress is C_eff : E
+    E = np.diag([1e-3, -2e-4, 5e-4])
+    E[0, 1] = E[1, 0] = 3e-4
+    z = relax(rve, [0.0], boundary="strain", mean_strain=E, **kw).steps[0]
+    assert z["displacement_rms_m"] == 0.0
+    Cz = np.asarray(z["C_eff_Pa"])
+    assert np.allclose(z["mean_stress_Pa"],
+                       voigt_to_tensor(Cz @ tensor_to_voigt(E, engineering=True)),
+                       rtol=1e-9, atol=1e-9 * np.abs(Cz).max() * 1e-3)
+
+
+# ------------------------------------------------------------------ near field
+def test_near_field_moves_close_along_field_pair_more():
+    """Near-field forces beyond point dipoles pull a close pair along the field together
+    harder (gap 0.4 a, chord mu capped at 1000: the exact force is ~1.4 x the point-dipole
+    force), conserve momentum (pairwise), and change nothing for pairs beyond their range."""
+    gaps, steps = {}, {}
+    for nf in (False, True):
+        r = relax(pair(2, 10e-9), [0.02, 0.05], law="linear", matrix=SOFT, voxels=None,
+                  near_field=nf)
+        d = np.linalg.norm(r.rve.minimum_image(r.rve.centers_m[1] - r.rve.centers_m[0]))
+        gaps[nf], steps[nf] = d - 2 * A, r.steps[-1]
+    closure = {k: 10e-9 - g for k, g in gaps.items()}
+    assert closure[True] > 1.2 * closure[False] > 0
+    s = steps[True]
+    assert s["near_field_pairs"] == 1
+    ratio = s["near_field_force_max_N"] / s["point_dipole_force_max_N"]
+    assert 0.2 < ratio < 0.6
+    M = green_displaceability(pair(2, 10e-9), SOFT)
+    eq = equilibrium(pair(2, 10e-9), [0, 0, 0.05], M, law="linear", matrix=SOFT,
+                     near_field=True)
+    Fn = eq.near_field_force_N
+    assert np.abs(Fn.sum(axis=0)).max() < 1e-12 * np.abs(Fn).max()
+    assert Fn[1, 2] < 0 < Fn[0, 2]          # particle 1 sits above 0: pulled down, 0 up
+    # beyond the near-field range (gap > 2 mean radii) the results are identical
+    far = [relax(pair(2, 60e-9), [0.05], law="linear", matrix=SOFT, voxels=None,
+                 near_field=nf).rve.centers_m for nf in (False, True)]
+    assert np.array_equal(far[0], far[1])
 
 
 def test_microstructure_descriptors():
@@ -277,7 +340,14 @@ def test_microstructure_descriptors():
     (dict(B_steps_T=[0.1, 0.1]), "strictly increasing"),
     (dict(B_steps_T=[-0.1, 0.1]), "strictly increasing"),
     (dict(B_steps_T=[0.1], boundary="clamped"), "boundary"),
-    (dict(B_steps_T=[0.1], near_field=True), "near_field"),
+    (dict(B_steps_T=[0.1], near_field="yes"), "near_field"),
+    (dict(B_steps_T=[0.1], near_field=True, near_field_mu_max=0.5), "near_field_mu_max"),
+    (dict(B_steps_T=[0.1], mean_strain=np.zeros((3, 3))), "boundary='strain'"),
+    (dict(B_steps_T=[0.1], boundary="strain", mean_strain=np.zeros(3)), "3x3"),
+    (dict(B_steps_T=[0.1], boundary="strain", mean_strain=np.diag([0.2, 0, 0])), "0.1"),
+    (dict(B_steps_T=[0.1], boundary="strain", mean_strain=[[0, 1e-3, 0], [0, 0, 0], [0, 0, 0]]),
+     "symmetric"),
+    (dict(B_steps_T=[0.1], boundary="strain", mean_strain=np.full((3, 3), np.nan)), "finite"),
 ])
 def test_bad_input(kw, match):
     kw = dict(kw)
