@@ -24,6 +24,15 @@ specimens when there are >= 3) by >= 10 % AND a one-sided Wilcoxon signed-rank t
 paired held-out squared errors gives p < 0.01 (the passing candidate with the lowest error is
 accepted; if none passes, pairs of the three best are tried together); repeated until nothing
 more helps.
+Causes (the vocabulary of examples/data/EXPERIMENT_FORMAT.md, section 4):
+field_dependent_magnetization, dipolar_interaction, oxide_shell, filler_stiffening,
+geometric_nonlinearity, hyperelasticity, gravity, hysteresis, demagnetization,
+microstructure_evolution (magnetostriction, on top of dipolar_interaction: particles that move
+in the matrix; form coupled_rve reads a relax table made by `mapsim batch` with evaluator =
+"relax", homogenize/experiments/data/relax_*.h5, at the specimen's phi and E; form fitted
+fits a stress growing as M^4, needs a field-dependent M). For magnetostriction the JSON and
+the report add "microstructure_evolution": the coupled RVE's predicted strain WITHOUT any
+fitted stress next to the measured one, the held-out gains, and what remains unexplained.
 Exit code 0 when the analysis ran (whatever it found), 2 for unusable input."""
 
 _STUDY_DOC = """\

@@ -44,6 +44,15 @@ hysteresis                      magnetic kinds: the law lags the field by a coer
                                 tensile: unloading stress softened by a factor (``softening``)
 demagnetization                 internal field ``H_int = H_a - N M`` with N the magnetometric
                                 factor of the cylinder's aspect ratio (none)
+microstructure_evolution        magnetostriction, on top of ``dipolar_interaction``: the
+                                particles move in the matrix under their forces (two-way
+                                coupled RVE, ``homogenize.relax``). Form ``coupled_rve``: the
+                                relaxed-minus-affine strain of the coupled RVE, read from a
+                                relax table made by ``mapsim batch`` (``evaluator = "relax"``,
+                                ``data/relax_*.h5`` with provenance) at the specimen's phi and
+                                matrix E (none); form ``fitted``: a stress growing faster than
+                                M^2, ``kappa += c_restructure mu0 M^2 / E`` (``c_restructure``,
+                                FITTED, reported as such)
 =============================== =================================================================
 """
 from __future__ import annotations
@@ -54,14 +63,16 @@ import numpy as np
 
 from . import _physics as P
 from .io import Experiment
-from homogenize.experiments.tables import microstructure_stress_coefficient
+from homogenize.experiments.tables import (Unavailable, microstructure_stress_coefficient,
+                                           restructuring_table)
 
-__all__ = ["CAUSES", "DESCRIPTIONS", "VARIANTS", "ModelSpec", "Param", "parameters",
-           "predict", "applicable", "LORENTZ_FACTOR"]
+__all__ = ["CAUSES", "DESCRIPTIONS", "VARIANTS", "REQUIRES", "ModelSpec", "Param", "parameters",
+           "predict", "applicable", "forms", "coupled_rve_available", "restructuring_strain",
+           "LORENTZ_FACTOR"]
 
 CAUSES = ("field_dependent_magnetization", "dipolar_interaction", "oxide_shell",
           "filler_stiffening", "geometric_nonlinearity", "hyperelasticity", "gravity",
-          "hysteresis", "demagnetization")
+          "hysteresis", "demagnetization", "microstructure_evolution")
 
 DESCRIPTIONS = {
     "field_dependent_magnetization": "the particles are not saturated: their magnetization "
@@ -75,10 +86,16 @@ DESCRIPTIONS = {
     "gravity": "self-weight adds a load",
     "hysteresis": "rising and falling branches differ",
     "demagnetization": "the specimen's shape reduces the internal field (demagnetizing factor)",
+    "microstructure_evolution": "the particles move in the soft matrix under their forces: "
+                                "the strain grows faster than M^2, beyond the affine picture",
 }
 
 #: Physical forms among which cross-validation chooses (None: a single form).
-VARIANTS = {"field_dependent_magnetization": P.LAWS, "hyperelasticity": P.HYPERELASTIC_FORMS}
+VARIANTS = {"field_dependent_magnetization": P.LAWS, "hyperelasticity": P.HYPERELASTIC_FORMS,
+            "microstructure_evolution": ("coupled_rve", "fitted")}
+
+#: causes that only extend a model which already has another (tried once it is accepted)
+REQUIRES = {"microstructure_evolution": "dipolar_interaction"}
 
 #: Mean-field (Lorentz cavity) local-field factor, the reference the RVE table is checked against.
 LORENTZ_FACTOR = 1.0 / 3.0
@@ -93,6 +110,7 @@ _KINDS_OF = {
     "gravity": ("deflection",),
     "hysteresis": ("deflection", "magnetization", "magnetostriction", "tensile"),
     "demagnetization": ("magnetization", "magnetostriction"),
+    "microstructure_evolution": ("magnetostriction",),
 }
 
 
@@ -103,14 +121,17 @@ class ModelSpec:
     causes: tuple = ()
     law: str | None = None           # with field_dependent_magnetization
     hyper: str | None = None         # with hyperelasticity
+    restructure: str | None = None   # with microstructure_evolution: coupled_rve | fitted
 
     def plus(self, cause: str, variant: str | None = None) -> "ModelSpec":
-        law, hyper = self.law, self.hyper
+        law, hyper, rs = self.law, self.hyper, self.restructure
         if cause == "field_dependent_magnetization":
             law = variant
         if cause == "hyperelasticity":
             hyper = variant
-        return ModelSpec(self.kind, self.causes + (cause,), law, hyper)
+        if cause == "microstructure_evolution":
+            rs = variant
+        return ModelSpec(self.kind, self.causes + (cause,), law, hyper, rs)
 
     def has(self, cause: str) -> bool:
         return cause in self.causes
@@ -122,6 +143,8 @@ class ModelSpec:
                 parts.append(f"{c}[{self.law}]")
             elif c == "hyperelasticity":
                 parts.append(f"{c}[{self.hyper}]")
+            elif c == "microstructure_evolution":
+                parts.append(f"{c}[{self.restructure}]")
             else:
                 parts.append(c)
         return "seed" + "".join(" + " + p for p in parts)
@@ -158,6 +181,52 @@ def applicable(cause: str, exp: Experiment) -> tuple[bool, str]:
     return True, ""
 
 
+def forms(cause: str, exp: Experiment, spec: ModelSpec | None = None) -> tuple:
+    """The physical forms of ``cause`` that can run on ``exp`` on top of ``spec``.
+
+    ``microstructure_evolution``: ``coupled_rve`` needs a relax table at the specimen's phi and
+    matrix E; ``fitted`` (a stress growing as M^4 instead of M^2) needs a magnetization that
+    varies within a specimen, i.e. ``field_dependent_magnetization`` in the model: with
+    saturated particles M is constant per specimen and the term would only re-weight the
+    specimens by phi^2, which a restructuring cannot be told from a phi-dependent stress by.
+    """
+    fs = VARIANTS.get(cause) or ()
+    if cause == "microstructure_evolution":
+        out = []
+        for f in fs:
+            if f == "coupled_rve" and not coupled_rve_available(exp)[0]:
+                continue
+            if f == "fitted" and not (spec is not None
+                                      and spec.has("field_dependent_magnetization")):
+                continue
+            out.append(f)
+        return tuple(out)
+    return fs
+
+
+def coupled_rve_available(exp: Experiment) -> tuple[bool, str]:
+    """Whether a relax table holds the coupled RVE at every specimen's phi and the matrix E."""
+    try:
+        for phi in np.unique(exp.columns["phi"]):
+            restructuring_table(float(phi), float(exp.matrix.E_Pa))
+    except Unavailable as exc:
+        return False, str(exc)
+    return True, ""
+
+
+def restructuring_strain(exp: Experiment) -> np.ndarray:
+    """Per row, the coupled RVE's restructuring strain (relaxed minus affine, with the
+    specimen's shape stress on the change of mu0 M^2 / E) from the relax table [-]."""
+    c = exp.columns
+    k_shape = np.asarray(P.shape_stress_coefficient(c["aspect_ratio"]), dtype=float)
+    out = np.empty(exp.n_rows)
+    for phi in np.unique(c["phi"]):
+        sel = c["phi"] == phi
+        tab = restructuring_table(float(phi), float(exp.matrix.E_Pa))
+        out[sel] = tab.delta_strain(c["B_T"][sel], k_shape[sel] if k_shape.ndim else k_shape)
+    return out
+
+
 def _probe(cause, exp):
     """Raise Unavailable if the project module behind ``cause`` has not landed."""
     if cause in ("field_dependent_magnetization", "hysteresis", "dipolar_interaction",
@@ -171,6 +240,8 @@ def _probe(cause, exp):
         P.core_shell_moment_ratio(np.array([20e-9]), 1e-9, 25e-9, 7870.0, 178.0)
     if cause == "filler_stiffening":
         P.stiffening_ratio(np.array([0.1]), 0.45)
+    if cause == "microstructure_evolution":
+        microstructure_stress_coefficient(0.1, 1.0)
     if cause in ("geometric_nonlinearity",):
         P.elastica_ratio(np.array([1.0]))
     if cause == "gravity" or exp.kind == "deflection":
@@ -210,6 +281,9 @@ def parameters(spec: ModelSpec, exp: Experiment) -> list[Param]:
         ps.append(Param("beta", False, -2.0, 1.0, (0.0, 0.5, -0.5)))
     if spec.has("hyperelasticity") and spec.hyper == "gent":
         ps.append(Param("J_m", True, 0.3, 1e4, (3.0, 30.0, 300.0)))
+    if spec.has("microstructure_evolution") and spec.restructure == "fitted":
+        # FITTED restructuring stress: kappa grows by c mu0 M^2 / E (faster than M^2)
+        ps.append(Param("c_restructure", False, -1e4, 1e4, (0.0, 1.0, 10.0, 100.0)))
     return ps
 
 
@@ -290,7 +364,14 @@ def predicted_stress_coefficients(exp: Experiment, M) -> tuple[np.ndarray, np.nd
 def magnetostriction_coefficient(spec: ModelSpec, exp: Experiment, M, p: dict) -> np.ndarray:
     """kappa = k_shape - k_rve + kappa_extra per row: axial strain = kappa mu0 M^2 / E."""
     k_shape, k_rve = predicted_stress_coefficients(exp, M)
-    return k_shape - k_rve + p.get("kappa_extra", 0.0)
+    kappa = k_shape - k_rve + p.get("kappa_extra", 0.0)
+    if "c_restructure" in p:
+        kappa = kappa + p["c_restructure"] * P.mu_0 * M ** 2 / _matrix_E(spec, exp)
+    return kappa
+
+
+def _matrix_E(spec, exp):
+    return exp.matrix.E_Pa * _stiffening(spec, exp)
 
 
 def predict(spec: ModelSpec, exp: Experiment, p: dict) -> np.ndarray:
@@ -311,10 +392,13 @@ def predict(spec: ModelSpec, exp: Experiment, p: dict) -> np.ndarray:
         return M
     E = exp.matrix.E_Pa * _stiffening(spec, exp)
     if spec.kind == "magnetostriction":
-        if not spec.has("dipolar_interaction"):
+        if not (spec.has("dipolar_interaction") or spec.has("microstructure_evolution")):
             return np.zeros(exp.n_rows)
         # axial magnetic stress kappa mu0 M^2 on an incompressible linear matrix (small strain)
-        return magnetostriction_coefficient(spec, exp, M, p) * P.mu_0 * M ** 2 / E
+        strain = magnetostriction_coefficient(spec, exp, M, p) * P.mu_0 * M ** 2 / E
+        if spec.has("microstructure_evolution") and spec.restructure == "coupled_rve":
+            strain = strain + restructuring_strain(exp)
+        return strain
     # deflection
     f = M * c["gradB_T_per_m"]
     comp = P.eb_compliance_m4_N(c["length_m"], c["width_m"], c["thickness_m"], 1.0) / E

@@ -39,7 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, stats
 
-from .causes import CAUSES, VARIANTS, ModelSpec, Param, applicable, parameters, predict
+from .causes import (CAUSES, REQUIRES, VARIANTS, ModelSpec, Param, applicable,
+                     coupled_rve_available, forms, parameters, predict)
 from .io import Experiment
 from homogenize.experiments.causes import composite_magnetization_A_per_m, predicted_stress_coefficients
 from dataclasses import replace as _replace
@@ -84,6 +85,7 @@ class Diagnosis:
     skipped: dict                      # cause -> why it was not tried
     folds: list | None
     round_bases: list = field(default_factory=list)   # model each round started from
+    microstructure: dict | None = None    # magnetostriction: the coupled RVE's account
 
     @property
     def gain(self) -> float:
@@ -105,6 +107,8 @@ class Diagnosis:
             "final": {"cv_rmse": self.final.cv_rmse,
                       "params": {**_params_out(self.final), **_predicted_out(self.exp, self.final)}},
             "gain": self.gain if self.steps else 1.0,
+            **({"microstructure_evolution": self.microstructure}
+               if self.microstructure is not None else {}),
         }
 
 
@@ -118,6 +122,8 @@ def _params_out(c: Candidate) -> dict:
         out["law"] = c.spec.law
     if c.spec.hyper:
         out["hyperelastic_law"] = c.spec.hyper
+    if c.spec.restructure:
+        out["restructure_form"] = c.spec.restructure
     if c.spec.kind == "magnetostriction" and "scale" not in out:
         out["scale"] = 1.0            # not identifiable in magnetostriction (absorbed in E)
     return out
@@ -378,10 +384,14 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
                      if len(parameters(seed.plus(c, (VARIANTS.get(c) or (None,))[0]), exp)) == n_seed]
     while remaining:
         tried = []
-        for cause in remaining:
+        # a cause that extends another (REQUIRES) waits until that one is accepted
+        eligible = [c for c in remaining if c not in REQUIRES or current.spec.has(REQUIRES[c])]
+        if not eligible:
+            break
+        for cause in eligible:
             best = None
             variants = {}
-            for spec, v in _specs_with(current.spec, cause):
+            for spec, v in _specs_with(current.spec, cause, exp):
                 cand = _candidate(spec, cause, exp, folds)
                 if bar is not None:
                     bar.update(1)
@@ -389,6 +399,8 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
                     variants[v] = cand.cv_rmse
                 if best is None or cand.cv_rmse < best.cv_rmse:
                     best = cand
+            if best is None:               # no form of this cause can run on this model
+                continue
             best.variants = variants
             tried.append(best)
         rounds.append(tried)
@@ -418,24 +430,32 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
         # best candidates that changed the prediction at all.
         helping = sorted((c for c in tried if not np.array_equal(c.cv_pred, current.cv_pred)),
                          key=lambda c: c.cv_rmse)[:3]
+        pairs = [(helping[i], helping[j]) for i in range(len(helping))
+                 for j in range(i + 1, len(helping))]
+        if exp.kind == "magnetostriction" and not current.spec.has("dipolar_interaction"):
+            # causes acting through M (its law, shell, demagnetization, hysteresis) show in a
+            # strain only together with the stress that makes it: pair them with that one
+            dip = [c for c in helping if c.cause == "dipolar_interaction"]
+            silent = [c for c in tried if np.array_equal(c.cv_pred, current.cv_pred)]
+            pairs += [(d, c) for d in dip for c in silent]
         best_pair = None
-        for i in range(len(helping)):
-            for j in range(i + 1, len(helping)):
-                a, b = helping[i], helping[j]
-                spec_b = b.spec
-                var_b = None
-                if b.cause in VARIANTS:
-                    var_b = spec_b.law if b.cause == "field_dependent_magnetization" else spec_b.hyper
-                spec = a.spec.plus(b.cause, var_b)
-                if b.spec.law and not a.spec.law:
-                    spec = _replace(spec, law=b.spec.law)
-                if b.spec.hyper and not a.spec.hyper:
-                    spec = _replace(spec, hyper=b.spec.hyper)
-                pair = _candidate(spec, b.cause, exp, folds)
-                if bar is not None:
-                    bar.update(1)
-                if best_pair is None or pair.cv_rmse < best_pair[2].cv_rmse:
-                    best_pair = (a, b, pair)
+        for a, b in pairs:
+            spec_b = b.spec
+            var_b = None
+            if b.cause in VARIANTS:
+                var_b = {"field_dependent_magnetization": spec_b.law,
+                         "microstructure_evolution": spec_b.restructure}.get(b.cause,
+                                                                             spec_b.hyper)
+            spec = a.spec.plus(b.cause, var_b)
+            if b.spec.law and not a.spec.law:
+                spec = _replace(spec, law=b.spec.law)
+            if b.spec.hyper and not a.spec.hyper:
+                spec = _replace(spec, hyper=b.spec.hyper)
+            pair = _candidate(spec, b.cause, exp, folds)
+            if bar is not None:
+                bar.update(1)
+            if best_pair is None or pair.cv_rmse < best_pair[2].cv_rmse:
+                best_pair = (a, b, pair)
         if best_pair is None:
             break
         a, b, pair = best_pair
@@ -459,7 +479,94 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
         remaining = [c for c in remaining if c not in (a.cause, b.cause)]
     if bar is not None:
         bar.close()
-    return Diagnosis(exp, baseline, current, steps, rounds, skipped, folds, round_bases)
+    ms = microstructure_account(exp, folds, baseline, current) \
+        if exp.kind == "magnetostriction" else None
+    return Diagnosis(exp, baseline, current, steps, rounds, skipped, folds, round_bases, ms)
+
+
+def microstructure_account(exp: Experiment, folds, baseline: Candidate,
+                           final: Candidate) -> dict:
+    """What the coupled RVE (particles that move) predicts for a magnetostriction experiment,
+    WITHOUT any fitted stress, next to the measurement; the held-out gain of its extension;
+    what remains unexplained (the fitted ``kappa_extra`` still needed, named as fitted).
+
+    Numbers at the row of the largest |B| (the rising branch when there is one):
+    ``measured``, ``predicted_affine`` (particles fixed: shape stress minus the RVE's virial
+    stress), ``predicted_coupled_rve`` (plus the relax table's restructuring strain, with the
+    Student-t interval over its realizations), ``fraction_explained``, ``unexplained``.
+    """
+    ok, why = coupled_rve_available(exp)
+    if not ok:
+        return {"available": False, "why": why}
+    from homogenize._stats import t_half_width
+    from .causes import predicted_stress_coefficients, composite_magnetization_A_per_m
+    from .tables import restructuring_table
+    from . import _physics as P
+    seed = ModelSpec(exp.kind)
+    dip = seed.plus("dipolar_interaction")
+    coupled = seed.plus("microstructure_evolution", "coupled_rve")   # no fitted parameter
+    c_coupled = _candidate(coupled, "microstructure_evolution", exp, folds)
+    c_dip = _candidate(dip, "dipolar_interaction", exp, folds)
+    c_dip_coupled = _candidate(dip.plus("microstructure_evolution", "coupled_rve"),
+                               "microstructure_evolution", exp, folds)
+    c_dip_fitted = _candidate(dip.plus("microstructure_evolution", "fitted"),
+                              "microstructure_evolution", exp, folds)
+    y = exp.y
+    B = np.abs(exp.columns["B_T"])
+    up = ~exp.down
+    pool = np.flatnonzero(up) if up.any() else np.arange(exp.n_rows)
+    i = int(pool[np.argmax(B[pool])])
+    affine = predict(dip, exp, {"kappa_extra": 0.0})
+    pred = predict(coupled, exp, {})
+    phi = float(exp.columns["phi"][i])
+    tab = restructuring_table(phi, float(exp.matrix.E_Pa))
+    k_shape = float(np.asarray(P.shape_stress_coefficient(exp.columns["aspect_ratio"][i])))
+    d_r = tab.delta_strain_realizations(B[i], k_shape)
+    R = d_r.size
+    half = t_half_width(float(np.std(d_r, ddof=1)) / math.sqrt(R), R - 1, 0.95) if R > 1 \
+        else math.nan
+    M = composite_magnetization_A_per_m(dip, exp, {})
+    x = P.mu_0 * M[i] ** 2 / exp.matrix.E_Pa
+    k_sh, k_rve = predicted_stress_coefficients(exp, M)
+
+    def cv(c):
+        return float(c.cv_rmse)
+
+    def gain(a, b):
+        return float(a / b) if b > 0 else math.inf
+
+    kx = c_dip_coupled.fit.params.get("kappa_extra")
+    cr = c_dip_fitted.fit.params.get("c_restructure")
+    return {
+        "available": True,
+        "relax_table": tab.provenance,
+        "at": {"B_T": float(exp.columns["B_T"][i]), "phi": phi,
+               "branch": "down" if exp.down[i] else "up"},
+        "measured": float(y[i]),
+        "predicted_affine": float(affine[i]),
+        "predicted_coupled_rve": float(pred[i]),
+        "predicted_coupled_rve_ci95": [float(pred[i] - half), float(pred[i] + half)],
+        "restructuring_strain": float(pred[i] - affine[i]),
+        "fraction_explained": float(pred[i] / y[i]) if y[i] != 0 else math.nan,
+        "unexplained": float(y[i] - pred[i]),
+        "kappa_affine": float(k_sh[i] - k_rve[i]),
+        "kappa_coupled_rve": float(pred[i] / x) if x > 0 else math.nan,
+        "kappa_measured": float(y[i] / x) if x > 0 else math.nan,
+        "cv_rmse": {"seed": cv(baseline), "coupled_rve_no_fitted_parameter": cv(c_coupled),
+                    "dipolar_interaction_kappa_extra_fitted": cv(c_dip),
+                    "dipolar_plus_coupled_rve_kappa_extra_fitted": cv(c_dip_coupled),
+                    "dipolar_plus_fitted_restructuring": cv(c_dip_fitted)},
+        "gain_coupled_rve_over_seed": gain(cv(baseline), cv(c_coupled)),
+        "gain_coupled_rve_on_top_of_dipolar": gain(cv(c_dip), cv(c_dip_coupled)),
+        "gain_fitted_restructuring_on_top_of_dipolar": gain(cv(c_dip), cv(c_dip_fitted)),
+        "kappa_extra_fitted_with_coupled_rve": None if kx is None else float(kx),
+        "kappa_extra_fitted_with_coupled_rve_sd": float(c_dip_coupled.fit.sd.get("kappa_extra",
+                                                                               math.nan)),
+        "c_restructure_fitted": None if cr is None else float(cr),
+        "c_restructure_fitted_sd": float(c_dip_fitted.fit.sd.get("c_restructure", math.nan)),
+        "accepted": final.spec.has("microstructure_evolution"),
+        "accepted_form": final.spec.restructure,
+    }
 
 
 def _passes(current: Candidate, cand: Candidate, p: float, min_gain: float, alpha: float) -> bool:
@@ -467,13 +574,15 @@ def _passes(current: Candidate, cand: Candidate, p: float, min_gain: float, alph
     return cand.cv_rmse <= (1.0 - min_gain) * current.cv_rmse and p < alpha
 
 
-def _specs_with(spec: ModelSpec, cause: str):
-    """``spec`` plus ``cause``, in every physical form: the new cause's own forms, and -- since
-    an added cause changes which law fits best -- every form of a law already in the model.
-    Yields (spec, label of the form or None)."""
-    forms = VARIANTS.get(cause)
-    if forms:
-        for v in forms:
+def _specs_with(spec: ModelSpec, cause: str, exp: Experiment | None = None):
+    """``spec`` plus ``cause``, in every physical form: the new cause's own forms (those that
+    can run on ``exp``), and -- since an added cause changes which law fits best -- every form
+    of a law already in the model. Yields (spec, label of the form or None)."""
+    fs = forms(cause, exp, spec) if exp is not None else VARIANTS.get(cause)
+    if cause in VARIANTS and not fs:
+        return                        # no form of it can run here (table missing, ...)
+    if fs:
+        for v in fs:
             yield spec.plus(cause, v), v
         return
     if spec.law is not None:

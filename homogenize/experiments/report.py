@@ -225,6 +225,7 @@ def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Pat
     if any(k.endswith("_predicted") for k in res["final"]["params"]):
         lines += ["Entries ending in `_predicted` are not fitted: they are the project's physics "
                   "at the final fit (row means), shown next to the fitted parameters.", ""]
+    lines += _microstructure_section(d.microstructure)
     c0 = residual_correlations(exp, d.baseline.cv_pred - exp.y)
     c1 = residual_correlations(exp, d.final.cv_pred - exp.y)
     if c0:
@@ -245,3 +246,52 @@ def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Pat
     md = out / "report.md"
     atomic_write_text(md, "\n".join(lines))
     return md
+
+
+def _microstructure_section(ms: dict | None) -> list:
+    """The coupled RVE's account of a magnetostriction experiment (``microstructure_evolution``)."""
+    if ms is None:
+        return []
+    lines = ["## Particles that move: the coupled RVE (`microstructure_evolution`)", ""]
+    if not ms.get("available"):
+        return lines + [f"Not evaluated: {ms.get('why')}", ""]
+    p = ms["relax_table"]
+    at = ms["at"]
+    cv = ms["cv_rmse"]
+    lo, hi = ms["predicted_coupled_rve_ci95"]
+    lines += [
+        f"Coupled RVE from `{p['table']}` (study `{p['study']}`, evaluator `{p['evaluator']}`, "
+        f"{p['realizations']} random RVEs of {p['n_particles']} particles, {p['voxels']}^3 "
+        f"voxels; made by `mapsim batch {p['study_toml']}`).", "",
+        f"At B = {at['B_T']:.3g} T ({at['branch']} branch), phi = {at['phi']:g}, with NO "
+        f"fitted stress (no `kappa_extra`):", "",
+        "| | axial strain | over mu0 M^2 / E |", "|---|---|---|",
+        f"| measured | {ms['measured']:.4g} | {ms['kappa_measured']:.4g} |",
+        f"| affine prediction (particles fixed) | {ms['predicted_affine']:.3g} | "
+        f"{ms['kappa_affine']:.4g} |",
+        f"| coupled RVE prediction (particles move) | {ms['predicted_coupled_rve']:.3g} "
+        f"(95 % interval over RVEs [{lo:.3g}, {hi:.3g}]) | {ms['kappa_coupled_rve']:.4g} |",
+        f"| of which restructuring (relaxed - affine) | {ms['restructuring_strain']:.3g} | |",
+        "",
+        f"The coupled RVE explains {100 * ms['fraction_explained']:.2g} % of the measured "
+        f"strain; unexplained: {ms['unexplained']:.4g}.", "",
+        "Held-out RMSE (same folds):", "",
+        "| model | cv_rmse | fitted |", "|---|---|---|",
+        f"| seed (no strain) | {cv['seed']:.4g} | - |",
+        f"| coupled RVE, nothing fitted | {cv['coupled_rve_no_fitted_parameter']:.4g} | - |",
+        f"| affine dipoles + fitted kappa_extra | "
+        f"{cv['dipolar_interaction_kappa_extra_fitted']:.4g} | kappa_extra |",
+        f"| coupled RVE + fitted kappa_extra | "
+        f"{cv['dipolar_plus_coupled_rve_kappa_extra_fitted']:.4g} | kappa_extra = "
+        f"{ms['kappa_extra_fitted_with_coupled_rve']:.4g} +- "
+        f"{ms['kappa_extra_fitted_with_coupled_rve_sd']:.2g} |",
+        f"| affine dipoles + fitted kappa_extra + fitted restructuring c x | "
+        f"{cv['dipolar_plus_fitted_restructuring']:.4g} | kappa_extra, c_restructure = "
+        f"{ms['c_restructure_fitted']:.4g} +- {ms['c_restructure_fitted_sd']:.2g} |", "",
+        f"Held-out gain of the coupled RVE: {ms['gain_coupled_rve_over_seed']:.4g} over the "
+        f"seed with nothing fitted, {ms['gain_coupled_rve_on_top_of_dipolar']:.4g} on top of "
+        f"the fitted kappa_extra. `microstructure_evolution` "
+        + ("was accepted in the selection (form "
+           f"`{ms['accepted_form']}`{', a FITTED constant' if ms['accepted_form'] == 'fitted' else ''})."
+           if ms["accepted"] else "was not accepted in the selection."), ""]
+    return lines

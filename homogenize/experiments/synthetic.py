@@ -28,6 +28,10 @@ hysteresis                     tensile: Ogden-Roxburgh Mullins softening ``eta(W
                                (constant factor); magnetic: tanh law shifted by +-H_c
 demagnetization                spheroid demagnetizing factor (Osborn 1945) of the same aspect
                                ratio                                 (cylinder factor)
+microstructure_evolution       magnetostriction: gaps that close under the stress raise it
+                               again, a geometric series ``strain = kappa x / (1 - b x)`` with
+                               ``x = mu0 M^2 / E`` and b in [2, 4], on the tanh law (M must
+                               vary within a specimen to show it)   (``kappa += c x``, fitted c)
 ============================== ==================================================================
 
 Causes that act through a non-saturated magnetization (``dipolar_interaction`` in the
@@ -76,6 +80,7 @@ CASES = (
     (("field_dependent_magnetization", "demagnetization"), "magnetization"),
     (("oxide_shell", "filler_stiffening"), "deflection"),
     (("field_dependent_magnetization", "geometric_nonlinearity"), "deflection"),
+    (("microstructure_evolution",), "magnetostriction"),
 )
 
 _NEEDS_LAW = {"dipolar_interaction", "hysteresis", "demagnetization"}
@@ -97,7 +102,7 @@ def _expected(hidden, kind):
     exp = set(hidden)
     if kind == "magnetostriction":
         exp.add("dipolar_interaction")
-        if exp & {"hysteresis", "demagnetization"}:
+        if exp & {"hysteresis", "demagnetization", "microstructure_evolution"}:
             exp.add("field_dependent_magnetization")
     elif kind != "tensile" and exp & _NEEDS_LAW:
         exp.add("field_dependent_magnetization")
@@ -368,9 +373,12 @@ def _magnetization(h, rng):
 
 def _magnetostriction(h, rng):
     truth = {}
-    fdm = "field_dependent_magnetization" in h or bool(h & {"hysteresis", "demagnetization"})
+    fdm = "field_dependent_magnetization" in h or bool(h & {"hysteresis", "demagnetization",
+                                                             "microstructure_evolution"})
     kappa0 = float(rng.uniform(0.3, 2.0))
     truth["kappa0"] = kappa0
+    if "microstructure_evolution" in h:
+        truth["b_restructure"] = float(rng.uniform(2.0, 4.0))
     chi = float(rng.uniform(0.5, 3.0)) if fdm else None
     cols = {k: [] for k in ("specimen", "phi", "aspect_ratio", "B_T", "strain")}
     n_spec = 6
@@ -383,7 +391,11 @@ def _magnetostriction(h, rng):
         # affine mean field: the shape's Maxwell stress (spheroid of the same aspect ratio)
         # minus the Lorentz cavity's 1/5, plus a phi-dependent stress it does not explain
         kappa = _spheroid_shape_stress(aspect) - 0.2 + kappa0 * (1.0 + phi)
-        strain = kappa * mu_0 * M ** 2 / _E
+        x = mu_0 * M ** 2 / _E
+        strain = kappa * x
+        if "microstructure_evolution" in h:
+            # restructuring: the stress closes gaps, which raises the stress (geometric series)
+            strain = strain / (1.0 - truth["b_restructure"] * x)
         n = B.size
         cols["specimen"] += [f"S{s + 1}"] * n
         cols["phi"] += [phi] * n

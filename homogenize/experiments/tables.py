@@ -51,6 +51,7 @@ above); all three are statistics of a few random RVEs, stored with their spread.
 from __future__ import annotations
 
 import csv
+from dataclasses import dataclass
 import functools
 import math
 import sys
@@ -464,3 +465,122 @@ def _read_table(path: Path) -> list[dict]:
     for r in csv.DictReader(lines):
         rows.append({k: (v if k == "law" else float(v)) for k, v in r.items()})
     return rows
+
+
+# ------------------------------------------------------------------------------------------
+# restructuring: the coupled RVE (particles that move) from relax tables
+
+#: relax tables the cause ``microstructure_evolution`` reads (``mapsim batch`` with
+#: ``evaluator = "relax"``, ``fem = true``; each made from the study TOML beside it)
+RELAX_TABLE_GLOB = "relax_*.h5"
+_RELAX_NEEDS = ("strain_parallel", "strain_affine_parallel", "M_eff_A_per_m",
+                "M_eff_affine_A_per_m", "E_eff_parallel_Pa")
+
+
+@dataclass(frozen=True, eq=False)
+class Restructuring:
+    """What the coupled RVE adds to the affine (particles fixed) magnetostriction.
+
+    Per field step ``B_T`` (K,) and realization (R): the relaxed-minus-affine free strain of
+    the RVE along the field ``d_eps_rve`` and the relaxed-minus-affine ``mu0 M^2 / E_parallel``
+    ``d_x`` (the specimen's shape stress acts on it), plus the raw relaxed and affine values;
+    ``provenance``: table path, study, evaluator id (code hash), seeds, manifest.
+    """
+
+    path: str
+    phi: float
+    E_Pa: float
+    B_T: np.ndarray
+    d_eps_rve: np.ndarray
+    d_x: np.ndarray
+    eps_rve_relaxed: np.ndarray
+    eps_rve_affine: np.ndarray
+    x_relaxed: np.ndarray
+    x_affine: np.ndarray
+    provenance: dict
+
+    def delta_strain(self, B_T, k_shape) -> np.ndarray:
+        """Mean over realizations of the restructuring strain ``d_eps_rve + k_shape d_x`` at
+        ``|B_T|`` (linear in B between the table's steps; held constant beyond its last)."""
+        b = np.abs(np.asarray(B_T, dtype=float))
+        d = self.d_eps_rve.mean(axis=1)
+        dx = self.d_x.mean(axis=1)
+        return np.interp(b, self.B_T, d) + np.asarray(k_shape) * np.interp(b, self.B_T, dx)
+
+    def delta_strain_realizations(self, B_T: float, k_shape: float) -> np.ndarray:
+        """The restructuring strain of every realization at one field (R,)."""
+        b = abs(float(B_T))
+        return np.array([np.interp(b, self.B_T, self.d_eps_rve[:, r])
+                         + k_shape * np.interp(b, self.B_T, self.d_x[:, r])
+                         for r in range(self.d_eps_rve.shape[1])])
+
+
+def relax_tables() -> list[Path]:
+    return sorted(DATA_DIR.glob(RELAX_TABLE_GLOB))
+
+
+def _restructuring_from(path: Path, phi: float, E_Pa: float, rtol: float):
+    from homogenize.tables import read_table
+    import json as _json
+    import tomllib
+    t = read_table(path)
+    if any(q not in t.values for q in _RELAX_NEEDS):
+        return None, f"{path.name}: not a relax table with fem = true"
+    study = tomllib.loads(t.attrs.get("study_toml", "")) if t.attrs.get("study_toml") else {}
+    E_fixed = study.get("relax", {}).get("matrix_E_Pa", 2.0e6)
+    B = np.asarray(t.axes.get("B_T", ()), dtype=float)
+    if B.size < 2 or B[0] != 0.0:
+        return None, f"{path.name}: needs B_T steps starting at 0 T"
+    hits = []
+    for i, p in enumerate(t.points):
+        E = float(p.get("matrix_E_Pa", E_fixed))
+        if abs(p["phi"] - phi) <= rtol * phi and abs(E - E_Pa) <= rtol * E_Pa:
+            hits.append(i)
+    if len(hits) != B.size:
+        axes = {a: list(v) for a, v in t.axes.items() if a in ("phi", "matrix_E_Pa")}
+        return None, (f"{path.name} holds {axes or {'phi': list(t.axes['phi'])}} "
+                      f"(E {E_fixed:g} Pa unless an axis), not phi = {phi:g}, E = {E_Pa:g} Pa")
+    hits.sort(key=lambda i: t.points[i]["B_T"])
+
+    def q(name, comp=None):
+        return t.component_values(name, comp)[hits]           # (K, R)
+
+    M_r, M_a = q("M_eff_A_per_m", "z"), q("M_eff_affine_A_per_m")
+    E_r = q("E_eff_parallel_Pa")
+    E_a = np.broadcast_to(E_r[0], E_r.shape)                   # as placed = the B = 0 state
+    x_r, x_a = mu_0 * M_r ** 2 / E_r, mu_0 * M_a ** 2 / E_a
+    eps_r, eps_a = q("strain_parallel"), q("strain_affine_parallel")
+    man = t.attrs.get("manifest")
+    prov = {"table": str(path.relative_to(DATA_DIR.parents[2])
+                         if path.is_relative_to(DATA_DIR.parents[2]) else path),
+            "study": t.attrs.get("study_name"), "evaluator": t.attrs.get("evaluator"),
+            "realizations": int(eps_r.shape[1]), "n_particles": study.get("study", {})
+            .get("n_particles"), "voxels": study.get("study", {}).get("voxels"),
+            "study_toml": path.with_suffix(".toml").name,
+            "git_revision": (_json.loads(man).get("git_revision") if man else None)}
+    return Restructuring(path=str(path), phi=phi, E_Pa=E_Pa, B_T=B, d_eps_rve=eps_r - eps_a,
+                         d_x=x_r - x_a, eps_rve_relaxed=eps_r, eps_rve_affine=eps_a,
+                         x_relaxed=x_r, x_affine=x_a, provenance=prov), ""
+
+
+@functools.lru_cache(maxsize=16)
+def restructuring_table(phi: float, E_Pa: float, rtol: float = 0.02) -> Restructuring:
+    """The relax table computed at this phi and matrix modulus (within ``rtol``).
+
+    Raises :class:`Unavailable` naming the tables found and what they hold, and the command
+    that makes one (a study TOML like ``data/relax_diguet2010.toml``).
+    """
+    why = []
+    for path in relax_tables():
+        try:
+            r, reason = _restructuring_from(path, float(phi), float(E_Pa), rtol)
+        except (OSError, KeyError, ValueError, InputError) as exc:
+            r, reason = None, f"{path.name}: unreadable ({exc})"
+        if r is not None:
+            return r
+        why.append(reason)
+    raise Unavailable(f"no coupled-RVE (relax) table at phi = {phi:g}, E = {E_Pa:g} Pa in "
+                      f"{DATA_DIR}" + (f" ({'; '.join(why)})" if why else "")
+                      + "; make one with `mapsim batch STUDY.toml --out "
+                        "homogenize/experiments/data/relax_NAME.h5` (evaluator = \"relax\", "
+                        "fem = true; see data/relax_diguet2010.toml)")

@@ -1,0 +1,112 @@
+"""The cause `microstructure_evolution` (particles that move): vocabulary, detection on a
+synthetic case built to need it and not on cases that do not, its forms, the coupled-RVE
+restructuring strain read from the relax table (zero at zero field, the affine model plus it),
+and the Diguet 2010 diagnosis end to end with the coupled RVE's prediction reported."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from homogenize.experiments import causes as C
+from homogenize.experiments.diagnose import diagnose
+from homogenize.experiments.io import load_experiment
+from homogenize.experiments.synthetic import generate
+from homogenize.experiments.tables import Unavailable, relax_tables, restructuring_table
+
+ROOT = Path(__file__).resolve().parents[3]
+DIGUET = ROOT / "examples" / "data" / "diguet2010_magnetostriction.toml"
+ME = "microstructure_evolution"
+# fixed seeds (the synthetic generator is seeded): a case built to need the cause, and two
+# that do not (saturated particles; field-dependent magnetization without restructuring)
+SEED_NEEDS, SEED_DIPOLAR, SEED_FDM = 1, 0, 2
+
+
+def test_vocabulary_format_document_and_help():
+    assert ME in C.CAUSES and ME in C.DESCRIPTIONS and C.REQUIRES[ME] == "dipolar_interaction"
+    doc = (ROOT / "examples" / "data" / "EXPERIMENT_FORMAT.md").read_text()
+    row = [line for line in doc.splitlines() if line.startswith(f"| `{ME}`")]
+    assert len(row) == 1 and "faster than M^2" in row[0]
+    from homogenize.cli.experiments import _DIAGNOSE_DOC
+    assert ME in _DIAGNOSE_DOC and "EXPERIMENT_FORMAT.md" in _DIAGNOSE_DOC
+
+
+def test_detected_on_a_case_built_to_need_it():
+    case = generate((ME,), "magnetostriction", seed=SEED_NEEDS)
+    assert case.expected == {ME, "dipolar_interaction", "field_dependent_magnetization"}
+    res = diagnose(case.experiment).as_dict()
+    assert set(res["causes"]) == set(case.expected), res["steps"]
+    step = next(s for s in res["steps"] if s["cause"] == ME)
+    # the synthetic truth has no relax table: the form is the fitted one, and named so
+    assert step["params"]["restructure_form"] == "fitted"
+    assert step["params"]["c_restructure"] > 0          # the strain grows faster than M^2
+    assert res["gain"] > 5
+
+
+@pytest.mark.parametrize("hidden, seed", [(("dipolar_interaction",), SEED_DIPOLAR),
+                                          (("field_dependent_magnetization",), SEED_FDM)])
+def test_not_detected_where_the_particles_need_not_move(hidden, seed):
+    case = generate(hidden, "magnetostriction", seed=seed)
+    res = diagnose(case.experiment).as_dict()
+    assert ME not in res["causes"], res["steps"]
+    assert set(res["causes"]) == set(case.expected)
+
+
+def test_forms_follow_the_data_and_the_tables():
+    case = generate(("dipolar_interaction",), "magnetostriction", seed=SEED_DIPOLAR)
+    exp = case.experiment
+    dip = C.ModelSpec("magnetostriction").plus("dipolar_interaction")
+    # saturated particles: M is constant per specimen, an M^4 term cannot be told apart
+    assert "fitted" not in C.forms(ME, exp, dip)
+    assert "fitted" in C.forms(ME, exp, dip.plus("field_dependent_magnetization", "langevin"))
+    # no relax table at the synthetic specimens' phi and E: no coupled_rve form, and why
+    ok, why = C.coupled_rve_available(exp)
+    assert not ok and "no coupled-RVE (relax) table" in why and "mapsim batch" in why
+    with pytest.raises(Unavailable):
+        restructuring_table(0.123, 2e6)
+
+
+needs_table = pytest.mark.skipif(not relax_tables(), reason="no relax table committed")
+
+
+@needs_table
+def test_restructuring_strain_is_zero_at_zero_field_and_adds_to_the_affine_model():
+    exp = load_experiment(DIGUET)
+    tab = restructuring_table(0.261, exp.matrix.E_Pa)
+    assert tab.B_T[0] == 0.0
+    # zero field: no force, no displacement: relaxed == affine for every realization
+    assert np.all(tab.d_eps_rve[0] == 0.0) and np.all(tab.d_x[0] == 0.0)
+    assert tab.delta_strain(0.0, 0.17) == 0.0
+    # the relaxed and affine values are those stored in the table
+    assert np.allclose(tab.d_eps_rve, tab.eps_rve_relaxed - tab.eps_rve_affine)
+    # the coupled_rve form = the affine model (no kappa_extra) + the restructuring strain
+    seed = C.ModelSpec("magnetostriction")
+    aff = C.predict(seed.plus("dipolar_interaction"), exp, {"kappa_extra": 0.0})
+    cpl = C.predict(seed.plus(ME, "coupled_rve"), exp, {})
+    assert np.allclose(cpl - aff, C.restructuring_strain(exp), rtol=1e-12, atol=1e-15)
+    # provenance of the tabulated extension
+    p = tab.provenance
+    assert p["evaluator"].startswith("relax-1-fem-") and p["realizations"] >= 2
+    assert p["study_toml"] == "relax_diguet2010.toml"
+
+
+@needs_table
+def test_diguet_diagnosis_reports_the_coupled_rve_prediction():
+    res = diagnose(load_experiment(DIGUET)).as_dict()
+    ms = res["microstructure_evolution"]
+    assert ms["available"]
+    assert ms["at"]["B_T"] == pytest.approx(1.129, abs=1e-3) and ms["at"]["branch"] == "up"
+    assert ms["measured"] == pytest.approx(0.0593, abs=1e-4)
+    lo, hi = ms["predicted_coupled_rve_ci95"]
+    assert lo <= ms["predicted_coupled_rve"] <= hi
+    # the arithmetic of the account
+    assert ms["fraction_explained"] == pytest.approx(ms["predicted_coupled_rve"] / ms["measured"])
+    assert ms["unexplained"] == pytest.approx(ms["measured"] - ms["predicted_coupled_rve"])
+    assert ms["restructuring_strain"] == pytest.approx(ms["predicted_coupled_rve"]
+                                                       - ms["predicted_affine"])
+    cv = ms["cv_rmse"]
+    assert ms["gain_coupled_rve_over_seed"] == pytest.approx(
+        cv["seed"] / cv["coupled_rve_no_fitted_parameter"])
+    # the model with a fitted kappa_extra on top is at least as good held out as the affine one
+    # would be with it (kappa_extra absorbs whatever the coupled RVE leaves)
+    assert ms["kappa_extra_fitted_with_coupled_rve"] is not None
+    assert ms["accepted"] == (ME in res["causes"])
