@@ -21,12 +21,14 @@ fixed by pinning one matrix node (the loads are balanced, so the pin carries no 
   partner sits at, pass the dipole solver's pairwise ``virial_stress_Pa`` when you have it; it
   replaces the first-moment term (whose cell-cut choice is then irrelevant).
 
-Solver: all load cases in one block (:mod:`homogenize._amg`): lock-step CG preconditioned by a
+Solver (``solver="fast"``): all load cases in one block (:mod:`homogenize._amg`): lock-step CG preconditioned by a
 block V-cycle on a pyamg smoothed-aggregation hierarchy (rigid-body near-nullspace, built once),
 DEFLATED by the six rigid-body modes of every stiff particle. Plain AMG-CG needs ~4x more
 iterations at Fe/PDMS contrast (1e5) than at contrast 1, because each stiff particle adds six
 near-zero modes (its rigid motions in the soft matrix); deflation removes exactly those (Vuik,
-Segal & Meijerink 1999).
+Segal & Meijerink 1999). ``solver="matrix-free"`` keeps the deflated block CG and replaces the
+assembled fine matrix and its AMG by the matrix-free operator and geometric multigrid of
+:mod:`homogenize._matfree`.
 """
 from __future__ import annotations
 
@@ -42,6 +44,8 @@ from micro.materials import FE, PDMS, ElasticMaterial, elastic
 from micro.rve import minimum_image
 
 from . import _assembly as asm
+from . import _budget
+from . import _matfree as mf
 from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
 from .mesh import METHODS, VoxelMesh, voxelize
@@ -186,6 +190,9 @@ class _CellSolver:
         self.n, self.h = mesh.n, mesh.h_m
         self.tol, self.maxiter = tol, maxiter
         self.kind = solver
+        if solver == "matrix-free":
+            self._init_matrix_free(lam, mu, composite, stiff_mask if deflate else None)
+            return
         fast = solver == "fast"
         t = {}
         t0 = time.perf_counter()
@@ -230,6 +237,55 @@ class _CellSolver:
             self.KZ = (K @ self.Z).tocsc()
             Ec = (self.Z.T @ self.KZ).tocsc()
             self.Esolve = splu(Ec).solve
+        t["deflation_setup"] = time.perf_counter() - t0
+        self.timings = t
+
+    def _init_matrix_free(self, lam, mu, composite, stiff_mask):
+        """``solver="matrix-free"``: element-type operator, geometric multigrid down to the
+        assembled (n/2)^3 (or coarser) grid with pyamg below it (:mod:`homogenize._matfree`)."""
+        n = self.n
+        if n % 2 or n < 8:
+            raise InputError(f"solver='matrix-free' needs an even number of voxels >= 8 per edge "
+                             f"(geometric multigrid), got voxels={n}")
+        t = {}
+        t0 = time.perf_counter()
+        field = mf.element_field(lam, mu, self.h, composite)
+        t["assembly"] = time.perf_counter() - t0
+        # the pin: a node surrounded by matrix voxels only, at coordinates divisible by the
+        # coarsening factor of every matrix-free level (so it is a node of each coarse grid)
+        levels = 1
+        nc = n // 2
+        while nc > MATFREE_ASSEMBLED_MAX and nc % 2 == 0 and nc >= 16:
+            levels, nc = levels + 1, nc // 2
+        step = 2 ** levels
+        soft = (mu <= mu.min() * (1.0 + 1e-12))
+        if composite is not None:
+            soft &= ~composite.mask
+        good = np.ones((n, n, n), dtype=bool)
+        for ax, ay, az in asm.CORNERS:
+            good &= np.roll(soft, shift=(az, ay, ax), axis=(0, 1, 2))
+        lat = np.zeros((n, n, n), dtype=bool)
+        lat[::step, ::step, ::step] = True
+        cand = np.flatnonzero((good & lat).reshape(-1))
+        self.pin = int(cand[0]) if cand.size else 0
+        t0 = time.perf_counter()
+        op = mf.MatFreeOperator(field, self.pin)
+        self.M = mf.GeometricVCycle(field, pin=self.pin, pin_scale=op.pin_scale, h=self.h,
+                                    amg_options=AMG_OPTIONS, fine_op=op,
+                                    assembled_max=MATFREE_ASSEMBLED_MAX)
+        self.ml = self.M.ml
+        self.matvec = op
+        self.K = None
+        self.field = field
+        t["amg_setup"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.Z = self._deflation_space(stiff_mask) if stiff_mask is not None else None
+        if self.Z is not None:
+            KZ = mf.stiffness_times_sparse(field, self.Z, pin=self.pin).tocsc()
+            Ec = (self.Z.T @ KZ).tocsc()
+            self.deflation = mf.Deflation(self.Z, KZ, splu(Ec).solve)
+        else:
+            self.deflation = None
         t["deflation_setup"] = time.perf_counter() - t0
         self.timings = t
 
@@ -287,6 +343,16 @@ class _CellSolver:
         """
         F = np.array(F, dtype=np.float64, order="C")
         F[3 * self.pin:3 * self.pin + 3] = 0.0
+        if self.kind == "matrix-free":
+            W, hist = mf.block_cg_inplace(self.matvec, self.M, F, tol=self.tol,
+                                          maxiter=self.maxiter, deflation=self.deflation,
+                                          callback=callback)
+            del F
+            self.M.release()
+            W[3 * self.pin:3 * self.pin + 3] = 0.0
+            Wn = W.reshape(-1, 3, W.shape[1])
+            Wn -= Wn.mean(axis=0)
+            return W, hist
         project = x0 = coarse = None
         if self.Z is not None:
             Z, KZ, Es = self.Z, self.KZ, self.Esolve
@@ -299,7 +365,7 @@ class _CellSolver:
                 return Z @ c, KZ @ c
 
             x0 = Z @ Es(np.asarray(Z.T @ F))
-        if self.kind == "fast":
+        if self.kind in ("fast", "matrix-free"):
             W, hist = block_cg(self.matvec, self.M, F, tol=self.tol, maxiter=self.maxiter,
                                project=project, x0=x0, coarse=coarse, callback=callback)
         else:
@@ -326,7 +392,10 @@ class _CellSolver:
         return at_rest(U).T @ self.matvec(at_rest(V))
 
 
-SOLVERS = ("fast", "reference")
+SOLVERS = ("fast", "reference", "matrix-free")
+#: solver="matrix-free": matrix-free geometric levels down to this many voxels per edge, the
+#: Galerkin matrix of that grid assembled for pyamg (128^3 -> 64^3; 64^3 -> 32^3)
+MATFREE_ASSEMBLED_MAX = 64
 # smoothed aggregation for the voxel stiffness with stiff particles. strength threshold 0.05:
 # a matrix-particle coupling |a_ij| ~ E_matrix against sqrt(a_ii a_jj) ~ sqrt(E_m E_p) is weak
 # at any contrast above ~400, so aggregates do not straddle a particle surface and the coarse
@@ -336,6 +405,21 @@ SOLVERS = ("fast", "reference")
 AMG_OPTIONS = dict(symmetry="hermitian", coarse_solver="splu",
                    strength=("symmetric", {"theta": 0.05}), improve_candidates=None,
                    smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}))
+
+
+def _choose_solver(solver: str, voxels: int, n_cases: int) -> str:
+    """Validate ``solver`` and refuse a grid whose memory estimate exceeds the machine (before
+    allocating). ``"fast"`` falls back to ``"matrix-free"`` when the assembled matrix does not fit
+    but the matrix-free solver does (even voxel counts)."""
+    if solver not in SOLVERS:
+        raise InputError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    share = _budget.MEMORY_SHARE * _budget.machine_memory_bytes()
+    if (solver == "fast" and voxels % 2 == 0 and voxels >= 8
+            and _budget.cell_memory_bytes(voxels, "fast", n_cases) > share
+            and _budget.cell_memory_bytes(voxels, "matrix-free", n_cases) <= share):
+        solver = "matrix-free"
+    _budget.check_cell_memory(voxels, solver, n_cases)
+    return solver
 
 
 def _material_fields(mesh: VoxelMesh, matrix: Material, particle: Material):
@@ -448,6 +532,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     """Solve the periodic cell problems on a prepared voxel mesh. See :func:`homogenize_rve`."""
     # a residual above 1e-2 returns meaningless moduli (tol 2 gave E_eff 1600x too high)
     check_range("tol", tol, 0.0, 1e-2, "(relative residual)", lo_open=True)
+    solver = _choose_solver(solver, mesh.n, len(cases) + (forces_N is not None))
     t_start = time.perf_counter()
     if rigid:
         # rigid particles as the stiff limit: 1e6 x the matrix modulus, same Poisson's ratio as
@@ -485,6 +570,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
         loads.append(asm.body_force_load(b, mesh.h_m))
     names = list(cases) + (["magnetic"] if forces_N is not None else [])
     F = np.stack(loads, axis=1)
+    del loads
     bar = callback = None
     if progress:
         # the bar counts converged load cases; its text shows the CG iteration and the worst
@@ -590,6 +676,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 "solver": solver.kind,
                 "amg_levels": len(solver.ml.levels),
                 "amg_operator_complexity": float(solver.ml.operator_complexity()),
+                "geometric_levels": (len(solver.M.levels) if solver.kind == "matrix-free"
+                                     else 0),
                 "C_linear_error_rel": err_lin, "stress_mag_linear_error_rel": err_stress,
                 "virial_from_dipoles": virial_stress_Pa is not None}
     return CellResult(
@@ -638,11 +726,15 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         (tests/homogenize/test_cell_solver.py); ``settings["C_linear_error_rel"]`` reports the
         (much larger) error of the plain mean-stress formula as a bound.
     keep_fields : bool -- keep the displacement fields (for VTU/PNG output)
-    solver : {"fast", "reference"} -- "fast" (default): numba assembly, all load cases in one
-        block (CG in lock-step, block V-cycle with parallel multicolour Gauss-Seidel on every
-        level, numba BSR products); "reference": BLAS assembly, pyamg's default hierarchy and
-        own V-cycle, scipy products, one load case after another. Same C_eff to the solver
-        tolerance.
+    solver : {"fast", "reference", "matrix-free"} -- "fast" (default): numba assembly, all load
+        cases in one block (CG in lock-step, block V-cycle with parallel multicolour Gauss-Seidel
+        on every level, numba BSR products); "reference": BLAS assembly, pyamg's default
+        hierarchy and own V-cycle, scipy products, one load case after another;
+        "matrix-free" (even voxel counts >= 8): no assembled fine matrix -- element-type
+        products, geometric multigrid (trilinear transfer, element-wise Galerkin coarse
+        operators) down to <= 64^3, pyamg below (:mod:`homogenize._matfree`); a fraction of the
+        memory, for grids whose assembled matrix does not fit ("fast" switches to it then).
+        Same C_eff to the solver tolerance.
 
     Returns
     -------

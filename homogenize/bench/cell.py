@@ -4,7 +4,9 @@
   ``skfem.asm`` of the same periodic matrix (same matrix to round-off);
 * the full homogenization (6 unit strains + magnetic case) of a 64^3 RVE against the 60 s budget;
 * AMG-CG iterations against the particle/matrix stiffness contrast, with and without deflation of
-  the particles' rigid-body modes.
+  the particles' rigid-body modes;
+* the matrix-free solver (geometric multigrid) against the assembled one at 32^3-128^3: time,
+  peak memory, iterations, E_eff agreement.
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ import time
 import numpy as np
 import os
 from homogenize import _assembly as A
+from homogenize import _budget
 from homogenize.bench.reference import skfem_reference
 from micro.particles import generate_rve
 from homogenize.cell import homogenize_rve, isotropic_projection
@@ -160,11 +163,59 @@ def _method_records(sizes) -> list[dict]:
     return out
 
 
+#: issue 15 targets of the matrix-free solver (6 strains + magnetic, this 2-core machine)
+MATFREE_TARGETS = {64: (20.0, None), 128: (300.0, 6.0)}     # voxels: (seconds, GB)
+#: largest grid on which the assembled solver is run next to the matrix-free one
+ASSEMBLED_MAX_VOXELS = 64
+
+
+def _matfree_records(sizes) -> list[dict]:
+    """solver="matrix-free" against the assembled solver ("fast") on the same RVE (6 strains +
+    magnetic, tol 1e-6), each run in its own process: seconds, peak RSS, iterations, E_eff
+    agreement, and the growth of time and memory with the grid."""
+    out, prev = [], None
+    for n in sizes:
+        m = _run_peer("solver-matrix-free", n, 1, None)
+        a = (_run_peer("solver-fast", n, 1, None) if n <= ASSEMBLED_MAX_VOXELS
+             else {"error": f"not run: the assembled matrix at {n}^3 needs about "
+                            f"{estimate_memory_bytes(n) / 1e9:.0f} GB (estimate)"})
+        name = f"cell/matrix-free {n}^3 (6 strains + magnetic) vs assembled"
+        if "error" in m:
+            out.append({"name": name, "n": 3 * n ** 3, "seconds": None,
+                        "reference": "solver=fast", "reference_seconds": None, "ratio": None,
+                        "max_rel_error": None, "skipped": m["error"], **_machine()})
+            continue
+        t_target, gb_target = MATFREE_TARGETS.get(n, (None, None))
+        rec = {"name": name, "n": 3 * n ** 3, "seconds": m["seconds"],
+               "reference": "solver=fast (assembled BSR, pyamg SA), same RVE",
+               "reference_seconds": a.get("seconds"),
+               "ratio": a["seconds"] / m["seconds"] if "seconds" in a else None,
+               "max_rel_error": (abs(m["E_eff_Pa"] - a["E_eff_Pa"]) / a["E_eff_Pa"]
+                                 if "E_eff_Pa" in a else None),
+               "E_eff_Pa": m["E_eff_Pa"], "reference_E_eff_Pa": a.get("E_eff_Pa"),
+               "peak_rss_GB": m["peak_rss_GB"], "reference_peak_rss_GB": a.get("peak_rss_GB"),
+               "iterations": m["iterations"], "reference_iterations": a.get("iterations"),
+               "timings_s": m["timings_s"], "reference_timings_s": a.get("timings_s"),
+               "max_residual": m["max_residual"], "n_particles": m["n_particles"],
+               "memory_estimate_GB": _budget.cell_memory_bytes(n, "matrix-free", 7) / 1e9,
+               "target_seconds": t_target, "target_peak_rss_GB": gb_target,
+               **({"reference_skipped": a["error"]} if "error" in a else {}), **_machine()}
+        if prev is not None:
+            f = (n / prev["n_vox"]) ** 3
+            rec["growth_vs"] = f"{prev['n_vox']}^3 (x{f:g} voxels)"
+            rec["time_growth"] = m["seconds"] / prev["seconds"]
+            rec["memory_growth"] = m["peak_rss_GB"] / prev["peak_rss_GB"]
+        prev = {"n_vox": n, "seconds": m["seconds"], "peak_rss_GB": m["peak_rss_GB"]}
+        out.append(rec)
+    return out
+
+
 def bench_records(quick: bool) -> list[dict]:
     recs = [_assembly_record(12 if quick else 32)]
     recs += _contrast_records(12 if quick else 24)
     recs.append(_full_record(16 if quick else 64))
     recs += _method_records((12, 16) if quick else (32, 64))
+    recs += _matfree_records((12, 16) if quick else (32, 64, 128))
     recs += _peer_records(15 if quick else 33)
     return recs
 
@@ -220,7 +271,16 @@ def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
     V = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
     t0 = time.perf_counter()
     extra = {}
-    if tool.startswith("full-"):                 # 6 strains + magnetic load, given method
+    if tool.startswith("solver-"):               # 6 strains + magnetic load, given solver
+        rve = _rve(voxels, seed)
+        forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
+        t0 = time.perf_counter()
+        r = homogenize_rve(rve, voxels, forces_N=forces, solver=tool[7:])
+        C = r.C_eff_Pa
+        extra = {"iterations": r.iterations, "E_eff_Pa": r.E_eff_Pa, "timings_s": r.timings_s,
+                 "n_particles": r.n_particles, "solver": r.settings["solver"],
+                 "max_residual": max(r.residuals.values())}
+    elif tool.startswith("full-"):               # 6 strains + magnetic load, given method
         rve = _rve(voxels, seed)
         forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
         t0 = time.perf_counter()

@@ -15,7 +15,7 @@ from micro.materials import ElasticMaterial as Material
 from micro.rve import RVE
 
 from homogenize._cell_output import plot_slice, write_pvd
-from homogenize.cell import CellConfig, homogenize
+from homogenize.cell import CellConfig, _choose_solver, homogenize
 from homogenize.cli._common import check_memory, config_of, float_in, int_in
 from homogenize.studies.cell_studies import (dilute_convergence_study, phi_study,
                                              plot_dilute_convergence, plot_phi_study)
@@ -68,10 +68,19 @@ def _parse_vec(text: str | None, name: str, unit: str):
 
 
 def _cmd(args) -> int:
-    _check_voxels("--voxels", args.voxels)
+    solver = getattr(args, "solver", "fast")
+    if solver == "matrix-free" and args.voxels % 2:
+        raise InputError(f"--solver matrix-free needs an even --voxels (geometric multigrid), "
+                         f"got {args.voxels}")
+    # the solver's own memory model (the matrix-free one has no assembled fine matrix; "fast"
+    # becomes "matrix-free" where only that one fits)
+    n_cases = 7 if args.B is not None else 6
+    solver = _choose_solver(solver, args.voxels, n_cases)
+    if solver != "matrix-free":
+        _check_voxels("--voxels", args.voxels)
     cfg = CellConfig(voxels=args.voxels, matrix=Material(args.matrix_E, args.matrix_nu),
                      particle=Material(args.particle_E, args.particle_nu), rigid=args.rigid,
-                     method=args.method, tol=args.tol)
+                     method=args.method, tol=args.tol, solver=solver)
     field = None
     if args.B is not None:
         B = _parse_vec(args.B, "B", "T")
@@ -234,6 +243,11 @@ def register(sub, formatter):
     p.add_argument("--tol", type=float_in("--tol", 1e-14, 1e-2), default=1e-6,
                    help="CG relative residual per load case [1] (default 1e-6; C_eff and "
                         "stress_mag are variational: their error is ~ tol^2)")
+    p.add_argument("--solver", default="fast", choices=("fast", "reference", "matrix-free"),
+                   help="cell solver: 'fast' (assembled matrix, AMG; switches to matrix-free "
+                        "when the assembled matrix does not fit in memory), 'reference' "
+                        "(assembled, one load case at a time), 'matrix-free' (no assembled fine "
+                        "matrix, geometric multigrid; even --voxels; for large grids)")
     p.add_argument("--json", required=True, type=Path, help="result JSON file (written atomically)")
     p.add_argument("--vtu", type=Path, default=None,
                    help="write the local fields (displacement, stress in VTK order XX YY ZZ XY "

@@ -1,0 +1,769 @@
+"""Matrix-free periodic voxel stiffness and a geometric multigrid preconditioner for it.
+
+The stiffness of the periodic Q1 voxel grid (:mod:`homogenize._assembly`) is held as ELEMENT
+TYPES: ``etype`` (n^3,) gives every voxel an index into a table ``Ktab`` (T, 24, 24) of element
+matrices (DOF ``3 a + c``, corner ``a = ax + 2 ay + 4 az``). The isotropic phases share one
+matrix each (``lambda K_lam + mu K_mu``); every cut (composite) voxel has its own. The first
+``n_shared`` types are the shared ones.
+
+``K u`` is a gather over nodes (each node sums over its 8 voxels: parallel over nodes, no write
+races), for k right-hand sides at once (``u`` of shape (N, 3, k)). A node whose 8 voxels all
+have the same shared type uses that type's 27-block stencil (243 multiply-adds per column
+instead of 576).
+
+Multigrid: trilinear prolongation from the (n/2)^3 grid. The Galerkin coarse operator ``P^T K P``
+is built element by element: a coarse voxel's matrix is ``sum_c P_c^T K_child(c) P_c`` over its 8
+children ``c`` with ``P_c`` fixed per child position, so a coarse voxel whose children all share
+one type gets a shared coarse type, and the fine matrix is never assembled. The coarsest
+geometric level is assembled as 3x3 BSR and handed to pyamg smoothed aggregation
+(:class:`homogenize._amg.BlockVCycle`). Every matrix-free level is smoothed by 8-colour block
+Gauss-Seidel (forward before, backward after the coarse correction: a symmetric V-cycle).
+
+Rigid translations: one node is pinned (its row and column replaced by ``scale * I``), the same
+way as the assembled solver in :mod:`homogenize.cell`; the pinned node of each coarser level is
+the coarse node at the same position (the pin has even coordinates on every level).
+"""
+from __future__ import annotations
+
+import numpy as np
+import numba as nb
+import scipy.sparse as sp
+
+from micro._numba import parallel_and_serial
+
+from . import _assembly as asm
+
+__all__ = ["ElementField", "element_field", "MatFreeOperator", "coarsen", "GeometricVCycle",
+           "child_prolongations", "prolongation_matrix", "typed_bsr", "memory_estimate_bytes"]
+
+# per node-neighbour slot s = (dx+1) + 3 (dy+1) + 9 (dz+1): for corner a, the corner b = a + d of
+# the same voxel, or -1
+_TAB = asm._stencil_tables()
+
+
+# ------------------------------------------------------------------------------------------------
+# numba kernels (contiguous arrays in, caller-allocated output, cache=True)
+# ------------------------------------------------------------------------------------------------
+
+def _node_op(n, nodes, etype, Ktab, ntype, S, pin, pin_scale, u, b, dinv, out, mode):
+    """For the nodes ``nodes`` (int64), with ``(K u)_p`` the
+    matrix-free product (pinned node ``pin``: row and column replaced by ``pin_scale I``):
+
+    mode 0: out[t] = (K u)_p;  mode 1: out[t] = b_p - (K u)_p  (p = nodes[t]);
+    mode 2: one block Gauss-Seidel update in place, u[p] += dinv[p] (b_p - (K u)_p); out is
+    scratch of len(nodes) rows. The nodes of one Gauss-Seidel call must not share a voxel.
+    u, b: (N, 3, k); out: (len(nodes), 3, k); etype (n^3,) int32; Ktab (T, 24, 24); ntype (N,) int32 (shared type of
+    all 8 voxels around the node, or -1); S (n_shared, 27, 3, 3) stencils of the shared types.
+    """
+    k = u.shape[2]
+    for t in nb.prange(nodes.shape[0]):
+        p = nodes[t]
+        i = p % n
+        j = (p // n) % n
+        kk = p // (n * n)
+        for r in range(3):
+            for m in range(k):
+                out[t, r, m] = 0.0
+        if p == pin:
+            for r in range(3):
+                for m in range(k):
+                    out[t, r, m] = pin_scale * u[p, r, m]
+        else:
+            ty = ntype[p]
+            if ty >= 0:
+                for s in range(27):
+                    dx = s % 3 - 1
+                    dy = (s // 3) % 3 - 1
+                    dz = s // 9 - 1
+                    q = (i + dx + n) % n + n * (((j + dy + n) % n) + n * ((kk + dz + n) % n))
+                    if q == pin:
+                        continue
+                    for r in range(3):
+                        for c in range(3):
+                            a = S[ty, s, r, c]
+                            if a != 0.0:
+                                for m in range(k):
+                                    out[t, r, m] += a * u[q, c, m]
+            else:
+                for ca in range(8):
+                    ax = ca & 1
+                    ay = (ca >> 1) & 1
+                    az = (ca >> 2) & 1
+                    vi = (i - ax + n) % n
+                    vj = (j - ay + n) % n
+                    vk = (kk - az + n) % n
+                    e = etype[vi + n * (vj + n * vk)]
+                    for cb in range(8):
+                        bx = cb & 1
+                        by = (cb >> 1) & 1
+                        bz = (cb >> 2) & 1
+                        q = (vi + bx) % n + n * (((vj + by) % n) + n * ((vk + bz) % n))
+                        if q == pin:
+                            continue
+                        for r in range(3):
+                            for c in range(3):
+                                a = Ktab[e, 3 * ca + r, 3 * cb + c]
+                                for m in range(k):
+                                    out[t, r, m] += a * u[q, c, m]
+        if mode == 1:
+            for r in range(3):
+                for m in range(k):
+                    out[t, r, m] = b[p, r, m] - out[t, r, m]
+        elif mode == 2:
+            for r in range(3):
+                for m in range(k):
+                    out[t, r, m] = b[p, r, m] - out[t, r, m]
+            for r in range(3):
+                for m in range(k):
+                    acc = 0.0
+                    for c in range(3):
+                        acc += dinv[p, r, c] * out[t, c, m]
+                    u[p, r, m] += acc
+
+
+def _diag_blocks(n, etype, Ktab, out):
+    """out (N, 3, 3): the 3x3 diagonal block of every node, summed over its 8 voxels."""
+    for p in nb.prange(n * n * n):
+        i = p % n
+        j = (p // n) % n
+        kk = p // (n * n)
+        for r in range(3):
+            for c in range(3):
+                out[p, r, c] = 0.0
+        for ca in range(8):
+            ax = ca & 1
+            ay = (ca >> 1) & 1
+            az = (ca >> 2) & 1
+            v = (i - ax + n) % n + n * (((j - ay + n) % n) + n * ((kk - az + n) % n))
+            e = etype[v]
+            for r in range(3):
+                for c in range(3):
+                    out[p, r, c] += Ktab[e, 3 * ca + r, 3 * ca + c]
+
+
+def _typed_stencil_blocks(n, rows, etype, Ktab, tab, axis_order, indices, data):
+    """Block rows ``rows`` (int64) of the periodic stiffness of an element-type field in sorted
+    27-block BSR order (as :func:`homogenize._kernels.voxel_stencil_blocks`, with a 24x24 matrix
+    per type); row t of the output is node rows[t]."""
+    for t in nb.prange(rows.shape[0]):
+        p = rows[t]
+        i = p % n
+        j = (p // n) % n
+        k = p // (n * n)
+        ri = 0 if i == 0 else (2 if i == n - 1 else 1)
+        rj = 0 if j == 0 else (2 if j == n - 1 else 1)
+        rk = 0 if k == 0 else (2 if k == n - 1 else 1)
+        out = 27 * t
+        for oz in range(3):
+            dz = axis_order[rk, oz]
+            for oy in range(3):
+                dy = axis_order[rj, oy]
+                for ox in range(3):
+                    dx = axis_order[ri, ox]
+                    s = (dx + 1) + 3 * (dy + 1) + 9 * (dz + 1)
+                    indices[out] = (i + dx + n) % n + n * (((j + dy + n) % n)
+                                                           + n * ((k + dz + n) % n))
+                    for r in range(3):
+                        for c in range(3):
+                            data[out, r, c] = 0.0
+                    for a in range(8):
+                        bb = tab[a, s]
+                        if bb >= 0:
+                            ax = a & 1
+                            ay = (a >> 1) & 1
+                            az = (a >> 2) & 1
+                            v = (i - ax + n) % n + n * (((j - ay + n) % n) + n * ((k - az + n) % n))
+                            e = etype[v]
+                            for r in range(3):
+                                for c in range(3):
+                                    data[out, r, c] += Ktab[e, 3 * a + r, 3 * bb + c]
+                    out += 1
+
+
+def _prolong_add(nc, xc, x):
+    """x += P xc: trilinear interpolation from the periodic nc^3 grid to the (2 nc)^3 grid.
+    xc (nc^3, 3, k), x ((2 nc)^3, 3, k)."""
+    n = 2 * nc
+    k = x.shape[2]
+    for p in nb.prange(n * n * n):
+        i = p % n
+        j = (p // n) % n
+        kk = p // (n * n)
+        ni = 1 if i % 2 == 0 else 2
+        nj = 1 if j % 2 == 0 else 2
+        nk = 1 if kk % 2 == 0 else 2
+        for a in range(nk):
+            K = (kk // 2 + a) % nc
+            wk = 1.0 if nk == 1 else 0.5
+            for bj in range(nj):
+                J = (j // 2 + bj) % nc
+                wj = 1.0 if nj == 1 else 0.5
+                for ci in range(ni):
+                    I = (i // 2 + ci) % nc
+                    w = wk * wj * (1.0 if ni == 1 else 0.5)
+                    q = I + nc * (J + nc * K)
+                    for r in range(3):
+                        for m in range(k):
+                            x[p, r, m] += w * xc[q, r, m]
+
+
+def _restrict(nc, x, xc):
+    """xc = P^T x (full weighting), the transpose of :func:`_prolong_add`."""
+    n = 2 * nc
+    k = x.shape[2]
+    for q in nb.prange(nc * nc * nc):
+        I = q % nc
+        J = (q // nc) % nc
+        K = q // (nc * nc)
+        for r in range(3):
+            for m in range(k):
+                xc[q, r, m] = 0.0
+        for dz in range(-1, 2):
+            wz = 1.0 if dz == 0 else 0.5
+            fk = (2 * K + dz + n) % n
+            for dy in range(-1, 2):
+                wy = 1.0 if dy == 0 else 0.5
+                fj = (2 * J + dy + n) % n
+                for dx in range(-1, 2):
+                    w = wz * wy * (1.0 if dx == 0 else 0.5)
+                    fi = (2 * I + dx + n) % n
+                    p = fi + n * (fj + n * fk)
+                    for r in range(3):
+                        for m in range(k):
+                            xc[q, r, m] += w * x[p, r, m]
+
+
+node_op, node_op_serial = parallel_and_serial(_node_op)
+diag_blocks, _ = parallel_and_serial(_diag_blocks)
+typed_stencil_blocks, _ = parallel_and_serial(_typed_stencil_blocks)
+prolong_add, _ = parallel_and_serial(_prolong_add)
+restrict, _ = parallel_and_serial(_restrict)
+
+
+# ------------------------------------------------------------------------------------------------
+# element types
+# ------------------------------------------------------------------------------------------------
+
+class ElementField:
+    """Element matrices of a periodic n^3 voxel grid by type (see the module docstring)."""
+
+    def __init__(self, n: int, etype: np.ndarray, Ktab: np.ndarray, n_shared: int):
+        self.n = int(n)
+        self.etype = np.ascontiguousarray(etype, dtype=np.int32).reshape(-1)
+        self.Ktab = np.ascontiguousarray(Ktab, dtype=np.float64)
+        self.n_shared = int(n_shared)
+        if self.etype.size != self.n ** 3:
+            raise ValueError("etype must have n^3 entries")
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.etype.nbytes + self.Ktab.nbytes)
+
+    def voxel_matrices(self, vox) -> np.ndarray:
+        return self.Ktab[self.etype[np.asarray(vox)]]
+
+
+def element_field(lam, mu, h: float, composite=None) -> ElementField:
+    """Element types of the isotropic fields ``lam``, ``mu`` (n, n, n) [Pa] plus the cut voxels of
+    a :class:`homogenize.cell._Composite` (their matrix: the isotropic base plus the same
+    difference the assembled solver adds, so both operators agree to round-off)."""
+    n = lam.shape[0]
+    Kl, Km = asm.reference_matrices(h)
+    pairs, inv = np.unique(np.stack([np.ravel(lam), np.ravel(mu)], axis=1), axis=0,
+                           return_inverse=True)
+    inv = inv.reshape(-1).astype(np.int32)
+    shared = np.stack([la * Kl + m * Km for la, m in pairs])
+    if composite is None or composite.vox.size == 0:
+        return ElementField(n, inv, shared, len(pairs))
+    T0 = len(pairs)
+    Ktab = np.empty((T0 + composite.vox.size, 24, 24))
+    Ktab[:T0] = shared
+    for sl, dK in composite._chunks():
+        vox = composite.vox[sl]
+        Ktab[T0 + sl.start:T0 + sl.start + vox.size] = shared[inv[vox]] + dK
+    etype = inv.copy()
+    etype[composite.vox] = T0 + np.arange(composite.vox.size, dtype=np.int32)
+    return ElementField(n, etype, Ktab, T0)
+
+
+def _shared_stencils(field: ElementField) -> np.ndarray:
+    """(n_shared, 27, 3, 3): the 27-block row of a node all of whose voxels have one shared type."""
+    S = np.zeros((max(field.n_shared, 1), 27, 3, 3))
+    for t in range(field.n_shared):
+        K = field.Ktab[t]
+        for a in range(8):
+            for s in range(27):
+                b = _TAB[a, s]
+                if b >= 0:
+                    S[t, s] += K[3 * a:3 * a + 3, 3 * b:3 * b + 3]
+    return S
+
+
+def _node_types(field: ElementField) -> np.ndarray:
+    """(N,) int32: the shared type of all 8 voxels around each node, or -1."""
+    n = field.n
+    e = field.etype.reshape(n, n, n)
+    first = e.copy()
+    same = np.ones((n, n, n), dtype=bool)
+    for ax, ay, az in asm.CORNERS:
+        same &= np.roll(e, shift=(az, ay, ax), axis=(0, 1, 2)) == first
+    out = np.where(same & (first < field.n_shared), first, -1)
+    return np.ascontiguousarray(out.reshape(-1), dtype=np.int32)
+
+
+# ------------------------------------------------------------------------------------------------
+# the operator
+# ------------------------------------------------------------------------------------------------
+
+class MatFreeOperator:
+    """``K u`` of an :class:`ElementField` (pinned node ``pin`` with diagonal ``scale I``; the
+    scale defaults to the mean diagonal entry, as in :class:`homogenize.cell._CellSolver`).
+    Vectors: (3 N, k) arrays, C-contiguous, float64."""
+
+    def __init__(self, field: ElementField, pin: int = -1, pin_scale: float | None = None):
+        self.field = field
+        self.n = field.n
+        N = self.n ** 3
+        self.shape = (3 * N, 3 * N)
+        self.S = np.ascontiguousarray(_shared_stencils(field))
+        self.ntype = _node_types(field)
+        D = np.empty((N, 3, 3))
+        diag_blocks(self.n, field.etype, field.Ktab, D)
+        self.mean_diag = float(np.mean(np.einsum("pii->pi", D)))
+        self.pin = int(pin)
+        self.pin_scale = self.mean_diag if pin_scale is None else float(pin_scale)
+        if self.pin >= 0:
+            D[self.pin] = self.pin_scale * np.eye(3)
+        self.diag = D
+        self._dinv = None
+        self._op = node_op if N >= 4096 else node_op_serial
+        self._all = np.arange(N, dtype=np.int64)
+        self._tmp = {}
+
+    @property
+    def dinv(self) -> np.ndarray:
+        if self._dinv is None:
+            from ._amg import _block_inverse
+            self._dinv = np.ascontiguousarray(_block_inverse(self.diag))
+        return self._dinv
+
+    def _run(self, nodes, X, B, out, mode):
+        f = self.field
+        k = X.shape[-1]
+        self._op(self.n, nodes, f.etype, f.Ktab, self.ntype, self.S, self.pin, self.pin_scale,
+                 X.reshape(-1, 3, k), B.reshape(-1, 3, k),
+                 self.dinv if mode == 2 else self.diag, out.reshape(-1, 3, k), mode)
+
+    def __matmul__(self, X):
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        one = X.ndim == 1
+        X2 = X[:, None] if one else X
+        Y = np.empty_like(X2)
+        self._run(self._all, X2, X2, Y, 0)
+        return Y[:, 0] if one else Y
+
+    __call__ = __matmul__
+
+    def residual(self, X, B):
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        B = np.ascontiguousarray(B, dtype=np.float64)
+        out = np.empty_like(X)
+        self._run(self._all, X, B, out, 1)
+        return out
+
+    def gauss_seidel(self, X, B, colours):
+        """Block Gauss-Seidel sweeps over the node colour classes ``colours``, in place in X."""
+        k = X.shape[1]
+        rows = max(c.size for c in colours)
+        tmp = self._tmp.get(k)
+        if tmp is None or tmp.shape[0] < rows:     # scratch of one colour class
+            tmp = self._tmp[k] = np.empty((rows, 3, k))
+        for c in colours:
+            self._run(c, X, B, tmp, 2)
+
+    def release(self):
+        self._tmp.clear()
+
+
+def typed_rows_bsr(field: ElementField, rows) -> sp.bsr_matrix:
+    """Block rows ``rows`` of the (unpinned) assembled matrix of an element field: 3x3 BSR of
+    shape (3 len(rows), 3 N), sorted indices."""
+    n = field.n
+    N = n ** 3
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    m = rows.size
+    idx_dtype = np.int32 if 27 * max(m, N) < 2 ** 31 else np.int64
+    indices = np.empty(27 * m, dtype=idx_dtype)
+    data = np.empty((27 * m, 3, 3))
+    typed_stencil_blocks(n, rows, field.etype, field.Ktab, _TAB, asm._AXIS_ORDER, indices, data)
+    indptr = np.arange(0, 27 * m + 1, 27, dtype=idx_dtype)
+    A = sp.bsr_matrix((data, indices, indptr), shape=(3 * m, 3 * N))
+    A.has_sorted_indices = True
+    return A
+
+
+def typed_bsr(field: ElementField, pin: int = -1, pin_scale: float | None = None) -> sp.bsr_matrix:
+    """The assembled periodic matrix of an element field: 3x3 BSR with sorted indices (pinned
+    like :class:`MatFreeOperator` when ``pin >= 0``)."""
+    A = typed_rows_bsr(field, np.arange(field.n ** 3, dtype=np.int64))
+    if pin >= 0:
+        if pin_scale is None:
+            pin_scale = float(np.mean(A.diagonal()))
+        ptr, ind = A.indptr, A.indices
+        A.data[ind == pin] = 0.0
+        A.data[ptr[pin]:ptr[pin + 1]] = 0.0
+        row = np.arange(ptr[pin], ptr[pin + 1])
+        A.data[row[ind[row] == pin][0]] = pin_scale * np.eye(3)
+    return A
+
+
+# ------------------------------------------------------------------------------------------------
+# geometric coarsening
+# ------------------------------------------------------------------------------------------------
+
+def stiffness_times_sparse(field: ElementField, Z: sp.spmatrix, pin: int = -1) -> sp.csr_matrix:
+    """``K Z`` for a sparse Z (3 N, m) (the deflation space of the stiff particles) without the
+    whole matrix: only the block rows of nodes within one node of Z's support are assembled.
+    With ``pin >= 0`` the pinned row is zero (Z must vanish at the pinned node)."""
+    n = field.n
+    N = n ** 3
+    Z = sp.csr_matrix(Z)
+    support = np.zeros(N, dtype=bool)
+    support[np.flatnonzero(np.diff(Z.indptr)) // 3] = True
+    s3 = support.reshape(n, n, n)
+    near = np.zeros_like(s3)
+    for dz in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                near |= np.roll(s3, shift=(dz, dy, dx), axis=(0, 1, 2))
+    rows = np.flatnonzero(near.reshape(-1))
+    if pin >= 0:
+        rows = rows[rows != pin]
+    out = sp.csr_matrix(typed_rows_bsr(field, rows)) @ Z
+    out = out.tocoo()
+    r3 = np.repeat(3 * rows, 3) + np.tile(np.arange(3), rows.size)
+    return sp.csr_matrix((out.data, (r3[out.row], out.col)), shape=(3 * N, Z.shape[1]))
+
+
+def child_prolongations() -> np.ndarray:
+    """(8, 24, 24): ``P_c`` for child position c = cx + 2 cy + 4 cz of a coarse voxel: the
+    trilinear interpolation of the coarse voxel's 8 corners at the child's 8 corners, x I_3."""
+    P = np.zeros((8, 8, 8))
+    for c, (cx, cy, cz) in enumerate(asm.CORNERS):
+        for b, (bx, by, bz) in enumerate(asm.CORNERS):
+            x = np.array([cx + bx, cy + by, cz + bz]) / 2.0
+            for A, corner in enumerate(asm.CORNERS):
+                P[c, b, A] = np.prod(np.where(corner == 1, x, 1.0 - x))
+    return np.einsum("cbA,ij->cbiAj", P, np.eye(3)).reshape(8, 24, 24)
+
+
+def prolongation_matrix(nc: int) -> sp.csr_matrix:
+    """The global trilinear prolongation from the periodic nc^3 to the (2 nc)^3 grid, 3 DOF per
+    node (for tests; the solver uses :func:`prolong_add` / :func:`restrict`)."""
+    n = 2 * nc
+    rows, cols, vals = [], [], []
+    for i in range(n):
+        if i % 2 == 0:
+            rows.append(i); cols.append(i // 2); vals.append(1.0)
+        else:
+            rows += [i, i]; cols += [i // 2, (i // 2 + 1) % nc]; vals += [0.5, 0.5]
+    p = sp.csr_matrix((vals, (rows, cols)), shape=(n, nc))
+    return sp.kron(sp.kron(sp.kron(p, p), p), sp.identity(3)).tocsr()
+
+
+def coarsen(field: ElementField, chunk: int = 4096) -> ElementField:
+    """Galerkin coarse element field ``P^T K P`` on the (n/2)^3 grid, element by element.
+
+    A coarse voxel whose 8 children all have the same shared type t gets the shared coarse type t
+    (``sum_c P_c^T K_t P_c``, computed once); every other coarse voxel its own matrix.
+    """
+    n = field.n
+    if n % 2:
+        raise ValueError("geometric coarsening needs an even number of voxels per edge")
+    nc = n // 2
+    e = field.etype.reshape(n, n, n)
+    kids = np.stack([e[cz::2, cy::2, cx::2].reshape(-1) for cx, cy, cz in asm.CORNERS], axis=1)
+    Pc = child_prolongations()
+    uniform = np.all(kids == kids[:, :1], axis=1) & (kids[:, 0] < field.n_shared)
+    ns = field.n_shared
+    shared = np.einsum("cia,tij,cjb->tab", Pc, field.Ktab[:ns], Pc, optimize=True)
+    own = np.flatnonzero(~uniform)
+    Ktab = np.empty((ns + own.size, 24, 24))
+    Ktab[:ns] = shared
+    for s in range(0, own.size, chunk):
+        sl = own[s:s + chunk]
+        acc = np.zeros((sl.size, 24, 24))
+        for c in range(8):
+            Kc = field.Ktab[kids[sl, c]]
+            acc += Pc[c].T @ Kc @ Pc[c]
+        Ktab[ns + s:ns + s + sl.size] = acc
+    etype = np.where(uniform, kids[:, 0], 0).astype(np.int32)
+    etype[own] = ns + np.arange(own.size, dtype=np.int32)
+    return ElementField(nc, etype, Ktab, ns)
+
+
+def grid_colours(n: int) -> list[np.ndarray]:
+    from ._amg import grid_colours as gc
+    return gc(n)
+
+
+class _AMGSummary:
+    """Levels and operator complexity of a pyamg hierarchy, without its matrices."""
+
+    def __init__(self, ml):
+        self.levels = [None] * len(ml.levels)
+        self._complexity = float(ml.operator_complexity())
+        self.shapes = [lv.A.shape[0] for lv in ml.levels]
+
+    def operator_complexity(self) -> float:
+        return self._complexity
+
+
+class _GeoLevel:
+    def __init__(self, op: MatFreeOperator):
+        self.op = op
+        self.n = op.n
+        self.colours = grid_colours(op.n)
+
+
+class GeometricVCycle:
+    """Symmetric V-cycle: matrix-free levels (8-colour block Gauss-Seidel, trilinear transfer)
+    down to a grid of at most ``assembled_max`` voxels per edge (at least 2 levels... see
+    ``levels``), then the assembled Galerkin matrix of that grid with a pyamg smoothed-aggregation
+    V-cycle (:class:`homogenize._amg.BlockVCycle`).
+
+    field : fine ElementField; pin : pinned fine node (even coordinates on every matrix-free
+    level); pin_scale : its diagonal; amg_options : pyamg options for the coarse hierarchy.
+    """
+
+    def __init__(self, field: ElementField, *, pin: int, pin_scale: float, h: float,
+                 amg_options: dict, assembled_max: int = 64, fine_op: MatFreeOperator | None = None,
+                 sweeps: int = 1):
+        import pyamg
+        from ._amg import BlockVCycle
+        self.levels = []
+        self.sweeps = int(sweeps)
+        f, p, hh = field, pin, h
+        op = fine_op if fine_op is not None else MatFreeOperator(f, p, pin_scale)
+        self.levels.append(_GeoLevel(op))
+        self.field_bytes = [f.nbytes]
+        while True:
+            n = f.n
+            ii, jj, kk = p % n, (p // n) % n, p // (n * n)
+            if ii % 2 or jj % 2 or kk % 2:
+                raise ValueError("the pinned node needs even coordinates on every level")
+            nc = n // 2
+            pc = ii // 2 + nc * (jj // 2 + nc * (kk // 2))
+            f = coarsen(f)
+            self.field_bytes.append(f.nbytes)
+            hh *= 2.0
+            p = pc
+            if nc <= assembled_max or nc % 2 or nc < 8:
+                break
+            # the coarse level's own pin scale: its mean diagonal (the preconditioner only needs
+            # an SPD operator; the Galerkin operator of the unpinned matrix with the pin replaced)
+            self.levels.append(_GeoLevel(MatFreeOperator(f, p, None)))
+        Ac = typed_bsr(f, pin=p)
+        B = asm.rigid_body_modes(f.n, hh)
+        # pyamg counts max_coarse in blocks, and its coarse levels have 6 unknowns per aggregate
+        # (the rigid modes): at most 600 blocks (3600 unknowns) on the coarsest AMG level, which
+        # BlockVCycle then factorizes densely (the sparse LU of a 7188-unknown, nearly dense
+        # coarsest matrix took 10 s to set up at 32^3)
+        opts = dict(amg_options, max_coarse=max(50, min(600, Ac.shape[0] // 120)))
+        ml = pyamg.smoothed_aggregation_solver(Ac, B=B, **opts)
+        del B
+        self.coarse = BlockVCycle(ml, fine_colours=grid_colours(f.n))
+        # keep what the V-cycle uses (its own copies of A and P per level), not pyamg's R, B, ...
+        self.ml = _AMGSummary(ml)
+        self.coarse_n = f.n
+        del ml, Ac, f
+        self.shape = self.levels[0].op.shape
+
+    def _cycle(self, i, B):
+        if i == len(self.levels):
+            return self.coarse(B)
+        L = self.levels[i]
+        k = B.shape[1]
+        X = np.zeros_like(B)
+        nc = len(L.colours)
+        fwd = [L.colours[c] for c in range(nc)] * self.sweeps
+        bwd = [L.colours[c] for c in range(nc - 1, -1, -1)] * self.sweeps
+        L.op.gauss_seidel(X, B, fwd)
+        R = L.op.residual(X, B)
+        ncg = L.n // 2
+        Rc = np.empty((3 * ncg ** 3, k))
+        restrict(ncg, R.reshape(-1, 3, k), Rc.reshape(-1, 3, k))
+        del R
+        Xc = np.ascontiguousarray(self._cycle(i + 1, Rc))
+        del Rc
+        prolong_add(ncg, Xc.reshape(-1, 3, k), X.reshape(-1, 3, k))
+        del Xc
+        L.op.gauss_seidel(X, B, bwd)
+        return X
+
+    def __matmul__(self, B):
+        B = np.ascontiguousarray(B, dtype=np.float64)
+        one = B.ndim == 1
+        X = self._cycle(0, B[:, None] if one else B)
+        return X[:, 0] if one else X
+
+    __call__ = __matmul__
+
+    def release(self):
+        for L in self.levels:
+            L.op.release()
+
+
+def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0.1) -> int:
+    """Peak memory model of one matrix-free cell solve [bytes].
+
+    Per fine node: ~16 vectors of 3 n_cases float64 (block CG: X, R, P, Z, Q, F, the final W and
+    temporaries; V-cycle: X, residual, Gauss-Seidel scratch), the diagonal blocks and their
+    inverses (2 x 72 B), node and element types (8 B); the cut voxels' own 24x24 matrices
+    (4.6 kB each, ``cut_fraction`` of the voxels on the fine level, the same number again on the
+    coarse ones); the assembled BSR of the (n/2)^3 grid (27 blocks of 72 B per coarse node) with
+    its pyamg hierarchy (x 3); plus the Python/numba base (0.6 GB).
+    """
+    N = int(voxels) ** 3
+    vec = 16 * 3 * int(n_cases) * 8 * N
+    per_node = (2 * 72 + 8) * N
+    cut = 2 * cut_fraction * N * 24 * 24 * 8
+    coarse = 3 * 27 * 72 * (N // 8)
+    return int(vec + per_node + cut + coarse + 0.6e9)
+
+
+# ------------------------------------------------------------------------------------------------
+# deflated block CG with in-place updates (the memory of the matrix-free solver is its vectors)
+# ------------------------------------------------------------------------------------------------
+
+def _axpy_cols(X, P, alpha):
+    """X[:, j] += alpha[j] P[:, j], in place (X, P (n, k) C-contiguous)."""
+    n, k = X.shape
+    for i in nb.prange(n):
+        for j in range(k):
+            X[i, j] += alpha[j] * P[i, j]
+
+
+def _xpby_cols(P, Z, beta):
+    """P[:, j] = Z[:, j] + beta[j] P[:, j], in place."""
+    n, k = P.shape
+    for i in nb.prange(n):
+        for j in range(k):
+            P[i, j] = Z[i, j] + beta[j] * P[i, j]
+
+
+def _coldot(A, B, out):
+    """out[j] = sum_i A[i, j] B[i, j] (sequential sum per column: deterministic)."""
+    n, k = A.shape
+    for j in range(k):
+        out[j] = 0.0
+    for i in range(n):
+        for j in range(k):
+            out[j] += A[i, j] * B[i, j]
+
+
+axpy_cols, _ = parallel_and_serial(_axpy_cols)
+xpby_cols, _ = parallel_and_serial(_xpby_cols)
+coldot = nb.njit(cache=True)(_coldot)
+
+
+def _dots(A, B):
+    out = np.empty(A.shape[1])
+    coldot(A, B, out)
+    return out
+
+
+class Deflation:
+    """The deflation space Z (3 N, m) of the stiff particles' rigid modes with ``KZ = K Z`` and
+    the factorized ``E = Z^T K Z``; products touch only the rows where Z or KZ are nonzero."""
+
+    def __init__(self, Z, KZ, Esolve):
+        Z, KZ = sp.csr_matrix(Z), sp.csr_matrix(KZ)
+        self.zr = np.flatnonzero(np.diff(Z.indptr))
+        self.kr = np.flatnonzero(np.diff(KZ.indptr))
+        self.Z, self.KZ = Z[self.zr], KZ[self.kr]          # the nonzero rows only
+        self.ZT, self.KZT = self.Z.T.tocsr(), self.KZ.T.tocsr()
+        self.Es = Esolve
+
+    def coefficients(self, Y, on_K: bool):
+        """E^-1 Z^T Y (``on_K=False``) or E^-1 (KZ)^T Y."""
+        if on_K:
+            return self.Es(np.asarray(self.KZT @ Y[self.kr]))
+        return self.Es(np.asarray(self.ZT @ Y[self.zr]))
+
+    def project(self, Y):
+        """Y -= Z E^-1 (KZ)^T Y, in place."""
+        Y[self.zr] -= self.Z @ self.coefficients(Y, True)
+
+    def correct(self, X, R):
+        """X += Z c, R -= K Z c with c = E^-1 Z^T R, in place."""
+        c = self.coefficients(R, False)
+        X[self.zr] += self.Z @ c
+        R[self.kr] -= self.KZ @ c
+
+
+def block_cg_inplace(A, M, F, *, tol: float, maxiter: int, deflation: Deflation | None = None,
+                     callback=None):
+    """Deflated preconditioned CG on the k columns of F at once, the recursion of
+    :func:`homogenize._amg.block_cg` (each column its own step lengths; the deflation space's
+    start ``x0 = Z E^-1 Z^T F``, its projection of the preconditioned residual and its correction
+    of the residual after every step), with in-place updates: X, R, P, Q and the preconditioned
+    residual are the only vectors (block_cg allocates ~2x more temporaries).
+
+    A : operator with ``A @ X`` and ``A.residual(X, B)``; M : ``M @ R`` (symmetric positive
+    definite). Returns ``(X, histories)`` like block_cg.
+    """
+    F = np.ascontiguousarray(F, dtype=np.float64)
+    n, k = F.shape
+    X = np.zeros((n, k))
+    fn = np.linalg.norm(F, axis=0)
+    fn[fn == 0.0] = 1.0
+    if deflation is not None:
+        X[deflation.zr] = deflation.Z @ deflation.coefficients(F, False)
+        R = A.residual(X, F)
+    else:
+        R = F.copy()
+    hist = [[float(v)] for v in np.linalg.norm(R, axis=0) / fn]
+    idx = np.flatnonzero([h[0] > tol for h in hist])
+    if idx.size == 0:
+        return X, hist
+    Xa = np.ascontiguousarray(X[:, idx])
+    R = np.ascontiguousarray(R[:, idx])
+    fa = fn[idx]
+    P = np.ascontiguousarray(M @ R)
+    rz = _dots(R, P)
+    if deflation is not None:
+        deflation.project(P)
+    it = 0
+    while idx.size and it < maxiter:
+        Q = A @ P
+        alpha = rz / _dots(P, Q)
+        axpy_cols(Xa, P, alpha)
+        axpy_cols(R, Q, -alpha)
+        del Q
+        if deflation is not None:
+            deflation.correct(Xa, R)
+        it += 1
+        res = np.linalg.norm(R, axis=0) / fa
+        for c, v in zip(idx, res):
+            hist[c].append(float(v))
+        done = res <= tol
+        if callback is not None:
+            callback(it, k - idx.size + int(done.sum()), float(res.max()))
+        if done.any():                  # converged columns leave the block
+            X[:, idx[done]] = Xa[:, done]
+            keep = ~done
+            idx, fa, rz = idx[keep], fa[keep], rz[keep]
+            if idx.size == 0:
+                break
+            Xa, R, P = (np.ascontiguousarray(a[:, keep]) for a in (Xa, R, P))
+        Z = np.ascontiguousarray(M @ R)
+        rz_new = _dots(R, Z)
+        if deflation is not None:
+            deflation.project(Z)
+        xpby_cols(P, Z, rz_new / rz)
+        del Z
+        rz = rz_new
+    if idx.size:
+        X[:, idx] = Xa
+    return X, hist

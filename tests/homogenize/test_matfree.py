@@ -1,0 +1,273 @@
+"""The matrix-free cell solver (homogenize._matfree, solver="matrix-free").
+
+Operator equal to the assembled one to round-off (matrix, particle and composite voxels, periodic
+wrap, pinned node); Gauss-Seidel sweep equal to the assembled sweep; the trilinear transfer
+kernels equal the global prolongation matrix; the element-wise Galerkin coarse operator equals
+P^T K P; symmetry and positive definiteness of the operator and of the V-cycle; C_eff and the
+magnetic stress equal to the assembled solver's to the solver tolerance; bad input.
+The bigger version (24^3 RVE) runs with MAPSIM_FULL=1.
+"""
+from __future__ import annotations
+
+import os
+import types
+
+import numpy as np
+import pytest
+
+from homogenize import _assembly as asm
+from homogenize import _budget
+from homogenize import _matfree as mf
+from homogenize import cell as C
+from homogenize._amg import _Level, grid_colours
+from homogenize.mesh import voxelize
+from micro._validate import InputError
+
+FULL = bool(os.environ.get("MAPSIM_FULL"))
+
+
+def _geometry(n_part=6, box=1e-6, seed=4, r=(0.09, 0.16)):
+    """Spheres at random places, some cut by the periodic boundary (the wrap is exercised)."""
+    rng = np.random.default_rng(seed)
+    centres = rng.random((n_part, 3)) * box
+    centres[0] = (0.02 * box, 0.5 * box, 0.98 * box)     # straddles two faces
+    radii = rng.uniform(*r, size=n_part) * box
+    return types.SimpleNamespace(box_m=box, centers_m=centres, radii_m=radii)
+
+
+def _fields(n, method="composite", geom=None):
+    mesh = voxelize(geom or _geometry(), n, method=method)
+    if method in ("composite", "laminate"):
+        lam, mu, comp = C._composite_fields(mesh, C.elastic(C.PDMS), C.elastic(C.FE))
+    else:
+        lam, mu = C._material_fields(mesh, C.elastic(C.PDMS), C.elastic(C.FE))
+        comp = None
+    return mesh, lam, mu, comp
+
+
+def _assembled(mesh, lam, mu, comp):
+    K = asm.assemble_bsr(lam, mu, mesh.h_m)
+    if comp is not None:
+        comp.add_to(K)
+    return K
+
+
+def _pin(K, pin, scale):
+    K = K.copy()
+    ptr, ind = K.indptr, K.indices
+    K.data[ind == pin] = 0.0
+    K.data[ptr[pin]:ptr[pin + 1]] = 0.0
+    row = np.arange(ptr[pin], ptr[pin + 1])
+    K.data[row[ind[row] == pin][0]] = scale * np.eye(3)
+    return K
+
+
+@pytest.mark.parametrize("method", ["composite", "centre", "laminate"])
+def test_operator_equals_assembled(method):
+    n = 10
+    mesh, lam, mu, comp = _fields(n, method)
+    # all three voxel kinds are present: matrix, particle, and (composite) cut voxels
+    assert (mu == mu.max()).any() and (mu == mu.min()).any()
+    if comp is not None:
+        assert comp.vox.size > 0
+    K = _assembled(mesh, lam, mu, comp)
+    field = mf.element_field(lam, mu, mesh.h_m, comp)
+    op = mf.MatFreeOperator(field)
+    assert (op.ntype >= 0).any() and (op.ntype < 0).any()   # both code paths of the kernel
+    U = np.random.default_rng(0).normal(size=(3 * n ** 3, 4))
+    ref = K @ U
+    got = op @ U
+    assert np.abs(got - ref).max() <= 1e-13 * np.abs(ref).max()
+    assert np.allclose(op @ U[:, 1], ref[:, 1], rtol=0, atol=1e-13 * np.abs(ref).max())
+    # the assembled matrix of the element types, the diagonal blocks
+    Kt = mf.typed_bsr(field)
+    assert abs(Kt - K).max() <= 1e-14 * abs(K).max()
+    diag = K.diagonal().reshape(-1, 3)
+    assert np.allclose(np.einsum("pii->pi", op.diag), diag, rtol=1e-14, atol=0)
+
+
+def test_pinned_operator_and_gauss_seidel_equal_assembled():
+    n = 8
+    mesh, lam, mu, comp = _fields(n)
+    K = _assembled(mesh, lam, mu, comp)
+    field = mf.element_field(lam, mu, mesh.h_m, comp)
+    pin = 2 + n * (4 + n * 6)
+    op = mf.MatFreeOperator(field, pin)
+    scale = float(np.mean(K.diagonal()))
+    assert op.pin_scale == pytest.approx(scale, rel=1e-14)
+    Kp = _pin(K, pin, scale)
+    U = np.random.default_rng(1).normal(size=(3 * n ** 3, 3))
+    ref = Kp @ U
+    assert np.abs(op @ U - ref).max() <= 1e-13 * np.abs(ref).max()
+    R = np.random.default_rng(2).normal(size=U.shape)
+    assert np.abs(op.residual(U, R) - (R - ref)).max() <= 1e-13 * np.abs(ref).max()
+    assert np.abs(mf.typed_bsr(field, pin=pin) - Kp).max() <= 1e-14 * abs(K).max()
+    # one forward sweep of 8-colour block Gauss-Seidel, matrix-free vs the assembled kernel
+    X1, X2 = np.zeros_like(U), np.zeros_like(U)
+    cols = grid_colours(n)
+    op.gauss_seidel(X1, R, cols)
+    _Level(Kp, cols).smooth(X2, R, range(len(cols)))
+    assert np.abs(X1 - X2).max() <= 1e-12 * np.abs(X2).max()
+
+
+def test_operator_symmetric_positive_definite():
+    n = 8
+    mesh, lam, mu, comp = _fields(n)
+    field = mf.element_field(lam, mu, mesh.h_m, comp)
+    rng = np.random.default_rng(3)
+    U = rng.normal(size=(3 * n ** 3, 5))
+    op = mf.MatFreeOperator(field)
+    G = U.T @ (op @ U)
+    assert np.abs(G - G.T).max() <= 1e-13 * np.abs(G).max()
+    # unpinned: the rigid translations are its null space, everything else has positive energy
+    T = np.zeros((3 * n ** 3, 3))
+    for c in range(3):
+        T[c::3, c] = 1.0
+    assert np.abs(op @ T).max() <= 1e-10 * np.abs(op @ U).max()
+    Uc = U - T @ np.linalg.lstsq(T, U, rcond=None)[0]
+    assert np.all(np.einsum("ij,ij->j", Uc, op @ Uc) > 0)
+    # pinned: positive definite (smallest eigenvalue of the small dense matrix > 0)
+    Kd = mf.typed_bsr(field, pin=0).toarray()
+    assert np.abs(Kd - Kd.T).max() <= 1e-14 * np.abs(Kd).max()
+    assert np.linalg.eigvalsh(Kd)[0] > 0
+
+
+def test_transfer_kernels_equal_prolongation_matrix():
+    nc = 5
+    P = mf.prolongation_matrix(nc)
+    rng = np.random.default_rng(4)
+    Xc = rng.normal(size=(3 * nc ** 3, 2))
+    X = rng.normal(size=(3 * (2 * nc) ** 3, 2))
+    out = X.copy()
+    mf.prolong_add(nc, Xc.reshape(-1, 3, 2), out.reshape(-1, 3, 2))
+    assert np.allclose(out, X + P @ Xc, rtol=0, atol=1e-14)
+    R = np.empty_like(Xc)
+    mf.restrict(nc, X.reshape(-1, 3, 2), R.reshape(-1, 3, 2))
+    assert np.allclose(R, P.T @ X, rtol=0, atol=1e-13)
+    # interpolation reproduces constants and linear fields (away from the periodic seam)
+    assert np.allclose(P @ np.ones(3 * nc ** 3), 1.0)
+    # each child prolongation is a partition of unity
+    Pc = mf.child_prolongations()
+    assert np.allclose(Pc.sum(axis=2), 1.0)
+
+
+@pytest.mark.parametrize("method", ["composite", "centre"])
+def test_galerkin_coarse_operator_elementwise(method):
+    n = 12
+    mesh, lam, mu, comp = _fields(n, method)
+    K = _assembled(mesh, lam, mu, comp).tocsr()
+    field = mf.element_field(lam, mu, mesh.h_m, comp)
+    fc = mf.coarsen(field)
+    P = mf.prolongation_matrix(n // 2)
+    G = (P.T @ K @ P).tocsr()
+    Gc = mf.typed_bsr(fc).tocsr()
+    assert abs(G - Gc).max() <= 1e-13 * abs(G).max()
+    # shared coarse types: the coarse voxels whose children are all matrix share one matrix
+    assert fc.n_shared == field.n_shared and fc.Ktab.shape[0] < fc.n ** 3
+    # twice: the 3^3 grid of the 12^3 one
+    fcc = mf.coarsen(fc)
+    P2 = mf.prolongation_matrix(n // 4)
+    G2 = (P2.T @ G @ P2).tocsr()
+    assert abs(G2 - mf.typed_bsr(fcc).tocsr()).max() <= 1e-13 * abs(G2).max()
+
+
+def test_vcycle_symmetric_positive_definite():
+    n = 16
+    mesh, lam, mu, comp = _fields(n)
+    field = mf.element_field(lam, mu, mesh.h_m, comp)
+    op = mf.MatFreeOperator(field, 0)
+    M = mf.GeometricVCycle(field, pin=0, pin_scale=op.pin_scale, h=mesh.h_m,
+                           amg_options=C.AMG_OPTIONS, fine_op=op, assembled_max=4)
+    assert len(M.levels) == 2 and M.coarse_n == 4       # two matrix-free levels, then AMG
+    rng = np.random.default_rng(5)
+    B = rng.normal(size=(3 * n ** 3, 4))
+    B[0:3] = 0.0                                         # the pinned node carries no load
+    MB = M @ B
+    G = B.T @ MB
+    assert np.abs(G - G.T).max() <= 1e-8 * np.abs(G).max()
+    assert np.all(np.linalg.eigvalsh(0.5 * (G + G.T)) > 0)
+    # a convergent preconditioner: one V-cycle reduces the error of K x = b in the energy norm
+    X = rng.normal(size=(3 * n ** 3, 1))
+    X[0:3] = 0.0
+    b = op @ X
+    E = X - M @ b
+
+    def energy(v):
+        return float(v[:, 0] @ (op @ v)[:, 0])
+    assert energy(E) < 0.5 * energy(X)
+
+
+def _c_eff(n, solver, forces, geom):
+    return C.homogenize_rve(geom, n, solver=solver, forces_N=forces, tol=1e-8)
+
+
+@pytest.mark.parametrize("n", [12] + ([24] if FULL else []))
+def test_c_eff_equals_assembled_solver(n):
+    geom = _geometry(n_part=8, seed=7, r=(0.08, 0.13))
+    forces = np.random.default_rng(8).normal(size=(8, 3)) * 1e-15
+    a = _c_eff(n, "fast", forces, geom)
+    b = _c_eff(n, "matrix-free", forces, geom)
+    assert b.settings["solver"] == "matrix-free" and b.settings["geometric_levels"] == 1
+    assert max(b.residuals.values()) <= 1e-8
+    # variational C_eff: error ~ tol^2 relative; both solvers agree far below the tolerance
+    assert np.abs(a.C_eff_Pa - b.C_eff_Pa).max() <= 1e-8 * np.abs(a.C_eff_Pa).max()
+    assert np.abs(a.stress_mag_Pa - b.stress_mag_Pa).max() <= 1e-6 * np.abs(a.stress_mag_Pa).max()
+    # symmetric positive definite effective stiffness, stiffer than the matrix
+    Cb = b.C_eff_Pa
+    assert np.abs(Cb - Cb.T).max() <= 1e-12 * np.abs(Cb).max()
+    assert np.linalg.eigvalsh(Cb)[0] > 0
+    assert b.E_eff_Pa > C.PDMS.E_Pa
+
+
+def test_bad_input():
+    geom = _geometry()
+    with pytest.raises(InputError, match="even number of voxels"):
+        C.homogenize_rve(geom, 9, solver="matrix-free")
+    with pytest.raises(InputError, match="solver must be one of"):
+        C.homogenize_rve(geom, 8, solver="matfree")
+    with pytest.raises(InputError, match="solver must be one of"):
+        C.CellConfig(voxels=8, solver="matfree")
+    assert C.CellConfig(voxels=8, solver="matrix-free").solver == "matrix-free"
+
+
+def test_memory_estimate(monkeypatch):
+    # no assembled fine matrix: the matrix-free model is well below the assembled one, and
+    # grows with the grid and the number of load cases
+    mfree = _budget.cell_memory_bytes(128, "matrix-free", 7)
+    fast = _budget.cell_memory_bytes(128, "fast", 7)
+    assert mfree < 0.6 * fast
+    assert _budget.cell_memory_bytes(64, "matrix-free", 7) < mfree
+    assert _budget.cell_memory_bytes(128, "matrix-free", 1) < mfree
+    # a grid beyond the machine is refused before any allocation, with the estimate named
+    monkeypatch.setattr(_budget, "machine_memory_bytes", lambda: 4 * 2 ** 30)
+    with pytest.raises(InputError, match=r"voxels=128 .* needs about .* GiB"):
+        C._choose_solver("matrix-free", 128, 7)
+    # "fast" falls back to the matrix-free solver where only that one fits
+    monkeypatch.setattr(_budget, "machine_memory_bytes", lambda: 12 * 2 ** 30)
+    assert C._choose_solver("fast", 128, 7) == "matrix-free"
+    assert C._choose_solver("fast", 32, 7) == "fast"
+    with pytest.raises(InputError, match="needs about"):
+        C._choose_solver("fast", 127, 7)       # odd: no matrix-free fallback
+
+
+def test_cli_solver_choice(tmp_path, monkeypatch):
+    import json
+
+    from homogenize.cli import main
+    from micro.particles import Monodisperse, generate_rve
+    rve = generate_rve(0.05, 4, 7, distribution=Monodisperse(25e-9), gap_m=5e-9)
+    path = tmp_path / "rve.h5"
+    rve.save(path)
+    out = tmp_path / "cell.json"
+    assert main(["homogenize", str(path), "--voxels", "8", "--solver", "matrix-free",
+                 "--json", str(out), "--quiet"]) == 0
+    d = json.loads(out.read_text())
+    assert d["settings"]["solver"] == "matrix-free" and d["E_eff_Pa"] > 2e6
+    # odd grid, and a grid beyond the machine: exit 2 before any work, no output file
+    bad = tmp_path / "bad.json"
+    assert main(["homogenize", str(path), "--voxels", "9", "--solver", "matrix-free",
+                 "--json", str(bad), "--quiet"]) == 2
+    monkeypatch.setattr(_budget, "machine_memory_bytes", lambda: 2 ** 30)
+    assert main(["homogenize", str(path), "--voxels", "128", "--solver", "matrix-free",
+                 "--json", str(bad), "--quiet"]) == 2
+    assert not bad.exists()
