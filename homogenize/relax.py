@@ -40,7 +40,11 @@ Near field (``near_field=True``): close pairs (surface gap below two mean radii)
 two-sphere force minus the point-dipole force (:mod:`micro.nearfield`, multipole expansion,
 chord permeability of each sphere's law at its local field) on top of the periodic point
 dipoles; the corrections are pairwise, so they conserve momentum and join the virial. Their
-part of the Jacobian comes from the same finite differences as the magnetic stiffness.
+part of the Jacobian comes from the same finite differences as the magnetic stiffness. Inside
+the contact layer (gap < ``min_gap_m``) the near-field force is held at its value at the
+layer's edge and the contact penalty, stiffened by the exact/point-dipole force ratio there
+(4.4 for mu_r = 1000 at 5 % of a radius), takes over: the contact force itself is set by the
+penalty, not by the (log-divergent, for mu_r -> inf) force of touching spheres.
 """
 from __future__ import annotations
 
@@ -267,6 +271,18 @@ def _dipole_pair_stiffness(x, moments, a, box, near=2.0):
 NEAR_FIELD_GAPS = (1.0, 2.0)
 
 
+def _near_field_stiffening(a_mean, g0, mu_max):
+    """Factor on the contact penalty with near-field forces: the ratio of the exact to the
+    point-dipole attraction of two equal spheres along the field at the contact-layer gap
+    ``g0`` (4.4 for mu_r = 1000 at g0 = 5 % of a radius), so the penalty holds the stronger
+    contact forces with the same overlap as it holds the point-dipole ones."""
+    from micro.nearfield import pair_polarizabilities, point_dipole_polarizabilities
+    R = 2.0 + g0 / a_mean
+    ex = pair_polarizabilities(R, 1.0, 1.0, mu_max, mu_max, tol=1e-8)
+    pd = point_dipole_polarizabilities(R, 1.0, 1.0, mu_max, mu_max)
+    return max(1.0, ex[2] / pd[2])
+
+
 def _taper(gap, g1, g2):
     if gap <= g1:
         return 1.0
@@ -284,7 +300,8 @@ def _near_field_forces(x, a, box, state, gap_floor_m, mu_max=MU_MAX, tol=1e-6):
     two-point-dipole force, for the spheres' chord permeabilities
     (:func:`micro.nearfield.chord_permeability`, capped at ``mu_max``) in the background field of
     the pair, i.e. the mean of the two local fields without the partner's dipole field. Gaps
-    below ``gap_floor_m`` (inside the contact layer) are evaluated at ``gap_floor_m``.
+    below ``gap_floor_m`` (inside the contact layer) are evaluated at ``gap_floor_m``: there
+    the contact penalty takes over (stiffened by :func:`_near_field_stiffening`).
     """
     N = a.size
     F = np.zeros((N, 3))
@@ -396,9 +413,11 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
     if not g0 > 0:
         raise InputError(f"min_gap_m must be > 0 m, got {min_gap_m}")
     k_c = _contact_stiffness(a, matrix)
+    if near_field:
+        k_c = k_c * _near_field_stiffening(a_mean, g0, near_field_mu_max)
     law_params = dict(law_params or {})
     last = {"m": None, "state": None, "Fc": None, "nf": None}
-    nf_floor = 0.1 * g0         # near-field forces inside the contact layer: at this gap
+    nf_floor = g0               # near-field forces inside the contact layer: at its edge
 
     def magnetic(x, st):
         """Total magnetic force (N, 3): periodic point dipoles (+ near-field corrections)."""
@@ -688,6 +707,10 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
         M = fem_displaceability(rve, voxels, matrix)
     t["displaceability"] = time.perf_counter() - t0
     e1, e2 = _perpendicular(n)
+    a_mean = float(np.mean(rve.radii_m))
+    stiffen = (_near_field_stiffening(a_mean, min_gap_m if min_gap_m is not None
+                                      else 0.05 * a_mean, near_field_mu_max)
+               if near_field else 1.0)
     steps, rves = [], []
     u = np.zeros((rve.n, 3))
     for Bk in B:
@@ -735,7 +758,7 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
             g0 = min_gap_m if min_gap_m is not None else 0.05 * float(np.mean(rve.radii_m))
             for (_, _, dv, fv) in _pair_contact_forces(eq.centers_m, np.asarray(rve.radii_m),
                                                        rve.box_m, g0, matrix,
-                                                       np.asarray(rve.centers_m)):
+                                                       np.asarray(rve.centers_m), stiffen):
                 vir -= np.outer(dv, fv) / rve.box_m ** 3
             res = _cell(voxelize(r_rel, voxels), forces, vir, matrix, cell_tol)
             t["cell"] += time.perf_counter() - t0
@@ -812,9 +835,9 @@ def _cell(mesh, forces, virial, matrix, tol):
     return "cell FEM failed on the relaxed RVE (" + "; ".join(errors) + ")"
 
 
-def _pair_contact_forces(x, a, box, g0, matrix, X_ref=None):
+def _pair_contact_forces(x, a, box, g0, matrix, X_ref=None, stiffen=1.0):
     """(i, j, d_ij, force on i from j) of the contact penalty pairs (see :func:`_contact`)."""
-    k_c = _contact_stiffness(a, matrix)
+    k_c = _contact_stiffness(a, matrix) * stiffen
     out = []
     i, j, d, r, g = _pairs(x, a, box, g0)
     ga = _activation_gap(X_ref, a, box, i, j, g0)

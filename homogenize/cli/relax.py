@@ -35,7 +35,8 @@ checked against an axisymmetric FEM to 0.15 %) minus the point-dipole force, on 
 periodic point dipoles. Limits: pairwise additive (no three-body near field), linear spheres
 with the chord permeability of their law at their local field (so near contact it overrates
 saturating particles, whose gap region saturates), permeability capped at 1000, gaps inside
-the contact layer evaluated at a tenth of it. Not modelled: particle rotation."""
+the contact layer (5 % of a radius) held at the layer's edge, where the contact penalty takes
+over. Not modelled: particle rotation."""
 
 
 def _steps(text: str) -> np.ndarray:

@@ -385,3 +385,15 @@ def test_magnetostriction_curve_stiff_matrix_limit():
     assert stiff["strain_relaxed"][0] == pytest.approx(stiff["strain_affine"][0], rel=1e-3)
     soft = magnetostriction_curve(rve, [0.3], law="linear", matrix=SOFT, voxels=12)
     assert soft["M_eff_relaxed_A_per_m"][0] > soft["M_eff_affine_A_per_m"][0]
+
+
+def test_near_field_contact_without_overlap():
+    """Near contact the near-field force grows (x 4.4 at the contact layer's edge for the
+    capped mu_r = 1000; log-divergent for touching perfectly permeable spheres): it is held at
+    the layer's edge and the stiffened penalty keeps the pair from overlapping."""
+    r = relax(pair(2, 10e-9), [0.3, 1.0], law="linear", matrix=SOFT, voxels=None,
+              near_field=True)
+    for s in r.steps:
+        assert s["n_contacts"] == 1 and s["contacts"] == [[0, 1]]
+        assert 0.0 < s["min_gap_m"] < 0.05 * A
+    assert R._near_field_stiffening(A, 0.05 * A, 1000.0) == pytest.approx(4.434, rel=1e-3)
