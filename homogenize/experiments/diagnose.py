@@ -490,10 +490,13 @@ def microstructure_account(exp: Experiment, folds, baseline: Candidate,
     WITHOUT any fitted stress, next to the measurement; the held-out gain of its extension;
     what remains unexplained (the fitted ``kappa_extra`` still needed, named as fitted).
 
-    Numbers at the row of the largest |B| (the rising branch when there is one):
-    ``measured``, ``predicted_affine`` (particles fixed: shape stress minus the RVE's virial
-    stress), ``predicted_coupled_rve`` (plus the relax table's restructuring strain, with the
-    Student-t interval over its realizations), ``fraction_explained``, ``unexplained``.
+    All models share the final model's magnetization (its law and parameters when it has
+    ``field_dependent_magnetization`` etc.: M is not what is in question); none of the
+    "predicted" numbers has a fitted stress. Numbers at the row of the largest |B| (the rising
+    branch when there is one): ``measured``, ``predicted_affine`` (particles fixed: shape
+    stress minus the RVE's virial stress), ``predicted_coupled_rve`` (plus the relax table's
+    restructuring strain, with the Student-t interval over its realizations),
+    ``fraction_explained``, ``unexplained``.
     """
     ok, why = coupled_rve_available(exp)
     if not ok:
@@ -502,9 +505,13 @@ def microstructure_account(exp: Experiment, folds, baseline: Candidate,
     from .causes import predicted_stress_coefficients, composite_magnetization_A_per_m
     from .tables import restructuring_table
     from . import _physics as P
-    seed = ModelSpec(exp.kind)
-    dip = seed.plus("dipolar_interaction")
-    coupled = seed.plus("microstructure_evolution", "coupled_rve")   # no fitted parameter
+    # the final model's magnetization (law, shell, demagnetization, hysteresis), no stress
+    mag = ModelSpec(exp.kind, tuple(c for c in final.spec.causes
+                                    if c not in ("dipolar_interaction", "microstructure_evolution")),
+                    final.spec.law, final.spec.hyper)
+    p_mag = {k: v for k, v in final.fit.params.items() if k not in ("kappa_extra", "c_restructure")}
+    dip = mag.plus("dipolar_interaction")
+    coupled = mag.plus("microstructure_evolution", "coupled_rve")    # no fitted stress
     c_coupled = _candidate(coupled, "microstructure_evolution", exp, folds)
     c_dip = _candidate(dip, "dipolar_interaction", exp, folds)
     c_dip_coupled = _candidate(dip.plus("microstructure_evolution", "coupled_rve"),
@@ -516,8 +523,8 @@ def microstructure_account(exp: Experiment, folds, baseline: Candidate,
     up = ~exp.down
     pool = np.flatnonzero(up) if up.any() else np.arange(exp.n_rows)
     i = int(pool[np.argmax(B[pool])])
-    affine = predict(dip, exp, {"kappa_extra": 0.0})
-    pred = predict(coupled, exp, {})
+    affine = predict(dip, exp, {**p_mag, "kappa_extra": 0.0})
+    pred = predict(coupled, exp, p_mag)
     phi = float(exp.columns["phi"][i])
     tab = restructuring_table(phi, float(exp.matrix.E_Pa))
     k_shape = float(np.asarray(P.shape_stress_coefficient(exp.columns["aspect_ratio"][i])))
@@ -525,7 +532,7 @@ def microstructure_account(exp: Experiment, folds, baseline: Candidate,
     R = d_r.size
     half = t_half_width(float(np.std(d_r, ddof=1)) / math.sqrt(R), R - 1, 0.95) if R > 1 \
         else math.nan
-    M = composite_magnetization_A_per_m(dip, exp, {})
+    M = composite_magnetization_A_per_m(dip, exp, p_mag)
     x = P.mu_0 * M[i] ** 2 / exp.matrix.E_Pa
     k_sh, k_rve = predicted_stress_coefficients(exp, M)
 
@@ -552,11 +559,12 @@ def microstructure_account(exp: Experiment, folds, baseline: Candidate,
         "kappa_affine": float(k_sh[i] - k_rve[i]),
         "kappa_coupled_rve": float(pred[i] / x) if x > 0 else math.nan,
         "kappa_measured": float(y[i] / x) if x > 0 else math.nan,
-        "cv_rmse": {"seed": cv(baseline), "coupled_rve_no_fitted_parameter": cv(c_coupled),
+        "cv_rmse": {"seed": cv(baseline), "coupled_rve_no_fitted_stress": cv(c_coupled),
                     "dipolar_interaction_kappa_extra_fitted": cv(c_dip),
                     "dipolar_plus_coupled_rve_kappa_extra_fitted": cv(c_dip_coupled),
                     "dipolar_plus_fitted_restructuring": cv(c_dip_fitted)},
         "gain_coupled_rve_over_seed": gain(cv(baseline), cv(c_coupled)),
+        "gain_fitted_kappa_extra_over_seed": gain(cv(baseline), cv(c_dip)),
         "gain_coupled_rve_on_top_of_dipolar": gain(cv(c_dip), cv(c_dip_coupled)),
         "gain_fitted_restructuring_on_top_of_dipolar": gain(cv(c_dip), cv(c_dip_fitted)),
         "kappa_extra_fitted_with_coupled_rve": None if kx is None else float(kx),
@@ -564,6 +572,8 @@ def microstructure_account(exp: Experiment, folds, baseline: Candidate,
                                                                                math.nan)),
         "c_restructure_fitted": None if cr is None else float(cr),
         "c_restructure_fitted_sd": float(c_dip_fitted.fit.sd.get("c_restructure", math.nan)),
+        "magnetization_model": mag.label(),
+        "magnetization_params": {k: float(v) for k, v in p_mag.items()},
         "accepted": final.spec.has("microstructure_evolution"),
         "accepted_form": final.spec.restructure,
     }

@@ -264,7 +264,10 @@ def _microstructure_section(ms: dict | None) -> list:
         f"{p['realizations']} random RVEs of {p['n_particles']} particles, {p['voxels']}^3 "
         f"voxels; made by `mapsim batch {p['study_toml']}`).", "",
         f"At B = {at['B_T']:.3g} T ({at['branch']} branch), phi = {at['phi']:g}, with NO "
-        f"fitted stress (no `kappa_extra`):", "",
+        f"fitted stress (no `kappa_extra`); magnetization of the final model "
+        f"(`{ms['magnetization_model']}`, "
+        + ", ".join(f"{k} = {v:.4g}" for k, v in ms["magnetization_params"].items()) + "):",
+        "",
         "| | axial strain | over mu0 M^2 / E |", "|---|---|---|",
         f"| measured | {ms['measured']:.4g} | {ms['kappa_measured']:.4g} |",
         f"| affine prediction (particles fixed) | {ms['predicted_affine']:.3g} | "
@@ -278,7 +281,8 @@ def _microstructure_section(ms: dict | None) -> list:
         "Held-out RMSE (same folds):", "",
         "| model | cv_rmse | fitted |", "|---|---|---|",
         f"| seed (no strain) | {cv['seed']:.4g} | - |",
-        f"| coupled RVE, nothing fitted | {cv['coupled_rve_no_fitted_parameter']:.4g} | - |",
+        f"| coupled RVE, no fitted stress | {cv['coupled_rve_no_fitted_stress']:.4g} | "
+        f"(M law only) |",
         f"| affine dipoles + fitted kappa_extra | "
         f"{cv['dipolar_interaction_kappa_extra_fitted']:.4g} | kappa_extra |",
         f"| coupled RVE + fitted kappa_extra | "
@@ -289,7 +293,9 @@ def _microstructure_section(ms: dict | None) -> list:
         f"{cv['dipolar_plus_fitted_restructuring']:.4g} | kappa_extra, c_restructure = "
         f"{ms['c_restructure_fitted']:.4g} +- {ms['c_restructure_fitted_sd']:.2g} |", "",
         f"Held-out gain of the coupled RVE: {ms['gain_coupled_rve_over_seed']:.4g} over the "
-        f"seed with nothing fitted, {ms['gain_coupled_rve_on_top_of_dipolar']:.4g} on top of "
+        f"seed with no fitted stress (the fitted kappa_extra alone: "
+        f"{ms['gain_fitted_kappa_extra_over_seed']:.4g}), "
+        f"{ms['gain_coupled_rve_on_top_of_dipolar']:.4g} on top of "
         f"the fitted kappa_extra. `microstructure_evolution` "
         + ("was accepted in the selection (form "
            f"`{ms['accepted_form']}`{', a FITTED constant' if ms['accepted_form'] == 'fitted' else ''})."

@@ -16,9 +16,9 @@ from homogenize.experiments.tables import Unavailable, relax_tables, restructuri
 ROOT = Path(__file__).resolve().parents[3]
 DIGUET = ROOT / "examples" / "data" / "diguet2010_magnetostriction.toml"
 ME = "microstructure_evolution"
-# fixed seeds (the synthetic generator is seeded): a case built to need the cause, and two
-# that do not (saturated particles; field-dependent magnetization without restructuring)
-SEED_NEEDS, SEED_DIPOLAR, SEED_FDM = 1, 0, 2
+# fixed seeds (the synthetic generator is seeded): a case built to need the cause (recovered
+# exactly in 8 of seeds 0-7) and one that does not (saturated particles)
+SEED_NEEDS, SEED_DIPOLAR = 1, 0
 
 
 def test_vocabulary_format_document_and_help():
@@ -42,13 +42,24 @@ def test_detected_on_a_case_built_to_need_it():
     assert res["gain"] > 5
 
 
-@pytest.mark.parametrize("hidden, seed", [(("dipolar_interaction",), SEED_DIPOLAR),
-                                          (("field_dependent_magnetization",), SEED_FDM)])
-def test_not_detected_where_the_particles_need_not_move(hidden, seed):
-    case = generate(hidden, "magnetostriction", seed=seed)
+def test_not_detected_where_the_particles_need_not_move():
+    """Saturated particles, a phi-dependent extra stress (kappa0 (1 + phi)) that is not a
+    restructuring: not named (0 of seeds 0-7 when this was written)."""
+    case = generate(("dipolar_interaction",), "magnetostriction", seed=SEED_DIPOLAR)
     res = diagnose(case.experiment).as_dict()
     assert ME not in res["causes"], res["steps"]
     assert set(res["causes"]) == set(case.expected)
+
+
+@pytest.mark.xfail(reason="known weakness: with a field-dependent magnetization the fitted "
+                          "M^4 form absorbs the misfit between the truth's tanh law and the "
+                          "fitted laws; microstructure_evolution is falsely named in 5 of "
+                          "seeds 0-7 (this seed is one of them); see results/diagnose/README.md",
+                   strict=False)
+def test_not_detected_with_a_field_dependent_magnetization_alone():
+    case = generate(("field_dependent_magnetization",), "magnetostriction", seed=1)
+    res = diagnose(case.experiment).as_dict()
+    assert ME not in res["causes"], res["steps"]
 
 
 def test_forms_follow_the_data_and_the_tables():
@@ -105,7 +116,7 @@ def test_diguet_diagnosis_reports_the_coupled_rve_prediction():
                                                        - ms["predicted_affine"])
     cv = ms["cv_rmse"]
     assert ms["gain_coupled_rve_over_seed"] == pytest.approx(
-        cv["seed"] / cv["coupled_rve_no_fitted_parameter"])
+        cv["seed"] / cv["coupled_rve_no_fitted_stress"])
     # the model with a fitted kappa_extra on top is at least as good held out as the affine one
     # would be with it (kappa_extra absorbs whatever the coupled RVE leaves)
     assert ms["kappa_extra_fitted_with_coupled_rve"] is not None
