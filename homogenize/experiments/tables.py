@@ -556,7 +556,9 @@ def _restructuring_from(path: Path, phi: float, E_Pa: float, rtol: float):
             "study": t.attrs.get("study_name"), "evaluator": t.attrs.get("evaluator"),
             "realizations": int(eps_r.shape[1]), "n_particles": study.get("study", {})
             .get("n_particles"), "voxels": study.get("study", {}).get("voxels"),
-            "study_toml": path.with_suffix(".toml").name,
+            "study_toml": (path.with_suffix(".toml").relative_to(DATA_DIR.parents[2]).as_posix()
+                           if path.is_relative_to(DATA_DIR.parents[2])
+                           else str(path.with_suffix(".toml"))),
             "git_revision": (_json.loads(man).get("git_revision") if man else None)}
     return Restructuring(path=str(path), phi=phi, E_Pa=E_Pa, B_T=B, d_eps_rve=eps_r - eps_a,
                          d_x=x_r - x_a, eps_rve_relaxed=eps_r, eps_rve_affine=eps_a,
