@@ -46,14 +46,16 @@ _TAB = asm._stencil_tables()
 # ------------------------------------------------------------------------------------------------
 
 def _node_op(n, nodes, etype, Ktab, ntype, S, pin, pin_scale, u, b, dinv, out, mode):
-    """For the nodes ``nodes`` (int64), with ``(K u)_p`` the
-    matrix-free product (pinned node ``pin``: row and column replaced by ``pin_scale I``):
+    """For the nodes ``nodes`` (int64), with ``(K u)_p`` the matrix-free product (pinned node
+    ``pin``: row and column replaced by ``pin_scale I``):
 
     mode 0: out[t] = (K u)_p;  mode 1: out[t] = b_p - (K u)_p  (p = nodes[t]);
     mode 2: one block Gauss-Seidel update in place, u[p] += dinv[p] (b_p - (K u)_p); out is
     scratch of len(nodes) rows. The nodes of one Gauss-Seidel call must not share a voxel.
-    u, b: (N, 3, k); out: (len(nodes), 3, k); etype (n^3,) int32; Ktab (T, 24, 24); ntype (N,) int32 (shared type of
-    all 8 voxels around the node, or -1); S (n_shared, 27, 3, 3) stencils of the shared types.
+    u, b: (N, 3, k); out: (len(nodes), 3, k); etype (n^3,) int32; Ktab (T, 24, 24); ntype (N,)
+    int32 (shared type of all 8 voxels around the node, or -1); S (n_shared, 27, 3, 3) stencils
+    of the shared types. The wrapped neighbour coordinates are computed once per node (no
+    integer division in the inner loops).
     """
     k = u.shape[2]
     for t in nb.prange(nodes.shape[0]):
@@ -61,6 +63,9 @@ def _node_op(n, nodes, etype, Ktab, ntype, S, pin, pin_scale, u, b, dinv, out, m
         i = p % n
         j = (p // n) % n
         kk = p // (n * n)
+        xs = (i - 1 if i > 0 else n - 1, i, i + 1 if i < n - 1 else 0)
+        ys = (j - 1 if j > 0 else n - 1, j, j + 1 if j < n - 1 else 0)
+        zs = (kk - 1 if kk > 0 else n - 1, kk, kk + 1 if kk < n - 1 else 0)
         for r in range(3):
             for m in range(k):
                 out[t, r, m] = 0.0
@@ -71,33 +76,31 @@ def _node_op(n, nodes, etype, Ktab, ntype, S, pin, pin_scale, u, b, dinv, out, m
         else:
             ty = ntype[p]
             if ty >= 0:
-                for s in range(27):
-                    dx = s % 3 - 1
-                    dy = (s // 3) % 3 - 1
-                    dz = s // 9 - 1
-                    q = (i + dx + n) % n + n * (((j + dy + n) % n) + n * ((kk + dz + n) % n))
-                    if q == pin:
-                        continue
-                    for r in range(3):
-                        for c in range(3):
-                            a = S[ty, s, r, c]
-                            if a != 0.0:
-                                for m in range(k):
-                                    out[t, r, m] += a * u[q, c, m]
+                for sz in range(3):
+                    for sy in range(3):
+                        rowq = n * (ys[sy] + n * zs[sz])
+                        for sx in range(3):
+                            q = xs[sx] + rowq
+                            if q == pin:
+                                continue
+                            s = sx + 3 * sy + 9 * sz
+                            for r in range(3):
+                                for c in range(3):
+                                    a = S[ty, s, r, c]
+                                    if a != 0.0:
+                                        for m in range(k):
+                                            out[t, r, m] += a * u[q, c, m]
             else:
                 for ca in range(8):
                     ax = ca & 1
                     ay = (ca >> 1) & 1
                     az = (ca >> 2) & 1
-                    vi = (i - ax + n) % n
-                    vj = (j - ay + n) % n
-                    vk = (kk - az + n) % n
-                    e = etype[vi + n * (vj + n * vk)]
+                    e = etype[xs[1 - ax] + n * (ys[1 - ay] + n * zs[1 - az])]
                     for cb in range(8):
                         bx = cb & 1
                         by = (cb >> 1) & 1
                         bz = (cb >> 2) & 1
-                        q = (vi + bx) % n + n * (((vj + by) % n) + n * ((vk + bz) % n))
+                        q = xs[1 + bx - ax] + n * (ys[1 + by - ay] + n * zs[1 + bz - az])
                         if q == pin:
                             continue
                         for r in range(3):
@@ -528,9 +531,9 @@ class _GeoLevel:
 
 class GeometricVCycle:
     """Symmetric V-cycle: matrix-free levels (8-colour block Gauss-Seidel, trilinear transfer)
-    down to a grid of at most ``assembled_max`` voxels per edge (at least 2 levels... see
-    ``levels``), then the assembled Galerkin matrix of that grid with a pyamg smoothed-aggregation
-    V-cycle (:class:`homogenize._amg.BlockVCycle`).
+    down to a grid of at most ``assembled_max`` voxels per edge (at least one matrix-free level:
+    the fine one), then the assembled Galerkin matrix of that grid with a pyamg smoothed-
+    aggregation V-cycle (:class:`homogenize._amg.BlockVCycle`).
 
     field : fine ElementField; pin : pinned fine node (even coordinates on every matrix-free
     level); pin_scale : its diagonal; amg_options : pyamg options for the coarse hierarchy.

@@ -126,8 +126,9 @@ def test_operator_symmetric_positive_definite():
     assert np.abs(op @ T).max() <= 1e-10 * np.abs(op @ U).max()
     Uc = U - T @ np.linalg.lstsq(T, U, rcond=None)[0]
     assert np.all(np.einsum("ij,ij->j", Uc, op @ Uc) > 0)
-    # pinned: positive definite (smallest eigenvalue of the small dense matrix > 0)
-    Kd = mf.typed_bsr(field, pin=0).toarray()
+    # pinned: positive definite (smallest eigenvalue of a small dense matrix > 0)
+    mesh6, lam6, mu6, comp6 = _fields(6)
+    Kd = mf.typed_bsr(mf.element_field(lam6, mu6, mesh6.h_m, comp6), pin=0).toarray()
     assert np.abs(Kd - Kd.T).max() <= 1e-14 * np.abs(Kd).max()
     assert np.linalg.eigvalsh(Kd)[0] > 0
 
