@@ -620,17 +620,20 @@ class GeometricVCycle:
 def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0.1) -> int:
     """Peak memory model of one matrix-free cell solve [bytes].
 
-    Per fine node: ~16 vectors of 3 n_cases float64 (block CG: X, R, P, Z, Q, F, the final W and
-    temporaries; V-cycle: X, residual, Gauss-Seidel scratch), the diagonal blocks and their
-    inverses (2 x 72 B), node and element types (8 B); the cut voxels' own 24x24 matrices
-    (4.6 kB each, ``cut_fraction`` of the voxels on the fine level, the same number again on the
-    coarse ones); the assembled BSR of the (n/2)^3 grid (27 blocks of 72 B per coarse node) with
-    its pyamg hierarchy (x 3); plus the Python/numba base (0.6 GB).
+    Per fine node: 11 vectors of 3 n_cases float64 (the load block and its pinned copy;
+    in-place block CG: X, the active X, R, P, Q, the preconditioned residual; V-cycle: its
+    result and the fine residual; the energy products afterwards reuse that space), the diagonal
+    blocks and their inverses (2 x 72 B), node and element types and indices (16 B); the cut
+    voxels' own 24x24 matrices (4.6 kB each, ``cut_fraction`` of the voxels on the fine level and
+    half as many on the coarse one); the assembled (n/2)^3 Galerkin matrix with its pyamg
+    hierarchy (3 x 27 blocks of 72 B per coarse node); plus the Python/numba base (0.6 GB).
+    Measured peak RSS (bench, 7 load cases, _rve(n) with cut voxels ~5 %): 0.37 GB at 32^3
+    (model 0.71), 1.10 GB at 64^3 (model 1.50); 128^3: model 7.8 GB, see the bench record.
     """
     N = int(voxels) ** 3
-    vec = 16 * 3 * int(n_cases) * 8 * N
-    per_node = (2 * 72 + 8) * N
-    cut = 2 * cut_fraction * N * 24 * 24 * 8
+    vec = 11 * 3 * int(n_cases) * 8 * N
+    per_node = (2 * 72 + 16) * N
+    cut = 1.5 * cut_fraction * N * 24 * 24 * 8
     coarse = 3 * 27 * 72 * (N // 8)
     return int(vec + per_node + cut + coarse + 0.6e9)
 
