@@ -107,9 +107,17 @@ def _plot_data(d: Diagnosis, path: Path):
                      label=lab if g < 8 else None)
             ax1.plot(x[m][o], d.baseline.fit.prediction[m][o], ":", color=colors[g], lw=1)
             ax1.plot(x[m][o], d.final.fit.prediction[m][o], "-", color=colors[g], lw=1.2)
+    ms = d.microstructure
+    title = "data (o), seed model (dotted), extended model (solid)"
+    if ms and ms.get("available") and "rows" in ms and int(groups.max()) < 8:
+        up = ~exp.down
+        o = np.argsort(x[up])
+        ax1.plot(x[up][o], np.asarray(ms["rows"]["predicted_coupled_rve"])[up][o], "--",
+                 color="k", lw=1, label="coupled RVE, no fitted stress")
+        title += ",\ncoupled RVE (particles move) without kappa_extra (dashed)"
     ax1.set_xlabel(xlabel)
     ax1.set_ylabel(_label(exp.measured_name, UNITS[exp.kind]))
-    ax1.set_title("data (o), seed model (dotted), extended model (solid)", fontsize=9)
+    ax1.set_title(title, fontsize=9)
     if int(groups.max()) < 8:
         ax1.legend(fontsize=7)
     lo = float(min(exp.y.min(), d.baseline.cv_pred.min(), d.final.cv_pred.min()))
