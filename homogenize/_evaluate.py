@@ -390,7 +390,7 @@ class RVEEvaluator:
 _RELAX_AXES = ("phi", "B_T", "law", "matrix_E_Pa")
 #: [relax] keys -> keyword of homogenize.relax.relax (matrix_E_Pa / matrix_nu build the matrix)
 _RELAX_KEYS = ("elastic_model", "boundary", "min_gap_m", "tol", "max_iter", "demag_factor",
-               "accuracy", "cell_tol", "matrix_E_Pa", "matrix_nu")
+               "accuracy", "cell_tol", "matrix_E_Pa", "matrix_nu", "near_field")
 _RELAX_CACHE: dict = {}
 _RELAX_CACHE_SIZE = 4
 
@@ -416,7 +416,8 @@ class RelaxEvaluator:
     ``mean_radius_m``, ``arrangement``, ...). ``[relax]``: ``elastic_model`` (``green``, the
     fast periodic Green's function, default; or ``fem``, needs ``fem = true``), ``boundary``
     (``free``/``strain``), ``min_gap_m``, ``tol``, ``max_iter``, ``demag_factor``, ``accuracy``,
-    ``cell_tol``, ``matrix_E_Pa`` (default the seed's PDMS, 2 MPa), ``matrix_nu`` (0.45).
+    ``cell_tol``, ``matrix_E_Pa`` (default the seed's PDMS, 2 MPa), ``matrix_nu`` (0.45),
+    ``near_field`` (exact two-sphere forces for close pairs, default false).
     ``fem = true`` runs the cell FEM (``voxels``) on the relaxed RVE at every step: strain along
     and across the field, E along and across, and the same strain for the RVE as placed.
     Field along z. The sweep over all B values is computed once (run_batch submits the steps

@@ -26,7 +26,7 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
     [cell]       # fixed keywords of homogenize.cell.homogenize_rve (matrix_E_Pa, ...)
     [relax]      # evaluator = "relax" only: keywords of homogenize.relax.relax (elastic_model,
                  # boundary, min_gap_m, tol, max_iter, demag_factor, accuracy, cell_tol,
-                 # matrix_E_Pa, matrix_nu); see homogenize/studies/relax_example.toml
+                 # matrix_E_Pa, matrix_nu, near_field); see homogenize/studies/relax_example.toml
 
     [synthetic]  # evaluator = "synthetic" only: work_seconds = CPU seconds per realization
 
@@ -136,7 +136,7 @@ _RULES = {
     "rigid": ("bool",), "deflate": ("bool",), "maxiter": ("int", 1, 10 ** 6),
     # relax (homogenize.relax.relax; tol, max_iter, accuracy, demag_factor, matrix_* above)
     "elastic_model": ("enum", ("green", "fem")), "boundary": ("enum", ("free", "strain")),
-    "min_gap_m": ("float", 0.0, 1e-3, "m", True), "cell_tol": _TOL,
+    "min_gap_m": ("float", 0.0, 1e-3, "m", True), "cell_tol": _TOL, "near_field": ("bool",),
 }
 # the cell's tol shares the name of the dipoles' tol: both must be <= 1e-2
 _CELL_RULES = {"method": ("enum", ("composite", "laminate", "centre", "fraction"))}

@@ -128,6 +128,7 @@ def test_xarray_opens_the_relax_table(tables):
     (("matrix_nu = 0.49", "matrix_nu = 0.7"), ("[relax] matrix_nu", "0.5")),
     (("matrix_nu = 0.49", "elastic_model = \"fem\"\nfem_x = 1"), ("[relax] unknown key 'fem_x'",)),
     (("matrix_nu = 0.49", "boundary = \"open\""), ("[relax] boundary", "free, strain")),
+    (("matrix_nu = 0.49", "near_field = 1"), ("[relax] near_field", "true or false")),
     (("fem = true", "fem = false\n[magnetics]\ntol = 1e-6"), ("[magnetics]", "[relax]")),
     (("matrix_E_Pa = 0.5e6", "matrix_E_Pa = 0.5e6\ngradB_T_per_m = 1.0"),
      ("unknown key 'gradB_T_per_m'",)),
@@ -147,6 +148,12 @@ def test_relax_table_only_with_the_relax_evaluator():
     text = STUDY.replace('evaluator = "relax"', 'evaluator = "rve"')
     with pytest.raises(InputError, match=r"\[relax\] is given but \[study\] evaluator = 'rve'"):
         parse_study(text, "x.toml")
+
+
+def test_near_field_key_reaches_relax():
+    s = parse_study(STUDY.replace("matrix_nu = 0.49", "matrix_nu = 0.49\nnear_field = true"),
+                    "nf.toml")
+    assert s.tasks()[0].settings["relax"]["near_field"] is True
 
 
 def test_packaged_example_study_parses():
