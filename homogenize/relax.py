@@ -13,7 +13,10 @@ neighbours along the field snap together). Equation (1) is solved for ``u`` by N
 with pseudo-transient continuation (the Jacobian ``I - M dF/dx``: contact penalty exact,
 magnetic stiffness by differences of the full self-consistent forces for close particles),
 field step after field step, each step starting from the previous solution; no particle moves
-by more than a quarter of its smallest gap per step, and no step makes particles overlap.
+by more than a quarter of its smallest gap per step, and no step makes particles overlap. A
+field step that does not converge, or converges into an overlap (a pair snapping through the
+contact penalty in one large step), is retried from the last converged state with the field
+increment halved (adaptive sub-stepping, :func:`_substepped`; ``max_substep_halvings``).
 Torques: the moments of soft spheres follow their local field (isotropic laws), so point
 dipoles carry no torque and the rotations of the spheres (which do not change their positions
 to the order of ``M``) are not solved.
@@ -22,7 +25,13 @@ Displaceability ``M``:
 
 * ``elastic="green"`` (default, fast): the elastic Rotne-Prager tensor of rigid spheres,
   Ewald-summed in the periodic cell (:mod:`homogenize._green`); exact for one sphere and to
-  O(r^-3) for pairs (many-body reflections left out).
+  O(r^-3) for pairs (many-body reflections left out). Model error (results/relax/green_vs_fem.md,
+  voxel FEM at 32 and 48 voxels per edge, nu = 0.45): the pair blocks agree with the FEM to
+  5 % down to a gap of 0.6 radius, but the reflections that lower the self displaceability of
+  a sphere with a close neighbour are missing (FEM: -6.4 % at gap 0.6 a, -2.9 % at 1 a,
+  -0.6 % at 2 a), so the relative compliance of a close pair under equal and opposite forces
+  is overestimated, after removing the FEM's own single-sphere voxel error, by about 16 % at
+  gap 0.6 a, 7 % at 1 a and 2 % at 2 a: close pairs come together somewhat too easily.
 * ``elastic="fem"``: the voxel cell FEM with rigid particles, one unit force per particle and
   direction (:func:`fem_displaceability`, 3N cell solves; for small RVEs and for validation).
 
@@ -74,7 +83,7 @@ from .mesh import voxelize
 __all__ = ["relax", "RelaxResult", "equilibrium", "Equilibrium", "fem_displaceability",
            "magnetostriction_curve",
            "green_displaceability", "microstructure", "magnetic_coenergy_J", "BOUNDARIES",
-           "ELASTIC_MODELS"]
+           "ELASTIC_MODELS", "MAX_SUBSTEP_HALVINGS"]
 
 BOUNDARIES = ("free", "strain")
 ELASTIC_MODELS = ("green", "fem")
@@ -122,14 +131,16 @@ def _particle_translation(mesh, W, p):
 
 
 def fem_displaceability(rve, voxels: int, matrix: ElasticMaterial = elastic(PDMS), *,
-                        tol: float = 1e-8, particles=None, directions=(0, 1, 2)) -> np.ndarray:
+                        tol: float = 1e-8, particles=None, directions=(0, 1, 2),
+                        solver: str = "fast") -> np.ndarray:
     """Displaceability of rigid particles from the periodic voxel cell FEM, (3N, 3N) [m/N].
 
     A unit force on particle j (spread over its voxels, balanced by a uniform counter-load,
     zero mean strain) is solved with :func:`homogenize.cell.homogenize_mesh` (rigid particles,
     deflated CG); column (j, d) holds the mean nodal displacement of every particle. Costs 3N
     cell solves; ``particles`` (indices) and ``directions`` restrict the loaded particles and
-    force directions (other columns zero).
+    force directions (other columns zero). ``solver`` goes to the cell FEM (``"fast"``,
+    ``"reference"`` or ``"matrix-free"`` for large grids, :func:`homogenize.cell.homogenize_mesh`).
 
     Conventions as in the cell FEM: the counter-load acts on every voxel, the particle's own
     included (net force ``(1 - phi_p) F`` on it), and the nodal fluctuation has zero mean; both
@@ -147,7 +158,7 @@ def fem_displaceability(rve, voxels: int, matrix: ElasticMaterial = elastic(PDMS
             F = np.zeros((N, 3))
             F[j, d] = 1.0
             res = homogenize_mesh(mesh, forces_N=F, matrix=matrix, rigid=True, cases=(),
-                                  keep_fields=True, tol=tol)
+                                  keep_fields=True, tol=tol, solver=solver)
             W = res.fields["magnetic"]
             for p in range(N):
                 M[3 * p:3 * p + 3, 3 * j + d] = _particle_translation(mesh, W, p)
@@ -636,13 +647,80 @@ class RelaxResult:
                 "steps": [dict(s) for s in self.steps]}
 
 
+#: Default limit of the adaptive field sub-stepping of :func:`relax`: a requested step is
+#: retried with its field increment halved at most this many times (down to 1/32 of it).
+MAX_SUBSTEP_HALVINGS = 5
+
+
+def _substepped(rve, M, n, B_from, B_to, u_from, eq_kw, max_halvings):
+    """Equilibrium at the field ``B_to`` (along unit ``n``) by continuation from the converged
+    state ``u_from`` at ``B_from`` [T], with adaptive sub-stepping.
+
+    A trial (sub-)step that raises ConvergenceError (no convergence, or overlapping particles)
+    is discarded and retried from the last converged state with the increment halved; after two
+    converged sub-steps in a row the increment doubles again (at most back to the requested
+    one). At
+    most ``max_halvings`` halvings per requested step, then ConvergenceError with every
+    attempt. Returns the Equilibrium at ``B_to`` and a summary dict (``substeps``,
+    ``fields_T``, ``iterations``, ``evaluations``, ``failed``)."""
+    full = B_to - B_from
+    h = full
+    B_c, u_c = B_from, u_from
+    halvings = 0
+    fields, failed, attempts = [], [], []
+    its = evals = 0
+    eq = None
+    while eq is None or B_c < B_to:
+        B_try = B_to if (B_to - B_c) <= h * (1.0 + 1e-9) else B_c + h
+        try:
+            e = equilibrium(rve, B_try * n, M, u0_m=u_c, **eq_kw)
+        except ConvergenceError as exc:
+            hist = list(exc.residual_history)
+            attempts.append({"B_T": float(B_try), "from_B_T": float(B_c), "converged": False,
+                             "residual_history": hist, "message": str(exc)})
+            failed.append({"B_T": float(B_try), "from_B_T": float(B_c),
+                           "residual_evaluations": len(hist),
+                           "last_residual": float(hist[-1]) if hist else None})
+            halvings += 1
+            if halvings > max_halvings or not h > 0:
+                lines = "; ".join(
+                    f"{a['from_B_T']:.4g} -> {a['B_T']:.4g} T: "
+                    + ("converged" if a["converged"] else
+                       f"failed after {len(a['residual_history'])} residual evaluations, "
+                       "residuals " + ", ".join(f"{v:.1e}" for v in a["residual_history"][-3:]))
+                    for a in attempts)
+                err = ConvergenceError(
+                    f"relaxation did not reach the requested B = {B_to:.4g} T: the step from "
+                    f"{B_c:.4g} T failed at B = {B_try:.4g} T even with the field increment "
+                    f"halved {halvings - 1} times (max_substep_halvings = {max_halvings}). "
+                    f"Attempts: {lines}. Last failure: {exc}",
+                    [v for a in attempts for v in a["residual_history"]])
+                err.attempts = attempts
+                raise err from None
+            h = 0.5 * h
+            continue
+        attempts.append({"B_T": float(B_try), "from_B_T": float(B_c), "converged": True,
+                         "residual_history": list(e.residual_history), "message": ""})
+        its += e.iterations
+        evals += e.evaluations
+        fields.append(float(B_try))
+        # the increment doubles again after two converged sub-steps in a row
+        if attempts[-2:-1] and attempts[-2]["converged"]:
+            h = min(2.0 * h, full)
+        eq, B_c, u_c = e, B_try, e.displacement_m
+    return eq, {"substeps": len(fields), "fields_T": fields, "iterations": its,
+                "evaluations": evals, "failed": failed}
+
+
+
 def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
           matrix: ElasticMaterial = elastic(PDMS), boundary: str = "free", voxels: int | None = 32,
           near_field: bool = False, elastic_model: str = "green", direction=(0.0, 0.0, 1.0),
           min_gap_m: float | None = None, tol: float = 1e-6, max_iter: int = 60,
           demag_factor=None, accuracy: float = 1e-6, cell_tol: float = 1e-6,
           progress: bool = False, mean_strain=None,
-          near_field_mu_max: float = MU_MAX) -> RelaxResult:
+          near_field_mu_max: float = MU_MAX,
+          max_substep_halvings: int = MAX_SUBSTEP_HALVINGS) -> RelaxResult:
     """Relax an RVE through increasing field steps (coupled magneto-mechanics).
 
     Parameters
@@ -669,7 +747,15 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
         function (fast) or from the voxel FEM (3N cell solves at ``voxels``)
     direction : (3,) -- field direction
     min_gap_m : float -- contact gap [m] (default 5 % of the mean radius)
-    tol, max_iter : Newton tolerance (in radii) and iteration budget per step
+    tol, max_iter : Newton tolerance (in radii) and iteration budget per (sub-)step
+    max_substep_halvings : int -- adaptive field sub-stepping: a step that does not converge
+        (or ends with overlapping particles) is retried from the last converged state with
+        the field increment halved, at most this many times per requested step (default
+        ``MAX_SUBSTEP_HALVINGS`` = 5: increments down to 1/32 of the requested one; 0 switches
+        sub-stepping off). After two converged sub-steps in a row the increment doubles again
+        (never beyond the requested one). Each step reports ``substeps`` (converged solves it took,
+        1 without sub-stepping), ``substep_B_T`` (their fields) and ``failed_attempts``
+        (field, starting field, residual evaluations and last residual of each failed try)
     demag_factor, accuracy : passed to :func:`micro.dipoles.solve`
     cell_tol : CG tolerance of the cell FEM
 
@@ -680,7 +766,10 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
     Raises
     ------
     InputError -- steps not increasing, matrix modulus <= 0, unknown options.
-    ConvergenceError -- a step does not converge or particles overlap.
+    ConvergenceError -- a step does not converge or particles overlap even with the field
+        increment halved ``max_substep_halvings`` times; the message names the requested
+        and the failed field and summarises every attempt, ``residual_history`` concatenates
+        the residual histories of all attempts (``attempts``: one dict per attempt).
     """
     t_all = time.perf_counter()
     B = np.asarray(check_finite("B_steps_T", B_steps_T, "T"), dtype=float).ravel()
@@ -697,6 +786,11 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
     check_range("near_field_mu_max", near_field_mu_max, 1.0, 1e6, "(relative permeability)",
                 lo_open=True)
     E_mean = _check_mean_strain(mean_strain, boundary)
+    if (isinstance(max_substep_halvings, (bool, np.bool_))
+            or not isinstance(max_substep_halvings, (int, np.integer))
+            or not 0 <= max_substep_halvings <= 20):
+        raise InputError(f"max_substep_halvings must be an integer in [0, 20], got "
+                         f"{max_substep_halvings!r}")
     if voxels is None and elastic_model == "fem":
         raise InputError("elastic_model='fem' needs voxels")
     n = np.asarray(direction, dtype=float)
@@ -717,14 +811,16 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
                if near_field else 1.0)
     steps, rves = [], []
     u = np.zeros((rve.n, 3))
+    B_done = 0.0                   # field of the last converged state (u = 0 at zero field)
+    eq_kw = dict(law=law, law_params=law_params, min_gap_m=min_gap_m, tol=tol,
+                 max_iter=max_iter, demag_factor=demag_factor, accuracy=accuracy, matrix=matrix,
+                 near_field=bool(near_field), near_field_mu_max=near_field_mu_max)
     for Bk in B:
         t0 = time.perf_counter()
-        eq = equilibrium(rve, Bk * n, M, law=law, law_params=law_params, min_gap_m=min_gap_m,
-                         u0_m=u, tol=tol, max_iter=max_iter, demag_factor=demag_factor,
-                         accuracy=accuracy, matrix=matrix, near_field=bool(near_field),
-                         near_field_mu_max=near_field_mu_max)
+        eq, sub = _substepped(rve, M, n, B_done, float(Bk), u, eq_kw, max_substep_halvings)
         t["relax"] += time.perf_counter() - t0
         u = eq.displacement_m
+        B_done = float(Bk)
         r_rel = replace(rve, centers_m=eq.centers_m,
                         params={**dict(rve.params), "relaxed_B_T": float(Bk),
                                 "relaxed_boundary": boundary})
@@ -735,7 +831,10 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
                "M_eff_vector_A_per_m": np.asarray(st.M_eff_A_per_m).tolist(),
                "displacement_rms_m": float(np.sqrt(np.mean(np.sum(u ** 2, axis=1)))),
                "displacement_max_m": float(np.sqrt(np.sum(u ** 2, axis=1)).max()),
-               "iterations": int(eq.iterations), "residual_evaluations": int(eq.evaluations),
+               "iterations": int(sub["iterations"]),
+               "residual_evaluations": int(sub["evaluations"]),
+               "substeps": int(sub["substeps"]), "substep_B_T": sub["fields_T"],
+               "failed_attempts": sub["failed"],
                "contacts": [list(p) for p in eq.contacts], "n_contacts": len(eq.contacts),
                "virial_stress_Pa": np.asarray(st.virial_stress_Pa).tolist()}
         ms = microstructure(r_rel, n)
@@ -791,8 +890,9 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
             rec["C_eff_Pa"] = np.asarray(C).tolist()
         steps.append(rec)
         if progress:
-            print(f"B = {Bk:.3f} T: {eq.iterations} Newton its, u_rms "
-                  f"{rec['displacement_rms_m']:.3g} m, contacts {rec['n_contacts']}", flush=True)
+            print(f"B = {Bk:.3f} T: {sub['iterations']} Newton its in {sub['substeps']} "
+                  f"sub-step(s), u_rms {rec['displacement_rms_m']:.3g} m, contacts "
+                  f"{rec['n_contacts']}", flush=True)
     t["total"] = time.perf_counter() - t_all
     settings = {"law": law if isinstance(law, str) else getattr(law, "name", str(law)),
                 "law_params": dict(law_params or {}), "matrix_E_Pa": matrix.E_Pa,
@@ -802,7 +902,8 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
                 "mean_strain": E_mean.tolist() if boundary == "strain" else None,
                 "direction": n.tolist(), "min_gap_m": min_gap_m, "tol": tol,
                 "n_particles": rve.n, "box_m": rve.box_m, "phi": rve.phi,
-                "demag_factor": demag_factor}
+                "demag_factor": demag_factor,
+                "max_substep_halvings": int(max_substep_halvings)}
     return RelaxResult(steps=tuple(steps), rve=rves[-1], rves=tuple(rves), settings=settings,
                        timings_s=t)
 

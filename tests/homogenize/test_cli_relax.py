@@ -20,7 +20,7 @@ def test_relax_writes_steps_and_a_loadable_rve(tmp_path, capsys):
     # zero field: nothing moves; the field moves the particles
     assert steps[0]["displacement_rms_m"] == 0.0 and steps[-1]["displacement_rms_m"] > 0.0
     for k in ("strain_mag", "M_eff_A_per_m", "E_eff_parallel_Pa", "E_eff_perpendicular_Pa",
-              "min_gap_m", "iterations"):
+              "min_gap_m", "iterations", "substeps", "substep_B_T", "failed_attempts"):
         assert k in steps[-1]
     assert np.shape(steps[-1]["strain_mag"]) == (3, 3)
     # the relaxed RVE opens with the other commands
@@ -34,7 +34,9 @@ def test_relax_writes_steps_and_a_loadable_rve(tmp_path, capsys):
     assert main(["relax", str(src), "--boundary", "strain", "--mean-strain", "0,0,0,0,0",
                  "--json", str(tmp_path / "z.json")]) == 2
     assert main(["relax", str(src), "--json", str(src)]) == 2
-    for f in ("x.json", "y.json", "z.json"):
+    assert main(["relax", str(src), "--max-substep-halvings", "-1",
+                 "--json", str(tmp_path / "w.json")]) == 2
+    for f in ("x.json", "y.json", "z.json", "w.json"):
         assert not (tmp_path / f).exists()
 
 

@@ -402,3 +402,49 @@ def test_near_field_contact_without_overlap():
     r = relax(rve, [0.0, 0.3], near_field=True, voxels=None)
     assert r.steps[-1]["min_gap_m"] > 0.0 and r.steps[-1]["n_contacts"] >= 1
     assert R._near_field_stiffening(A, 0.05 * A, 1000.0) == pytest.approx(4.434 ** 0.5, rel=1e-3)
+
+
+# ------------------------------------------------------------------ adaptive field sub-stepping
+def test_substepping_recovers_a_step_that_overlaps_and_matches_finer_steps():
+    """A pair along the field 0 -> 0.6 T in one step snaps through the contact penalty into an
+    overlap (ConvergenceError without sub-stepping); with the field increment halved it
+    converges to contact, and the state at 0.6 T is the one reached through finer requested
+    steps (0.3, 0.4, 0.5, 0.6 T, no sub-steps) to the solver tolerance."""
+    rve = pair(2, 20e-9)
+    with pytest.raises(ConvergenceError, match=r"B = 0.6 T.*overlap"):
+        relax(rve, [0.6], law="linear", matrix=SOFT, voxels=None, max_substep_halvings=0)
+    r = relax(rve, [0.6], law="linear", matrix=SOFT, voxels=None)
+    s = r.steps[-1]
+    assert s["substeps"] > 1 and s["substep_B_T"][-1] == 0.6
+    assert len(s["failed_attempts"]) >= 1 and s["failed_attempts"][0]["B_T"] == 0.6
+    assert np.all(np.diff(s["substep_B_T"]) > 0)
+    assert s["n_contacts"] == 1 and 0.0 < s["min_gap_m"] < 0.05 * A
+    fine = relax(rve, [0.3, 0.4, 0.5, 0.6], law="linear", matrix=SOFT, voxels=None,
+                 max_substep_halvings=0)
+    assert [x["substeps"] for x in fine.steps] == [1, 1, 1, 1]
+    # tol = 1e-6 radii on the residual u - M F; the stiff penalty keeps the error near it
+    assert np.abs(r.rve.centers_m - fine.rve.centers_m).max() < 1e-5 * A
+    assert s["M_eff_A_per_m"] == pytest.approx(fine.steps[-1]["M_eff_A_per_m"], rel=1e-6)
+    assert r.to_dict()["steps"][-1]["substeps"] == s["substeps"]
+
+
+def test_substepping_failure_names_field_and_every_attempt():
+    """Even sub-stepping fails (one Newton iteration allowed): ConvergenceError after
+    ``max_substep_halvings`` halvings, naming the requested and the failed field, with the
+    residual history of every attempt."""
+    with pytest.raises(ConvergenceError) as e:
+        relax(pair(2, 20e-9), [0.3], law="linear", matrix=SOFT, voxels=None, max_iter=1,
+              max_substep_halvings=2)
+    msg = str(e.value)
+    assert "requested B = 0.3 T" in msg and "failed at B = 0.075 T" in msg
+    assert "halved 2 times" in msg and msg.count("failed after") == 3
+    att = e.value.attempts
+    assert [a["B_T"] for a in att] == pytest.approx([0.3, 0.15, 0.075])
+    assert e.value.residual_history == [v for a in att for v in a["residual_history"]]
+    assert all(len(a["residual_history"]) >= 2 for a in att)
+
+
+@pytest.mark.parametrize("bad", [-1, 21, 1.5, True])
+def test_substep_limit_refused(bad):
+    with pytest.raises(InputError, match="max_substep_halvings"):
+        relax(pair(2), [0.1], law="linear", voxels=None, max_substep_halvings=bad)
