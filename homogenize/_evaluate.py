@@ -258,6 +258,13 @@ def _signature_keys(func) -> set:
             if p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)}
 
 
+def _particle_keys(generate_rve) -> set:
+    """The study keys that describe the particle population (``generate_rve`` keywords)."""
+    return ((_signature_keys(generate_rve) - {"phi", "n", "seed", "distribution", "composition",
+                                              "progress"})
+            | set(_DIST_KEYS) | set(_COMP_KEYS))
+
+
 def _rve_kwargs(params: dict) -> dict:
     """Keywords of generate_rve from the study's RVE keys (distribution, composition, rest)."""
     p = dict(params)
@@ -314,9 +321,7 @@ class RVEEvaluator:
         except ModuleNotFoundError as exc:
             raise InputError(f"{study.path}: evaluator 'rve' needs {exc.name}, which is not "
                              f"available in this installation") from None
-        gen_keys = ((_signature_keys(generate_rve) - {"phi", "n", "seed", "distribution",
-                                                      "composition", "progress"})
-                    | set(_DIST_KEYS) | set(_COMP_KEYS))
+        gen_keys = _particle_keys(generate_rve)
         for axis in names:
             if axis not in _FIELD_AXES and axis not in gen_keys:
                 raise InputError(f"{study.path}: [grid] unknown key '{axis}'; allowed: "
@@ -445,9 +450,7 @@ class RelaxEvaluator:
             raise InputError(f"{study.path}: [grid] B_T must be strictly increasing for the "
                              f"relax evaluator (the field steps of one continuation, >= 0 T), "
                              f"got {B}")
-        gen_keys = ((_signature_keys(generate_rve) - {"phi", "n", "seed", "distribution",
-                                                      "composition", "progress"})
-                    | set(_DIST_KEYS) | set(_COMP_KEYS))
+        gen_keys = _particle_keys(generate_rve)
         for axis in names:
             if axis not in _RELAX_AXES and axis not in gen_keys:
                 raise InputError(f"{study.path}: [grid] unknown key '{axis}' for the relax "

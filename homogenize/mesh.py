@@ -216,8 +216,13 @@ def machine_memory_bytes() -> int:
 
 
 def check_memory(voxels: int, method: str = "composite", n_cases: int = 7) -> int:
-    """Refuse (InputError) a cell whose memory estimate exceeds the machine, before allocating."""
+    """Refuse (InputError) a cell whose memory estimate exceeds the machine, before allocating:
+    the estimate of the cheapest solver that can run it (matrix-free for even voxel counts >= 8,
+    else assembled); the solver actually chosen is checked again by the cell solve."""
     need = estimate_memory_bytes(voxels, method, n_cases)
+    if int(voxels) % 2 == 0 and int(voxels) >= 8:
+        from homogenize._matfree import memory_estimate_bytes
+        need = min(need, memory_estimate_bytes(int(voxels), n_cases))
     have = machine_memory_bytes()
     if need > have:
         raise InputError(
