@@ -75,7 +75,10 @@ def _cmd(args) -> int:
     # the solver's own memory model (the matrix-free one has no assembled fine matrix; "fast"
     # becomes "matrix-free" where only that one fits)
     n_cases = 7 if args.B is not None else 6
-    solver = _choose_solver(solver, args.voxels, n_cases)
+    try:
+        solver = _choose_solver(solver, args.voxels, n_cases)
+    except InputError as exc:       # name the option the user gave
+        raise InputError(f"--voxels {args.voxels}: {exc}") from None
     if solver != "matrix-free":
         _check_voxels("--voxels", args.voxels)
     cfg = CellConfig(voxels=args.voxels, matrix=Material(args.matrix_E, args.matrix_nu),
