@@ -12,8 +12,8 @@ each matrix block is read once for all columns.
   same result for any number of threads. Pre-smoothing runs the colours forward, post-smoothing
   backward: the V-cycle is a symmetric positive definite operator, as CG requires.
 * :func:`block_cg` -- preconditioned CG run in lock-step on all columns (each column has its own
-  step lengths: mathematically k independent CG solves), optionally deflated; converged columns
-  leave the block.
+  step lengths: mathematically k independent CG solves), in place, optionally deflated
+  (:class:`Deflation`); converged columns leave the block. Used by every cell solver.
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from . import _kernels as kn
 from scipy.linalg import cho_factor, cho_solve
 from scipy.sparse.linalg import splu
 
-__all__ = ["BSROp", "BlockVCycle", "block_cg", "grid_colours", "greedy_colours"]
+__all__ = ["BSROp", "BlockVCycle", "Deflation", "block_cg", "grid_colours", "greedy_colours"]
 
 
 def _bsr(A, blocksize=None):
@@ -219,54 +219,106 @@ class BlockVCycle:
     __call__ = __matmul__
 
 
-def block_cg(A, M, F, *, tol: float, maxiter: int, project=None, x0=None, coarse=None,
+class Deflation:
+    """The deflation space Z (n, m) of the stiff particles' rigid modes with ``KZ = K Z`` and the
+    factorized ``E = Z^T K Z`` (``Esolve``); products touch only the rows where Z or KZ are
+    nonzero."""
+
+    def __init__(self, Z, KZ, Esolve):
+        Z, KZ = sp.csr_matrix(Z), sp.csr_matrix(KZ)
+        self.zr = np.flatnonzero(np.diff(Z.indptr))
+        self.kr = np.flatnonzero(np.diff(KZ.indptr))
+        self.Z, self.KZ = Z[self.zr], KZ[self.kr]          # the nonzero rows only
+        self.ZT, self.KZT = self.Z.T.tocsr(), self.KZ.T.tocsr()
+        self.Es = Esolve
+
+    def coefficients(self, Y, on_K: bool):
+        """E^-1 Z^T Y (``on_K=False``) or E^-1 (KZ)^T Y."""
+        if on_K:
+            return self.Es(np.asarray(self.KZT @ Y[self.kr]))
+        return self.Es(np.asarray(self.ZT @ Y[self.zr]))
+
+    def start(self, F):
+        """The start ``Z E^-1 Z^T F`` (dense, the shape of F)."""
+        X = np.zeros(F.shape)
+        X[self.zr] = self.Z @ self.coefficients(F, False)
+        return X
+
+    def project(self, Y):
+        """Y -= Z E^-1 (KZ)^T Y, in place: K-orthogonal to the deflation space."""
+        Y[self.zr] -= self.Z @ self.coefficients(Y, True)
+
+    def correct(self, X, R):
+        """X += Z c, R -= K Z c with c = E^-1 Z^T R, in place."""
+        c = self.coefficients(R, False)
+        X[self.zr] += self.Z @ c
+        R[self.kr] -= self.KZ @ c
+
+
+def _own(Y, R):
+    """Y as a C-contiguous float64 array that does not share memory with R (updated in place)."""
+    Y = np.ascontiguousarray(Y, dtype=np.float64)
+    return Y.copy() if np.shares_memory(Y, R) else Y
+
+
+def _dots(A, B):
+    out = np.empty(A.shape[1])
+    kn.coldot(A, B, out)
+    return out
+
+
+def block_cg(A, M, F, *, tol: float, maxiter: int, deflation: Deflation | None = None,
              callback=None):
-    """Preconditioned CG on the k columns of F at once.
+    """Preconditioned CG on the k columns of F at once, with in-place updates (X, R, P, the
+    product A P and the preconditioned residual are the only vectors).
 
     A, M : callables mapping an (n, k) array to an (n, k) array (the matrix and the
-        preconditioner; both symmetric positive definite on the space CG works in)
+        preconditioner, both symmetric positive definite on the space CG works in); A may offer
+        ``A.residual(X, B)`` (= B - A X without a temporary)
     F : ndarray (n, k) -- right-hand sides
     tol : relative residual ||f - A x|| / ||f|| at which a column stops
-    project : callable or None -- deflation projector applied to the preconditioned residual
-    x0 : ndarray (n, k) or None -- start (e.g. the deflation space's coarse solution)
-    coarse : callable or None -- ``coarse(R) -> (dX, dR)``, the deflation space's correction of
-        a residual (``dX = Z E^-1 Z^T R``, ``dR = K dX``). Deflated CG keeps ``Z^T R = 0`` only in
-        exact arithmetic; the round-off that builds up there when the load acts mostly on the
-        deflated modes (particle forces move the particles rigidly) grows until CG diverges below
-        ~1e-9. Applying the correction after every step keeps ``R = F - A X`` and removes it.
+    deflation : :class:`Deflation` or None -- deflated CG: start ``Z E^-1 Z^T F``, projection of
+        the preconditioned residual, and the correction ``X += Z c, R -= K Z c`` of the residual
+        after every step. Deflated CG keeps ``Z^T R = 0`` only in exact arithmetic; the round-off
+        that builds up there when the load acts mostly on the deflated modes (particle forces
+        move the particles rigidly) grows until CG diverges below ~1e-9; the correction removes it.
     callback : callable or None -- ``callback(iteration, n_converged, worst_residual)`` after
         every step (progress reporting)
 
     Returns ``(X, histories)``: the solutions and, per column, the list of relative residuals
-    (first entry: the start). Each column follows exactly the recursion of a single-vector CG.
+    (first entry: the start). Each column follows exactly the recursion of a single-vector CG
+    (its own step lengths); converged columns leave the block.
     """
     F = np.ascontiguousarray(F, dtype=np.float64)
     n, k = F.shape
-    X = np.zeros((n, k)) if x0 is None else np.array(x0, dtype=np.float64)
     fn = np.linalg.norm(F, axis=0)
     fn[fn == 0.0] = 1.0
-    Rr = F - A(X) if x0 is not None else F.copy()
-    hist = [[float(v)] for v in np.linalg.norm(Rr, axis=0) / fn]
-    act = np.array([h[0] > tol for h in hist])
-    idx = np.flatnonzero(act)
+    if deflation is not None:
+        X = deflation.start(F)
+        R = A.residual(X, F) if hasattr(A, "residual") else F - A(X)
+    else:
+        X = np.zeros((n, k))
+        R = F.copy()
+    hist = [[float(v)] for v in np.linalg.norm(R, axis=0) / fn]
+    idx = np.flatnonzero([h[0] > tol for h in hist])
     if idx.size == 0:
         return X, hist
-    R = np.ascontiguousarray(Rr[:, idx])
     Xa = np.ascontiguousarray(X[:, idx])
+    R = np.ascontiguousarray(R[:, idx])
     fa = fn[idx]
-    Z = M(R)
-    P = project(Z) if project is not None else Z
-    rz = np.einsum("ij,ij->j", R, Z)
+    P = _own(M(R), R)
+    rz = _dots(R, P)
+    if deflation is not None:
+        deflation.project(P)
     it = 0
     while idx.size and it < maxiter:
-        Q = A(P)
-        alpha = rz / np.einsum("ij,ij->j", P, Q)
-        Xa += P * alpha
-        R -= Q * alpha
-        if coarse is not None:
-            dX, dR = coarse(R)
-            Xa += dX
-            R -= dR
+        Q = _own(A(P), P)
+        alpha = rz / _dots(P, Q)
+        kn.axpy_cols(Xa, P, alpha)
+        kn.axpy_cols(R, Q, -alpha)
+        del Q
+        if deflation is not None:
+            deflation.correct(Xa, R)
         it += 1
         res = np.linalg.norm(R, axis=0) / fa
         for c, v in zip(idx, res):
@@ -278,13 +330,15 @@ def block_cg(A, M, F, *, tol: float, maxiter: int, project=None, x0=None, coarse
             X[:, idx[done]] = Xa[:, done]
             keep = ~done
             idx, fa, rz = idx[keep], fa[keep], rz[keep]
-            Xa, R, P = (np.ascontiguousarray(a[:, keep]) for a in (Xa, R, P))
             if idx.size == 0:
                 break
-        Z = M(R)
-        rz_new = np.einsum("ij,ij->j", R, Z)
-        Pz = project(Z) if project is not None else Z
-        P = Pz + P * (rz_new / rz)
+            Xa, R, P = (np.ascontiguousarray(a[:, keep]) for a in (Xa, R, P))
+        Z = _own(M(R), R)
+        rz_new = _dots(R, Z)
+        if deflation is not None:
+            deflation.project(Z)
+        kn.xpby_cols(P, Z, rz_new / rz)
+        del Z
         rz = rz_new
     if idx.size:
         X[:, idx] = Xa

@@ -281,6 +281,31 @@ def _rve_kwargs(params: dict) -> dict:
     return {"distribution": dist, "composition": comp, **p}
 
 
+def _check_keys(study, section: str, given, allowed, what: str = "") -> None:
+    """Refuse a key of the study's ``[section]`` (or grid axis) that is not in ``allowed`` (listed
+    in the order given)."""
+    for k in given:
+        if k not in allowed:
+            raise InputError(f"{study.path}: [{section}] unknown key '{k}'{what}; allowed: "
+                             f"{', '.join(allowed)}")
+
+
+def _check_laws_and_particles(study, gen_keys, get_law) -> None:
+    """Every magnetization law of the grid and every distinct particle population of the grid
+    must be constructible (before any work starts)."""
+    for law in dict(study.axes).get("law", (DEFAULT_LAW,)):
+        try:
+            get_law(law, **study.law)
+        except (InputError, TypeError, ValueError) as exc:
+            raise InputError(f"{study.path}: [grid] law / [law]: {exc}") from None
+    rve_axes = [(a, v) for a, v in study.axes if a in gen_keys]
+    for combo in dict.fromkeys(itertools.product(*(v for _, v in rve_axes))):
+        try:
+            _rve_kwargs({**study.rve, **dict(zip((a for a, _ in rve_axes), combo))})
+        except (InputError, TypeError, ValueError) as exc:
+            raise InputError(f"{study.path}: [grid]/[rve] particle parameters: {exc}") from None
+
+
 @dataclass(frozen=True)
 class RVEEvaluator:
     """particles -> dipoles -> (FEM): one random RVE at one grid point.
@@ -322,37 +347,12 @@ class RVEEvaluator:
             raise InputError(f"{study.path}: evaluator 'rve' needs {exc.name}, which is not "
                              f"available in this installation") from None
         gen_keys = _particle_keys(generate_rve)
-        for axis in names:
-            if axis not in _FIELD_AXES and axis not in gen_keys:
-                raise InputError(f"{study.path}: [grid] unknown key '{axis}'; allowed: "
-                                 f"{', '.join(sorted(set(_FIELD_AXES) | gen_keys))}")
-        for k in study.rve:
-            if k not in gen_keys:
-                raise InputError(f"{study.path}: [rve] unknown key '{k}'; allowed: "
-                                 f"{', '.join(sorted(gen_keys))}")
+        _check_keys(study, "grid", names, sorted(set(_FIELD_AXES) | gen_keys))
+        _check_keys(study, "rve", study.rve, sorted(gen_keys))
         solve_keys = _signature_keys(solve) - {"rve", "B_T", "gradB_T_per_m", "law",
                                                "initial_moments_Am2"}
-        for k in study.magnetics:
-            if k not in solve_keys:
-                raise InputError(f"{study.path}: [magnetics] unknown key '{k}'; allowed: "
-                                 f"{', '.join(sorted(solve_keys))}")
-        for law in names.get("law", (DEFAULT_LAW,)):
-            try:
-                get_law(law, **study.law)
-            except (InputError, TypeError, ValueError) as exc:
-                raise InputError(f"{study.path}: [grid] law / [law]: {exc}") from None
-        # every distinct particle population of the grid must be constructible
-        rve_axes = [(a, v) for a, v in study.axes if a in gen_keys]
-        seen = set()
-        for combo in itertools.product(*(v for _, v in rve_axes)):
-            key = tuple(combo)
-            if key in seen:
-                continue
-            seen.add(key)
-            try:
-                _rve_kwargs({**study.rve, **dict(zip((a for a, _ in rve_axes), combo))})
-            except (InputError, TypeError, ValueError) as exc:
-                raise InputError(f"{study.path}: [grid]/[rve] particle parameters: {exc}") from None
+        _check_keys(study, "magnetics", study.magnetics, sorted(solve_keys))
+        _check_laws_and_particles(study, gen_keys, get_law)
         if study.fem:
             try:
                 from homogenize.cell import homogenize_rve
@@ -362,10 +362,7 @@ class RVEEvaluator:
             cell_keys = _signature_keys(homogenize_rve) - {"rve", "voxels", "forces_N",
                                                            "virial_stress_Pa", "keep_fields",
                                                            "progress"}
-            for k in study.cell:
-                if k not in cell_keys:
-                    raise InputError(f"{study.path}: [cell] unknown key '{k}'; allowed: "
-                                     f"{', '.join(sorted(cell_keys))}")
+            _check_keys(study, "cell", study.cell, sorted(cell_keys))
         elif study.cell:
             raise InputError(f"{study.path}: [cell] is given but [study] fem = false")
 
@@ -451,24 +448,15 @@ class RelaxEvaluator:
                              f"relax evaluator (the field steps of one continuation, >= 0 T), "
                              f"got {B}")
         gen_keys = _particle_keys(generate_rve)
-        for axis in names:
-            if axis not in _RELAX_AXES and axis not in gen_keys:
-                raise InputError(f"{study.path}: [grid] unknown key '{axis}' for the relax "
-                                 f"evaluator; allowed: "
-                                 f"{', '.join(sorted(set(_RELAX_AXES) | gen_keys))}")
-        for k in study.rve:
-            if k not in gen_keys:
-                raise InputError(f"{study.path}: [rve] unknown key '{k}'; allowed: "
-                                 f"{', '.join(sorted(gen_keys))}")
+        _check_keys(study, "grid", names, sorted(set(_RELAX_AXES) | gen_keys),
+                    " for the relax evaluator")
+        _check_keys(study, "rve", study.rve, sorted(gen_keys))
         for t in ("magnetics", "cell"):
             if getattr(study, t):
                 k = next(iter(getattr(study, t)))
                 raise InputError(f"{study.path}: [{t}] {k}: the relax evaluator takes its "
                                  f"solver options in [relax] (allowed: {', '.join(_RELAX_KEYS)})")
-        for k in study.relax:
-            if k not in _RELAX_KEYS:
-                raise InputError(f"{study.path}: [relax] unknown key '{k}'; allowed: "
-                                 f"{', '.join(_RELAX_KEYS)}")
+        _check_keys(study, "relax", study.relax, _RELAX_KEYS)
         if "matrix_E_Pa" in study.relax and "matrix_E_Pa" in names:
             raise InputError(f"{study.path}: [relax] matrix_E_Pa is also a grid axis; give it "
                              f"in one place")
@@ -478,17 +466,7 @@ class RelaxEvaluator:
         nu = study.relax.get("matrix_nu", 0.45)
         if not -1.0 < nu <= 0.5:
             raise InputError(f"{study.path}: [relax] matrix_nu must be in (-1, 0.5], got {nu}")
-        for law in names.get("law", (DEFAULT_LAW,)):
-            try:
-                get_law(law, **study.law)
-            except (InputError, TypeError, ValueError) as exc:
-                raise InputError(f"{study.path}: [grid] law / [law]: {exc}") from None
-        rve_axes = [(a, v) for a, v in study.axes if a in gen_keys]
-        for combo in itertools.product(*(v for _, v in rve_axes)):
-            try:
-                _rve_kwargs({**study.rve, **dict(zip((a for a, _ in rve_axes), combo))})
-            except (InputError, TypeError, ValueError) as exc:
-                raise InputError(f"{study.path}: [grid]/[rve] particle parameters: {exc}") from None
+        _check_laws_and_particles(study, gen_keys, get_law)
 
     def __call__(self, task) -> dict:
         from micro.materials import ElasticMaterial

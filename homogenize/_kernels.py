@@ -156,8 +156,37 @@ def _voxel_stencil_blocks(n, lam, mu, tab, axis_order, Gl, Gm, indices, data):
                     out += 1
 
 
+def _axpy_cols(X, P, alpha):
+    """X[:, j] += alpha[j] P[:, j], in place (X, P (n, k) C-contiguous)."""
+    n, k = X.shape
+    for i in nb.prange(n):
+        for j in range(k):
+            X[i, j] += alpha[j] * P[i, j]
+
+
+def _xpby_cols(P, Z, beta):
+    """P[:, j] = Z[:, j] + beta[j] P[:, j], in place."""
+    n, k = P.shape
+    for i in nb.prange(n):
+        for j in range(k):
+            P[i, j] = Z[i, j] + beta[j] * P[i, j]
+
+
+def _coldot(A, B, out):
+    """out[j] = sum_i A[i, j] B[i, j] (sequential sum per column: deterministic)."""
+    n, k = A.shape
+    for j in range(k):
+        out[j] = 0.0
+    for i in range(n):
+        for j in range(k):
+            out[j] += A[i, j] * B[i, j]
+
+
 bsr_matmat, bsr_matmat_serial = parallel_and_serial(_bsr_matmat)
 bsr_residual, bsr_residual_serial = parallel_and_serial(_bsr_residual)
 bsr_gauss_seidel_colour, bsr_gauss_seidel_colour_serial = parallel_and_serial(_bsr_gauss_seidel_colour)
 greedy_colouring = nb.njit(cache=True)(_greedy_colouring)
 voxel_stencil_blocks, voxel_stencil_blocks_serial = parallel_and_serial(_voxel_stencil_blocks)
+axpy_cols, _ = parallel_and_serial(_axpy_cols)
+xpby_cols, _ = parallel_and_serial(_xpby_cols)
+coldot = nb.njit(cache=True)(_coldot)

@@ -50,7 +50,7 @@ from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_sht
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
 from .mesh import METHODS, VoxelMesh, voxelize
 from homogenize._amg import BlockVCycle, BSROp, grid_colours
-from homogenize._amg import block_cg
+from homogenize._amg import Deflation, block_cg
 import pyamg
 from scipy.sparse.linalg import splu
 
@@ -233,10 +233,7 @@ class _CellSolver:
         t["amg_setup"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         self.Z = self._deflation_space(stiff_mask) if deflate else None
-        if self.Z is not None:
-            self.KZ = (K @ self.Z).tocsc()
-            Ec = (self.Z.T @ self.KZ).tocsc()
-            self.Esolve = splu(Ec).solve
+        self.deflation = self._deflation(K @ self.Z if self.Z is not None else None)
         t["deflation_setup"] = time.perf_counter() - t0
         self.timings = t
 
@@ -280,14 +277,18 @@ class _CellSolver:
         t["amg_setup"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         self.Z = self._deflation_space(stiff_mask) if stiff_mask is not None else None
-        if self.Z is not None:
-            KZ = mf.stiffness_times_sparse(field, self.Z, pin=self.pin).tocsc()
-            Ec = (self.Z.T @ KZ).tocsc()
-            self.deflation = mf.Deflation(self.Z, KZ, splu(Ec).solve)
-        else:
-            self.deflation = None
+        self.deflation = self._deflation(
+            mf.stiffness_times_sparse(field, self.Z, pin=self.pin) if self.Z is not None else None)
         t["deflation_setup"] = time.perf_counter() - t0
         self.timings = t
+
+    def _deflation(self, KZ):
+        """The deflated CG's coarse space (:class:`homogenize._amg.Deflation`) from ``self.Z`` and
+        ``KZ = K Z`` (None without deflation)."""
+        if self.Z is None:
+            return None
+        KZ = sp.csc_matrix(KZ)
+        return Deflation(self.Z, KZ, splu((self.Z.T @ KZ).tocsc()).solve)
 
     def _deflation_space(self, stiff_mask):
         """Rigid-body modes (3 translations, 3 rotations) of every stiff particle, at the nodes of
@@ -343,38 +344,18 @@ class _CellSolver:
         """
         F = np.array(F, dtype=np.float64, order="C")
         F[3 * self.pin:3 * self.pin + 3] = 0.0
-        if self.kind == "matrix-free":
-            W, hist = mf.block_cg_inplace(self.matvec, self.M, F, tol=self.tol,
-                                          maxiter=self.maxiter, deflation=self.deflation,
-                                          callback=callback)
-            del F
-            self.M.release()
-            W[3 * self.pin:3 * self.pin + 3] = 0.0
-            Wn = W.reshape(-1, 3, W.shape[1])
-            Wn -= Wn.mean(axis=0)
-            return W, hist
-        project = x0 = coarse = None
-        if self.Z is not None:
-            Z, KZ, Es = self.Z, self.KZ, self.Esolve
-
-            def project(Y):          # Y - Z E^-1 (KZ)^T Y : K-orthogonal to the deflation space
-                return Y - Z @ Es(np.asarray(KZ.T @ Y))
-
-            def coarse(R):           # coarse correction of a residual: (Z E^-1 Z^T R, K of it)
-                c = Es(np.asarray(Z.T @ R))
-                return Z @ c, KZ @ c
-
-            x0 = Z @ Es(np.asarray(Z.T @ F))
-        if self.kind in ("fast", "matrix-free"):
-            W, hist = block_cg(self.matvec, self.M, F, tol=self.tol, maxiter=self.maxiter,
-                               project=project, x0=x0, coarse=coarse, callback=callback)
-        else:
+        if self.kind == "reference":
             cols = [block_cg(self.matvec, self.M, F[:, [c]], tol=self.tol, maxiter=self.maxiter,
-                             project=project, x0=None if x0 is None else x0[:, [c]],
-                             coarse=coarse, callback=callback)
+                             deflation=self.deflation, callback=callback)
                     for c in range(F.shape[1])]
             W = np.concatenate([c[0] for c in cols], axis=1)
             hist = [c[1][0] for c in cols]
+        else:
+            W, hist = block_cg(self.matvec, self.M, F, tol=self.tol, maxiter=self.maxiter,
+                               deflation=self.deflation, callback=callback)
+        del F
+        if self.kind == "matrix-free":
+            self.M.release()
         W[3 * self.pin:3 * self.pin + 3] = 0.0
         Wn = W.reshape(-1, 3, W.shape[1])
         Wn -= Wn.mean(axis=0)     # zero-mean fluctuation (the pin only fixed the translation)

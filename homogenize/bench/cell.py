@@ -130,6 +130,16 @@ def _contrast_records(voxels: int) -> list[dict]:
     return out
 
 
+def _add_growth(rec: dict, prev: dict | None, n: int, run: dict) -> dict:
+    """Add to ``rec`` how time and peak memory of ``run`` grew against the previous grid
+    ``prev``; returns this grid's entry for the next call."""
+    if prev is not None:
+        rec["growth_vs"] = f"{prev['n_vox']}^3 (x{(n / prev['n_vox']) ** 3:g} voxels)"
+        rec["time_growth"] = run["seconds"] / prev["seconds"]
+        rec["memory_growth"] = run["peak_rss_GB"] / prev["peak_rss_GB"]
+    return {"n_vox": n, "seconds": run["seconds"], "peak_rss_GB": run["peak_rss_GB"]}
+
+
 def _method_records(sizes) -> list[dict]:
     """Composite voxels against the staircase (the reference path) on the same RVE: time and
     peak memory (each run in its own process under /usr/bin/time), and their growth with size."""
@@ -153,12 +163,7 @@ def _method_records(sizes) -> list[dict]:
                "memory_ratio": cent["peak_rss_GB"] / comp["peak_rss_GB"],
                "iterations": comp["iterations"], "timings_s": comp["timings_s"],
                "memory_estimate_GB": estimate_memory_bytes(n) / 1e9, **_machine()}
-        if prev is not None:
-            f = (n / prev["n_vox"]) ** 3
-            rec["growth_vs"] = f"{prev['n_vox']}^3 (x{f:g} voxels)"
-            rec["time_growth"] = comp["seconds"] / prev["seconds"]
-            rec["memory_growth"] = comp["peak_rss_GB"] / prev["peak_rss_GB"]
-        prev = {"n_vox": n, "seconds": comp["seconds"], "peak_rss_GB": comp["peak_rss_GB"]}
+        prev = _add_growth(rec, prev, n, comp)
         out.append(rec)
     return out
 
@@ -200,12 +205,7 @@ def _matfree_records(sizes) -> list[dict]:
                "memory_estimate_GB": _budget.cell_memory_bytes(n, "matrix-free", 7) / 1e9,
                "target_seconds": t_target, "target_peak_rss_GB": gb_target,
                **({"reference_skipped": a["error"]} if "error" in a else {}), **_machine()}
-        if prev is not None:
-            f = (n / prev["n_vox"]) ** 3
-            rec["growth_vs"] = f"{prev['n_vox']}^3 (x{f:g} voxels)"
-            rec["time_growth"] = m["seconds"] / prev["seconds"]
-            rec["memory_growth"] = m["peak_rss_GB"] / prev["peak_rss_GB"]
-        prev = {"n_vox": n, "seconds": m["seconds"], "peak_rss_GB": m["peak_rss_GB"]}
+        prev = _add_growth(rec, prev, n, m)
         out.append(rec)
     return out
 
