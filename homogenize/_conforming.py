@@ -123,10 +123,19 @@ def conforming_tet_mesh(box_m: float, centers_m, radii_m, mesh_size_m: float, *,
 
 def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDMS.E_Pa, PDMS.nu),
                           particle=(FE.E_Pa, FE.nu), curvature_elements: int = 0,
-                          geometry_order: int = 1) -> dict:
+                          geometry_order: int = 1, solver: str = "direct",
+                          tol: float = 1e-9) -> dict:
     """C_eff (6x6 Voigt, Pa) of the periodic cell with P2 tetrahedra on a conforming gmsh mesh
     (``curvature_elements``, ``geometry_order``: see :func:`conforming_tet_mesh`; order 2 gives
-    isoparametric P2 elements on curved sphere surfaces)."""
+    isoparametric P2 elements on curved sphere surfaces).
+
+    ``solver="direct"``: sparse LU (its fill-in limits it to ~1e5 DOF on this machine);
+    ``"cg"``: the six load cases in one deflated block CG (:func:`homogenize._amg.block_cg`),
+    preconditioned by pyamg smoothed aggregation with the six rigid-body modes as near-null
+    space, the particles' rigid modes deflated (as the voxel solver), relative residual ``tol``;
+    memory grows like the matrix, so larger meshes fit."""
+    if solver not in ("direct", "cg"):
+        raise InputError(f"solver must be 'direct' or 'cg', got {solver!r}")
     got = conforming_tet_mesh(box_m, centers_m, radii_m, mesh_size_m,
                               curvature_elements=curvature_elements,
                               geometry_order=geometry_order)
@@ -170,21 +179,31 @@ def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDM
     # pin the translations: first three masters of one node
     pin = np.unique(master[basis.nodal_dofs[:, 0]])
     free = np.setdiff1d(np.arange(Kp.shape[0]), pin)
-    lu = splu(Kp[free][:, free].tocsc())
+    Kff = Kp[free][:, free]
     vol = basis.dx.sum(axis=1)               # element volumes (curved elements included)
     Es = [voigt_to_tensor(np.eye(6)[j], engineering=True) for j in range(6)]
-    fs, ws = [], []
+    fs = []
     for E in Es:
         @LinearForm
         def rhs(v, w, E=E):
             sigE = w["lam"] * np.trace(E) * np.eye(3)[:, :, None, None] + 2.0 * w["mu"] * E[:, :, None, None]
             return -ddot(sigE, sym_grad(v))
 
-        f = P.T @ rhs.assemble(basis, lam=lam_e, mu=mu_e)
-        x = np.zeros(Kp.shape[0])
-        x[free] = lu.solve(f[free])
-        fs.append(f)
-        ws.append(x)
+        fs.append(P.T @ rhs.assemble(basis, lam=lam_e, mu=mu_e))
+    Ff = np.stack([f[free] for f in fs], axis=1)
+    W = np.zeros((Kp.shape[0], 6))
+    iterations = None
+    if solver == "direct":
+        lu = splu(Kff.tocsc())
+        W[free] = np.stack([lu.solve(Ff[:, j]) for j in range(6)], axis=1)
+        del lu
+    else:
+        # master DOF positions (components interleaved: 3 per master node)
+        mloc = np.zeros((Kp.shape[0], 3))
+        mloc[master] = np.mod(locs, 1.0)
+        W[free], iterations = _solve_cg(Kff.tocsr(), Ff, mloc[free], master, basis, tets.shape[0],
+                                        phase, np.asarray(centers_m) / L, free, tol)
+    ws = [W[:, j] for j in range(6)]
     lam_t, mu_t = np.where(phase == 1, lp, lm), np.where(phase == 1, mp, mm)
     C = np.zeros((6, 6))
     for k in range(6):
@@ -197,6 +216,67 @@ def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDM
     # sigma_rc directly, so C above is already in Voigt form
     C = 0.5 * (C + C.T)
     return {"C_eff_Pa": C, "n_dof": int(Kp.shape[0]), "n_tets": int(tets.shape[0]),
-            "phi_mesh": float(vol[phase == 1].sum() / vol.sum())}
+            "phi_mesh": float(vol[phase == 1].sum() / vol.sum()), "solver": solver,
+            "iterations": iterations}
+
+
+def _solve_cg(K, F, xyz, master, basis, n_tets, phase, centres, free, tol):
+    """Deflated block CG for the free DOFs of the periodic P2 system (see
+    :func:`homogenize_conforming`). xyz (n_free, 3): position of each free DOF's node in the unit
+    cell. Returns (W (n_free, 6), iterations per load case)."""
+    import pyamg
+    from homogenize._amg import Deflation, block_cg
+    n = K.shape[0]
+    comp = np.asarray(free) % 3               # masters are sorted by (position, component)
+    # near-null space for smoothed aggregation: 3 translations and 3 rotations
+    B = np.zeros((n, 6))
+    for c in range(3):
+        B[comp == c, c] = 1.0
+    x = xyz - 0.5
+    for col, (a, b) in zip((3, 4, 5), ((1, 2), (2, 0), (0, 1))):
+        # rotation about the axis normal to (a, b): u_a = -x_b, u_b = x_a
+        B[comp == a, col] = -x[comp == a, b]
+        B[comp == b, col] = x[comp == b, a]
+    ml = pyamg.smoothed_aggregation_solver(K, B=B, symmetry="hermitian", max_coarse=2000,
+                                           strength=("symmetric", {"theta": 0.05}))
+    pre = ml.aspreconditioner(cycle="V")
+    # deflation: the rigid modes of each particle at the DOFs of its elements
+    dofs_elem = basis.element_dofs                           # (30, n_tets) unfolded DOFs
+    free_of = -np.ones(int(master.max()) + 1, dtype=np.int64)
+    free_of[free] = np.arange(n)
+    rows, cols, vals = [], [], []
+    part = np.flatnonzero(phase == 1)
+    if part.size:
+        cent = basis.mesh.p[:, basis.mesh.t[:, part]].mean(axis=1).T      # (m, 3)
+        owner = np.argmin(((cent[:, None, :] - centres[None, :, :]) ** 2).sum(-1), axis=1)
+        for p in np.unique(owner):
+            d = np.unique(free_of[master[dofs_elem[:, part[owner == p]].ravel()]])
+            d = d[d >= 0]
+            r = xyz[d] - centres[p]
+            cd = comp[d]
+            for c in range(3):                               # translations
+                sel = cd == c
+                rows.append(d[sel]); cols.append(np.full(sel.sum(), 6 * p + c))
+                vals.append(np.ones(sel.sum()))
+            for col, (a, b) in zip((3, 4, 5), ((1, 2), (2, 0), (0, 1))):
+                sa, sb = cd == a, cd == b
+                rows += [d[sa], d[sb]]
+                cols += [np.full(sa.sum(), 6 * p + col), np.full(sb.sum(), 6 * p + col)]
+                vals += [-r[sa, b], r[sb, a]]
+    defl = None
+    if rows:
+        Z = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(n, 6 * len(centres)))
+        Z = Z[:, np.flatnonzero(np.diff(Z.tocsc().indptr))]      # drop empty columns
+        KZ = sp.csc_matrix(K @ Z)
+        defl = Deflation(Z, KZ, splu((Z.T @ KZ).tocsc()).solve)
+    W, hist = block_cg(lambda X: K @ X, lambda R: np.stack([pre @ R[:, j] for j in
+                                                            range(R.shape[1])], axis=1),
+                       F, tol=tol, maxiter=5000, deflation=defl)
+    bad = [h[-1] for h in hist if h[-1] > tol]
+    if bad:
+        from micro._validate import ConvergenceError
+        raise ConvergenceError(f"P2 block CG did not reach {tol:g} (worst {max(bad):.1e})", hist)
+    return W, [len(h) - 1 for h in hist]
 
 

@@ -240,3 +240,35 @@ def test_curved_p2_mesh_keeps_the_sphere_volume_and_is_exact_for_a_homogeneous_c
     assert np.allclose(same["C_eff_Pa"], C, rtol=1e-9, atol=1e-9 * E)
     with pytest.raises(InputError, match="geometry_order"):
         homogenize_conforming(1.0, c, r, 0.3, geometry_order=3)
+
+
+def test_p2_block_cg_equals_the_direct_solve():
+    """solver="cg" (deflated block CG, smoothed aggregation) gives the sparse-LU C_eff of the
+    same curved P2 mesh (two Fe spheres, contrast 1e5, one of them off the cell centre)."""
+    pytest.importorskip("gmsh")
+    from homogenize._conforming import homogenize_conforming
+    c, r = [[0.3, 0.35, 0.4], [0.7, 0.65, 0.6]], [0.18, 0.15]
+    direct = homogenize_conforming(1.0, c, r, 0.3, curvature_elements=12, geometry_order=2)
+    cg = homogenize_conforming(1.0, c, r, 0.3, curvature_elements=12, geometry_order=2,
+                               solver="cg", tol=1e-10)
+    assert direct["iterations"] is None and max(cg["iterations"]) < 200
+    C0 = direct["C_eff_Pa"]
+    assert np.abs(cg["C_eff_Pa"] - C0).max() < 1e-7 * np.abs(C0).max()
+    with pytest.raises(InputError, match="solver"):
+        homogenize_conforming(1.0, c, r, 0.3, solver="lu")
+
+
+def test_composite_accuracy_plot_reads_the_committed_document(tmp_path):
+    """The figure of results/cell/composite_accuracy.json is drawn from the committed document
+    (one panel per RVE) into a new PNG; the curved P2 meshes it plots are refined in DOF."""
+    import json
+    from pathlib import Path
+    from homogenize.studies.cell_studies import plot_composite_accuracy
+    doc = json.loads((Path(__file__).parents[2] / "results/cell/composite_accuracy.json")
+                     .read_text())
+    for case in doc["cases"]:
+        dofs = [q["n_dof"] for q in case["p2"] if q.get("geometry_order") == 2]
+        assert len(dofs) >= 2 and len(set(dofs)) == len(dofs)
+    out = tmp_path / "acc.png"
+    plot_composite_accuracy(out, doc)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
