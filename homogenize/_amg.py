@@ -303,8 +303,11 @@ def block_cg(A, M, F, *, tol: float, maxiter: int, deflation: Deflation | None =
     idx = np.flatnonzero([h[0] > tol for h in hist])
     if idx.size == 0:
         return X, hist
-    Xa = np.ascontiguousarray(X[:, idx])
-    R = np.ascontiguousarray(R[:, idx])
+    if idx.size < k:                    # columns already converged at the start stay in X
+        Xa = np.ascontiguousarray(X[:, idx])
+        R = np.ascontiguousarray(R[:, idx])
+    else:                               # all active: work in X itself (one block less memory)
+        Xa = X
     fa = fn[idx]
     P = _own(M(R), R)
     rz = _dots(R, P)
@@ -332,7 +335,10 @@ def block_cg(A, M, F, *, tol: float, maxiter: int, deflation: Deflation | None =
             idx, fa, rz = idx[keep], fa[keep], rz[keep]
             if idx.size == 0:
                 break
-            Xa, R, P = (np.ascontiguousarray(a[:, keep]) for a in (Xa, R, P))
+            # one at a time, so that only one old block is alive next to its copy
+            Xa = np.ascontiguousarray(Xa[:, keep])
+            R = np.ascontiguousarray(R[:, keep])
+            P = np.ascontiguousarray(P[:, keep])
         Z = _own(M(R), R)
         rz_new = _dots(R, Z)
         if deflation is not None:
