@@ -201,8 +201,8 @@ def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDM
         # master DOF positions (components interleaved: 3 per master node)
         mloc = np.zeros((Kp.shape[0], 3))
         mloc[master] = np.mod(locs, 1.0)
-        W[free], iterations = _solve_cg(Kff.tocsr(), Ff, mloc[free], master, basis, tets.shape[0],
-                                        phase, np.asarray(centers_m) / L, free, tol)
+        W[free], iterations = _solve_cg(Kff.tocsr(), Ff, mloc[free], master, basis, phase,
+                                        np.asarray(centers_m) / L, free, tol)
     ws = [W[:, j] for j in range(6)]
     lam_t, mu_t = np.where(phase == 1, lp, lm), np.where(phase == 1, mp, mm)
     C = np.zeros((6, 6))
@@ -220,7 +220,19 @@ def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDM
             "iterations": iterations}
 
 
-def _solve_cg(K, F, xyz, master, basis, n_tets, phase, centres, free, tol):
+def _rigid_modes(comp, r):
+    """(m, 6) translations and rotations (u_a = -r_b, u_b = r_a about each axis) at DOFs of
+    component ``comp`` (m,) and position ``r`` (m, 3) relative to the rotation centre."""
+    out = np.zeros((comp.size, 6))
+    for c in range(3):
+        out[comp == c, c] = 1.0
+    for col, (a, b) in zip((3, 4, 5), ((1, 2), (2, 0), (0, 1))):
+        out[comp == a, col] = -r[comp == a, b]
+        out[comp == b, col] = r[comp == b, a]
+    return out
+
+
+def _solve_cg(K, F, xyz, master, basis, phase, centres, free, tol):
     """Deflated block CG for the free DOFs of the periodic P2 system (see
     :func:`homogenize_conforming`). xyz (n_free, 3): position of each free DOF's node in the unit
     cell. Returns (W (n_free, 6), iterations per load case)."""
@@ -228,16 +240,9 @@ def _solve_cg(K, F, xyz, master, basis, n_tets, phase, centres, free, tol):
     from homogenize._amg import Deflation, block_cg
     n = K.shape[0]
     comp = np.asarray(free) % 3               # masters are sorted by (position, component)
-    # near-null space for smoothed aggregation: 3 translations and 3 rotations
-    B = np.zeros((n, 6))
-    for c in range(3):
-        B[comp == c, c] = 1.0
-    x = xyz - 0.5
-    for col, (a, b) in zip((3, 4, 5), ((1, 2), (2, 0), (0, 1))):
-        # rotation about the axis normal to (a, b): u_a = -x_b, u_b = x_a
-        B[comp == a, col] = -x[comp == a, b]
-        B[comp == b, col] = x[comp == b, a]
-    ml = pyamg.smoothed_aggregation_solver(K, B=B, symmetry="hermitian", max_coarse=2000,
+    # near-null space for smoothed aggregation: the rigid modes about the cell centre
+    ml = pyamg.smoothed_aggregation_solver(K, B=_rigid_modes(comp, xyz - 0.5),
+                                           symmetry="hermitian", max_coarse=2000,
                                            strength=("symmetric", {"theta": 0.05}))
     pre = ml.aspreconditioner(cycle="V")
     # deflation: the rigid modes of each particle at the DOFs of its elements
@@ -252,17 +257,9 @@ def _solve_cg(K, F, xyz, master, basis, n_tets, phase, centres, free, tol):
         for p in np.unique(owner):
             d = np.unique(free_of[master[dofs_elem[:, part[owner == p]].ravel()]])
             d = d[d >= 0]
-            r = xyz[d] - centres[p]
-            cd = comp[d]
-            for c in range(3):                               # translations
-                sel = cd == c
-                rows.append(d[sel]); cols.append(np.full(sel.sum(), 6 * p + c))
-                vals.append(np.ones(sel.sum()))
-            for col, (a, b) in zip((3, 4, 5), ((1, 2), (2, 0), (0, 1))):
-                sa, sb = cd == a, cd == b
-                rows += [d[sa], d[sb]]
-                cols += [np.full(sa.sum(), 6 * p + col), np.full(sb.sum(), 6 * p + col)]
-                vals += [-r[sa, b], r[sb, a]]
+            modes = _rigid_modes(comp[d], xyz[d] - centres[p])
+            nz = np.nonzero(modes)
+            rows.append(d[nz[0]]); cols.append(6 * p + nz[1]); vals.append(modes[nz])
     defl = None
     if rows:
         Z = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
