@@ -2,7 +2,7 @@
 
 Rules (STYLE.md): contiguous arrays in, caller-allocated output, no defaults, short;
 ``cache=True``; no ``fastmath``. Each kernel has a test against a plain-numpy/scipy reference on a
-small input (tests/homogenize/test_kernels.py). Python wrappers (in _assembly.py, cell.py) check
+small input (tests/homogenize/test_fem_kernels.py). Python wrappers (in _assembly.py, cell.py) check
 shapes and allocate.
 
 Determinism: every parallel loop writes disjoint outputs and each output is a sequential sum in a
@@ -23,11 +23,44 @@ from micro._numba import parallel_and_serial
 PARALLEL_MIN_ROWS = 50_000
 
 
+@nb.njit(cache=True, inline="always")
+def block_acc(M, r0, c0, R, C, x, q, y, p, k, sign):
+    """y[p, r, m] += sign * sum_c M[r0 + r, c0 + c] x[q, c, m] for the R x C block of the 2-D
+    matrix M at (r0, c0) and the k columns m (the one block product of the BSR kernels here and
+    of the matrix-free operator, homogenize._matfree). 3x3 blocks (the voxel grid's) are read
+    once into scalars (measured 1.3-1.5x over one loop per matrix entry); other block sizes (the
+    6-mode aggregates of smoothed aggregation) sum each row in a scalar."""
+    if R == 3 and C == 3:
+        a00 = sign * M[r0, c0]
+        a01 = sign * M[r0, c0 + 1]
+        a02 = sign * M[r0, c0 + 2]
+        a10 = sign * M[r0 + 1, c0]
+        a11 = sign * M[r0 + 1, c0 + 1]
+        a12 = sign * M[r0 + 1, c0 + 2]
+        a20 = sign * M[r0 + 2, c0]
+        a21 = sign * M[r0 + 2, c0 + 1]
+        a22 = sign * M[r0 + 2, c0 + 2]
+        for m in range(k):
+            x0 = x[q, 0, m]
+            x1 = x[q, 1, m]
+            x2 = x[q, 2, m]
+            y[p, 0, m] += a00 * x0 + a01 * x1 + a02 * x2
+            y[p, 1, m] += a10 * x0 + a11 * x1 + a12 * x2
+            y[p, 2, m] += a20 * x0 + a21 * x1 + a22 * x2
+    else:
+        for m in range(k):
+            for r in range(R):
+                acc = 0.0
+                for c in range(C):
+                    acc += M[r0 + r, c0 + c] * x[q, c, m]
+                y[p, r, m] += sign * acc
+
+
 def _bsr_matmat(indptr, indices, data, x, y):
     """y = A x for a block-sparse row matrix and k right-hand sides at once.
 
     data (nnzb, R, C); x (ncolblocks, C, k); y (nrowblocks, R, k). Each matrix block is read once
-    for all k columns (the products are memory-bound: k columns cost far less than k products).
+    for all k columns (k columns cost far less than k products).
     Parallel over block rows (disjoint writes); scipy's BSR product runs on one core.
     """
     nb_rows = indptr.shape[0] - 1
@@ -39,12 +72,7 @@ def _bsr_matmat(indptr, indices, data, x, y):
             for m in range(k):
                 y[p, r, m] = 0.0
         for s in range(indptr[p], indptr[p + 1]):
-            q = indices[s]
-            for r in range(R):
-                for c in range(C):
-                    a = data[s, r, c]
-                    for m in range(k):
-                        y[p, r, m] += a * x[q, c, m]
+            block_acc(data[s], 0, 0, R, C, x, indices[s], y, p, k, 1.0)
 
 
 def _bsr_residual(indptr, indices, data, x, b, out):
@@ -58,12 +86,7 @@ def _bsr_residual(indptr, indices, data, x, b, out):
             for m in range(k):
                 out[p, r, m] = b[p, r, m]
         for s in range(indptr[p], indptr[p + 1]):
-            q = indices[s]
-            for r in range(R):
-                for c in range(C):
-                    a = data[s, r, c]
-                    for m in range(k):
-                        out[p, r, m] -= a * x[q, c, m]
+            block_acc(data[s], 0, 0, R, C, x, indices[s], out, p, k, -1.0)
 
 
 def _bsr_gauss_seidel_colour(indptr, indices, data, dinv, rows, x, b, tmp):
@@ -83,11 +106,7 @@ def _bsr_gauss_seidel_colour(indptr, indices, data, dinv, rows, x, b, tmp):
         for s in range(indptr[p], indptr[p + 1]):
             q = indices[s]
             if q != p:
-                for r in range(R):
-                    for c in range(R):
-                        a = data[s, r, c]
-                        for m in range(k):
-                            tmp[p, r, m] -= a * x[q, c, m]
+                block_acc(data[s], 0, 0, R, R, x, q, tmp, p, k, -1.0)
         for r in range(R):
             for m in range(k):
                 acc = 0.0

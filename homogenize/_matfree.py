@@ -32,6 +32,7 @@ import scipy.sparse as sp
 from micro._numba import parallel_and_serial
 
 from . import _assembly as asm
+from ._kernels import block_acc
 
 __all__ = ["ElementField", "element_field", "MatFreeOperator", "coarsen", "GeometricVCycle",
            "child_prolongations", "prolongation_matrix", "typed_bsr", "memory_estimate_bytes"]
@@ -54,60 +55,58 @@ def _node_op(n, nodes, etype, Ktab, ntype, S, pin, pin_scale, u, b, dinv, out, m
     scratch of len(nodes) rows. The nodes of one Gauss-Seidel call must not share a voxel.
     u, b: (N, 3, k); out: (len(nodes), 3, k); etype (n^3,) int32; Ktab (T, 24, 24); ntype (N,)
     int32 (shared type of all 8 voxels around the node, or -1); S (n_shared, 27, 3, 3) stencils
-    of the shared types. The wrapped neighbour coordinates are computed once per node (no
-    integer division in the inner loops).
+    of the shared types.
+
+    Loop shape (measured, 64^3, 2 threads: 1.3-1.5x over one multiply-add loop per matrix
+    entry): every 3x3 block is read once into scalars and applied to all k columns; a node away
+    from the grid faces reaches its 27 neighbours by fixed offsets (no wrapping).
     """
     k = u.shape[2]
+    offs = np.empty(27, dtype=np.int64)
+    for s in range(27):
+        offs[s] = (s % 3 - 1) + n * ((s // 3) % 3 - 1) + n * n * (s // 9 - 1)
     for t in nb.prange(nodes.shape[0]):
         p = nodes[t]
         i = p % n
         j = (p // n) % n
         kk = p // (n * n)
-        xs = (i - 1 if i > 0 else n - 1, i, i + 1 if i < n - 1 else 0)
-        ys = (j - 1 if j > 0 else n - 1, j, j + 1 if j < n - 1 else 0)
-        zs = (kk - 1 if kk > 0 else n - 1, kk, kk + 1 if kk < n - 1 else 0)
         for r in range(3):
             for m in range(k):
                 out[t, r, m] = 0.0
+        ty = ntype[p]
         if p == pin:
             for r in range(3):
                 for m in range(k):
                     out[t, r, m] = pin_scale * u[p, r, m]
+        elif ty >= 0:
+            inner = 0 < i < n - 1 and 0 < j < n - 1 and 0 < kk < n - 1
+            for s in range(27):
+                if inner:
+                    q = p + offs[s]
+                else:
+                    sx, sy, sz = s % 3 - 1, (s // 3) % 3 - 1, s // 9 - 1
+                    q = ((i + sx + n) % n) + n * (((j + sy + n) % n) + n * ((kk + sz + n) % n))
+                if q == pin:
+                    continue
+                block_acc(S[ty, s], 0, 0, 3, 3, u, q, out, t, k, 1.0)
         else:
-            ty = ntype[p]
-            if ty >= 0:
-                for sz in range(3):
-                    for sy in range(3):
-                        rowq = n * (ys[sy] + n * zs[sz])
-                        for sx in range(3):
-                            q = xs[sx] + rowq
-                            if q == pin:
-                                continue
-                            s = sx + 3 * sy + 9 * sz
-                            for r in range(3):
-                                for c in range(3):
-                                    a = S[ty, s, r, c]
-                                    if a != 0.0:
-                                        for m in range(k):
-                                            out[t, r, m] += a * u[q, c, m]
-            else:
-                for ca in range(8):
-                    ax = ca & 1
-                    ay = (ca >> 1) & 1
-                    az = (ca >> 2) & 1
-                    e = etype[xs[1 - ax] + n * (ys[1 - ay] + n * zs[1 - az])]
-                    for cb in range(8):
-                        bx = cb & 1
-                        by = (cb >> 1) & 1
-                        bz = (cb >> 2) & 1
-                        q = xs[1 + bx - ax] + n * (ys[1 + by - ay] + n * zs[1 + bz - az])
-                        if q == pin:
-                            continue
-                        for r in range(3):
-                            for c in range(3):
-                                a = Ktab[e, 3 * ca + r, 3 * cb + c]
-                                for m in range(k):
-                                    out[t, r, m] += a * u[q, c, m]
+            xs = (i - 1 if i > 0 else n - 1, i, i + 1 if i < n - 1 else 0)
+            ys = (j - 1 if j > 0 else n - 1, j, j + 1 if j < n - 1 else 0)
+            zs = (kk - 1 if kk > 0 else n - 1, kk, kk + 1 if kk < n - 1 else 0)
+            for ca in range(8):
+                ax = ca & 1
+                ay = (ca >> 1) & 1
+                az = (ca >> 2) & 1
+                e = etype[xs[1 - ax] + n * (ys[1 - ay] + n * zs[1 - az])]
+                ra = 3 * ca
+                for cb in range(8):
+                    bx = cb & 1
+                    by = (cb >> 1) & 1
+                    bz = (cb >> 2) & 1
+                    q = xs[1 + bx - ax] + n * (ys[1 + by - ay] + n * zs[1 + bz - az])
+                    if q == pin:
+                        continue
+                    block_acc(Ktab[e], ra, 3 * cb, 3, 3, u, q, out, t, k, 1.0)
         if mode == 1:
             for r in range(3):
                 for m in range(k):
@@ -536,14 +535,18 @@ class GeometricVCycle:
     aggregation V-cycle (:class:`homogenize._amg.BlockVCycle`).
 
     field : fine ElementField; pin : pinned fine node (even coordinates on every matrix-free
-    level); pin_scale : its diagonal; amg_options : pyamg options for the coarse hierarchy.
+    level); pin_scale : its diagonal; amg_options : pyamg options for the coarse hierarchy;
+    coarse : "amg" (default) or "lu": the assembled grid solved exactly by a sparse LU (small
+    grids only: it tells whether the geometric levels or the AMG below them limit convergence).
     """
 
     def __init__(self, field: ElementField, *, pin: int, pin_scale: float, h: float,
                  amg_options: dict, assembled_max: int = 64, fine_op: MatFreeOperator | None = None,
-                 sweeps: int = 1):
+                 sweeps: int = 1, coarse: str = "amg"):
         import pyamg
         from ._amg import BlockVCycle
+        if coarse not in ("amg", "lu"):
+            raise ValueError(f"coarse must be 'amg' or 'lu', got {coarse!r}")
         self.levels = []
         self.sweeps = int(sweeps)
         f, p, hh = field, pin, h
@@ -567,6 +570,12 @@ class GeometricVCycle:
             # an SPD operator; the Galerkin operator of the unpinned matrix with the pin replaced)
             self.levels.append(_GeoLevel(MatFreeOperator(f, p, None)))
         Ac = typed_bsr(f, pin=p)
+        if coarse == "lu":              # diagnostics: the two-grid method with an exact coarse solve
+            from scipy.sparse.linalg import splu
+            lu = splu(sp.csc_matrix(Ac))
+            self.coarse = lambda B: lu.solve(np.asarray(B))
+            self.ml, self.coarse_n, self.shape = None, f.n, self.levels[0].op.shape
+            return
         B = asm.rigid_body_modes(f.n, hh)
         # pyamg counts max_coarse in blocks, and its coarse levels have 6 unknowns per aggregate
         # (the rigid modes): at most 600 blocks (3600 unknowns) on the coarsest AMG level, which

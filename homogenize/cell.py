@@ -269,7 +269,7 @@ class _CellSolver:
         op = mf.MatFreeOperator(field, self.pin)
         self.M = mf.GeometricVCycle(field, pin=self.pin, pin_scale=op.pin_scale, h=self.h,
                                     amg_options=AMG_OPTIONS, fine_op=op,
-                                    assembled_max=MATFREE_ASSEMBLED_MAX)
+                                    assembled_max=MATFREE_ASSEMBLED_MAX, coarse=MATFREE_COARSE)
         self.ml = self.M.ml
         self.matvec = op
         self.K = None
@@ -377,6 +377,9 @@ SOLVERS = ("fast", "reference", "matrix-free")
 #: solver="matrix-free": matrix-free geometric levels down to this many voxels per edge, the
 #: Galerkin matrix of that grid assembled for pyamg (128^3 -> 64^3; 64^3 -> 32^3)
 MATFREE_ASSEMBLED_MAX = 64
+#: solver="matrix-free": the assembled grid's solver, "amg" (pyamg smoothed aggregation) or "lu"
+#: (exact; a diagnostic for small grids, results/cell/multigrid_robustness.py)
+MATFREE_COARSE = "amg"
 # smoothed aggregation for the voxel stiffness with stiff particles. strength threshold 0.05:
 # a matrix-particle coupling |a_ij| ~ E_matrix against sqrt(a_ii a_jj) ~ sqrt(E_m E_p) is weak
 # at any contrast above ~400, so aggregates do not straddle a particle surface and the coarse
@@ -655,8 +658,10 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 "particle_E_Pa": particle.E_Pa, "particle_nu": particle.nu, "rigid": rigid,
                 "deflate": solver.Z is not None, "tol": tol, "method": mesh.method,
                 "solver": solver.kind,
-                "amg_levels": len(solver.ml.levels),
-                "amg_operator_complexity": float(solver.ml.operator_complexity()),
+                # no AMG below the geometric levels with MATFREE_COARSE = "lu" (a diagnostic)
+                "amg_levels": len(solver.ml.levels) if solver.ml is not None else 0,
+                "amg_operator_complexity": (float(solver.ml.operator_complexity())
+                                            if solver.ml is not None else None),
                 "geometric_levels": (len(solver.M.levels) if solver.kind == "matrix-free"
                                      else 0),
                 "C_linear_error_rel": err_lin, "stress_mag_linear_error_rel": err_stress,
@@ -715,7 +720,10 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         products, geometric multigrid (trilinear transfer, element-wise Galerkin coarse
         operators) down to <= 64^3, pyamg below (:mod:`homogenize._matfree`); a fraction of the
         memory, for grids whose assembled matrix does not fit ("fast" switches to it then).
-        Same C_eff to the solver tolerance.
+        Same C_eff to the solver tolerance. "fast" stays the default: its iteration count does
+        not depend on the microstructure, while the trilinear coarse level of "matrix-free"
+        needs 2-4x more iterations with many or small particles
+        (results/cell/multigrid_robustness.json).
 
     Returns
     -------

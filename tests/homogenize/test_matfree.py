@@ -172,14 +172,19 @@ def test_galerkin_coarse_operator_elementwise(method):
     assert abs(G2 - mf.typed_bsr(fcc).tocsr()).max() <= 1e-13 * abs(G2).max()
 
 
-def test_vcycle_symmetric_positive_definite():
+@pytest.mark.parametrize("coarse", ["amg", "lu"])
+def test_vcycle_symmetric_positive_definite(coarse):
+    """Also with the assembled grid solved exactly (coarse="lu", the diagnostic of
+    results/cell/multigrid_robustness.py)."""
     n = 16
     mesh, lam, mu, comp = _fields(n)
     field = mf.element_field(lam, mu, mesh.h_m, comp)
     op = mf.MatFreeOperator(field, 0)
     M = mf.GeometricVCycle(field, pin=0, pin_scale=op.pin_scale, h=mesh.h_m,
-                           amg_options=C.AMG_OPTIONS, fine_op=op, assembled_max=4)
-    assert len(M.levels) == 2 and M.coarse_n == 4       # two matrix-free levels, then AMG
+                           amg_options=C.AMG_OPTIONS, fine_op=op, assembled_max=4,
+                           coarse=coarse)
+    assert len(M.levels) == 2 and M.coarse_n == 4       # two matrix-free levels, then AMG / LU
+    assert (M.ml is None) == (coarse == "lu")
     rng = np.random.default_rng(5)
     B = rng.normal(size=(3 * n ** 3, 4))
     B[0:3] = 0.0                                         # the pinned node carries no load

@@ -1,0 +1,84 @@
+"""Why the matrix-free solver's iterations grow with the RVE, and why solver="fast" stays the
+default: the numbers behind results/cell/multigrid_robustness.json and the "multigrid
+robustness" section of results/cell/README.md.
+
+Same RVE family and load as `mapsim bench` (homogenize.bench.cell._rve: the seed paper's size
+distribution at 3.5 vol%, particle count chosen for a mean radius of 2.5 voxels at `rve_voxels`;
+6 unit strains + random particle forces, tol 1e-6), solved on `voxels` per edge:
+
+* fixed resolution (rve_voxels == voxels, mean radius 2.5 voxels), growing particle count;
+* particles at half the resolution (rve_voxels == 2 voxels, mean radius 1.25 voxels);
+* the matrix-free V-cycle with its assembled coarse grid solved EXACTLY (sparse LU,
+  homogenize.cell.MATFREE_COARSE = "lu"): if the iterations stay, the geometric (trilinear)
+  level limits convergence, not the AMG below it.
+
+Iteration counts are deterministic; seconds are wall times on whatever else the machine ran.
+Run: .venv/bin/python results/cell/multigrid_robustness.py          (~15 min, ~3 GB)
+     --out F writes the JSON to F instead of the committed file; --missing runs only the cases
+     that file does not hold yet (the JSON is rewritten after every case).
+"""
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+import homogenize.cell as cell
+from homogenize.bench.cell import _rve
+
+HERE = Path(__file__).resolve().parent
+JSON = HERE / "multigrid_robustness.json"
+#: (rve_voxels, voxels, solver, coarse)
+PLAN = [(32, 32, "matrix-free", "amg"), (48, 48, "matrix-free", "amg"),
+        (64, 64, "matrix-free", "amg"), (96, 96, "matrix-free", "amg"),
+        (32, 32, "fast", None), (48, 48, "fast", None), (64, 64, "fast", None),
+        (64, 32, "matrix-free", "amg"), (64, 32, "fast", None),
+        (96, 48, "matrix-free", "amg"), (96, 48, "fast", None),
+        (128, 64, "matrix-free", "amg"), (128, 64, "fast", None),
+        (64, 32, "matrix-free", "lu"), (96, 48, "matrix-free", "lu")]
+
+
+def run(rve_voxels: int, voxels: int, solver: str, coarse) -> dict:
+    rve = _rve(rve_voxels, 1)
+    forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
+    cell.MATFREE_COARSE = coarse or "amg"
+    try:
+        t0 = time.perf_counter()
+        r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver=solver)
+        sec = time.perf_counter() - t0
+    finally:
+        cell.MATFREE_COARSE = "amg"
+    it = r.iterations
+    return {"rve_voxels": rve_voxels, "voxels": voxels, "n_particles": int(rve.n),
+            "mean_radius_voxels": 2.5 * voxels / rve_voxels, "solver": solver,
+            "coarse": coarse, "iterations": it,
+            "max_strain_iterations": max(v for k, v in it.items() if k != "magnetic"),
+            "magnetic_iterations": it["magnetic"], "seconds": sec,
+            "E_eff_Pa": r.E_eff_Pa}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=JSON)
+    ap.add_argument("--missing", action="store_true",
+                    help="run only the cases the output file does not hold yet")
+    args = ap.parse_args()
+    key = ("rve_voxels", "voxels", "solver", "coarse")
+    rows = (json.loads(args.out.read_text())["rows"]
+            if args.missing and args.out.exists() else [])
+    have = {tuple(r[k] for k in key) for r in rows}
+    for case in PLAN:
+        if case in have:
+            continue
+        rows.append(run(*case))
+        print(rows[-1], flush=True)
+        rows.sort(key=lambda r: [PLAN.index(tuple(r[k] for k in key))])
+        doc = {"rows": rows, "command": "results/cell/multigrid_robustness.py",
+               "note": "iterations of the deflated block CG to relative residual 1e-6; seconds: "
+                       "wall time, not a benchmark (see results/bench/cell.json for timed runs)"}
+        args.out.write_text(json.dumps(doc, indent=1) + "\n")      # after every case
+
+
+if __name__ == "__main__":
+    main()
