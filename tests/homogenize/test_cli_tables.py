@@ -296,7 +296,10 @@ def test_ctrl_c_on_the_command_then_rerun_resumes(scheduler, tmp_path):
     p = tmp_path / "s.toml"
     p.write_text('[study]\nseed = 4\nrealizations = 6\nevaluator = "synthetic"\n'
                  '[grid]\nphi = 0.035\nB_T = [0.01, 0.1, 0.5]\ngradB_T_per_m = 1.78\n'
-                 '[synthetic]\nwork_seconds = 0.3\n')
+                 '[synthetic]\nwork_seconds = 0.6\n')
+    # 0.6 s per realization: the window between the 2nd stored result and the end of the run
+    # (~10 s) must outlast a starved polling loop on a loaded machine (at 0.3 s a CI run under
+    # load once saw the batch finish before the interrupt)
     out = tmp_path / "t.h5"
     parts = parts_dir_for(out)
     proc = subprocess.Popen([sys.executable, "-m", "homogenize.cli", "batch", str(p), "--out",
