@@ -574,21 +574,22 @@ class GeometricVCycle:
             from scipy.sparse.linalg import splu
             lu = splu(sp.csc_matrix(Ac))
             self.coarse = lambda B: lu.solve(np.asarray(B))
-            self.ml, self.coarse_n, self.shape = None, f.n, self.levels[0].op.shape
-            return
-        B = asm.rigid_body_modes(f.n, hh)
-        # pyamg counts max_coarse in blocks, and its coarse levels have 6 unknowns per aggregate
-        # (the rigid modes): at most 600 blocks (3600 unknowns) on the coarsest AMG level, which
-        # BlockVCycle then factorizes densely (the sparse LU of a 7188-unknown, nearly dense
-        # coarsest matrix took 10 s to set up at 32^3)
-        opts = dict(amg_options, max_coarse=max(50, min(600, Ac.shape[0] // 120)))
-        ml = pyamg.smoothed_aggregation_solver(Ac, B=B, **opts)
-        del B
-        self.coarse = BlockVCycle(ml, fine_colours=grid_colours(f.n))
-        # keep what the V-cycle uses (its own copies of A and P per level), not pyamg's R, B, ...
-        self.ml = _AMGSummary(ml)
+            self.ml = None
+        else:
+            B = asm.rigid_body_modes(f.n, hh)
+            # pyamg counts max_coarse in blocks, and its coarse levels have 6 unknowns per
+            # aggregate (the rigid modes): at most 600 blocks (3600 unknowns) on the coarsest AMG
+            # level, which BlockVCycle then factorizes densely (the sparse LU of a 7188-unknown,
+            # nearly dense coarsest matrix took 10 s to set up at 32^3)
+            opts = dict(amg_options, max_coarse=max(50, min(600, Ac.shape[0] // 120)))
+            ml = pyamg.smoothed_aggregation_solver(Ac, B=B, **opts)
+            del B
+            self.coarse = BlockVCycle(ml, fine_colours=grid_colours(f.n))
+            # keep what the V-cycle uses (its own copies of A and P per level), not pyamg's R, B
+            self.ml = _AMGSummary(ml)
+            del ml
         self.coarse_n = f.n
-        del ml, Ac, f
+        del Ac, f
         self.shape = self.levels[0].op.shape
 
     def _cycle(self, i, B):

@@ -68,6 +68,17 @@ def test_voxel_stencil_kernel_equals_blas_assembly():
         assert np.abs(Kn.data - Kb.data).max() <= 1e-14 * np.abs(Kb.data).max()
 
 
+def _sequential_block_sweep(D, b, x, order, R):
+    """Plain numpy block Gauss-Seidel: the R x R diagonal blocks of the dense D solved one after
+    another in ``order``, all columns of b at once; returns the updated copy of x."""
+    xr = x.copy()
+    for p in order:
+        s = slice(R * p, R * p + R)
+        r = b[s] - D[s] @ xr + D[s, s] @ xr[s]
+        xr[s] = np.linalg.solve(D[s, s], r)
+    return xr
+
+
 def test_colour_sweep_equals_sequential_block_gauss_seidel():
     """A multicolour sweep IS a sequential block Gauss-Seidel sweep in colour order, because the
     nodes of one colour share no voxel (checked here for odd and even n)."""
@@ -98,12 +109,7 @@ def test_colour_sweep_equals_sequential_block_gauss_seidel():
                                              xs.reshape(-1, 3, k), b.reshape(-1, 3, k), tmp)
         assert np.array_equal(xk, xs)       # thread-count independent, bit for bit
         # plain numpy sequential block sweep in the same node order, column by column
-        D = Md.toarray()
-        xr = x.copy()
-        for p in np.concatenate(colours):
-            s = slice(3 * p, 3 * p + 3)
-            r = b[s] - D[s] @ xr + D[s, s] @ xr[s]
-            xr[s] = np.linalg.solve(D[s, s], r)
+        xr = _sequential_block_sweep(Md.toarray(), b, x, np.concatenate(colours), 3)
         assert np.allclose(xk, xr, rtol=1e-12, atol=1e-12 * np.abs(xr).max())
 
 
@@ -125,11 +131,6 @@ def test_colour_sweep_with_6x6_blocks_equals_sequential_block_gauss_seidel():
     for c in colours:
         K.bsr_gauss_seidel_colour_serial(M.indptr, M.indices, M.data, dinv, c,
                                          xk.reshape(-1, R, k), b.reshape(-1, R, k), tmp)
-    D = M.toarray()
-    xr = x.copy()
-    for p in np.concatenate(colours):
-        s = slice(R * p, R * p + R)
-        r = b[s] - D[s] @ xr + D[s, s] @ xr[s]
-        xr[s] = np.linalg.solve(D[s, s], r)
+    xr = _sequential_block_sweep(M.toarray(), b, x, np.concatenate(colours), R)
     assert np.allclose(xk, xr, rtol=1e-12, atol=1e-12 * np.abs(xr).max())
     assert not np.allclose(xk, x)           # the sweep did something
