@@ -144,6 +144,17 @@ def _stencil_blocks(h: float) -> np.ndarray:
     return G
 
 
+def voxel_types(lam: np.ndarray, mu: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """The voxels of the fields ``lam``, ``mu`` (n, n, n) [Pa] as element types: ``etype``
+    (n^3,) int32 indexes ``Ktab`` (T, 24, 24), one element matrix ``lambda K_lam + mu K_mu`` per
+    distinct (lambda, mu) pair (a phase field has two or three)."""
+    Kl, Km = reference_matrices(h)
+    pairs, inv = np.unique(np.stack([np.ravel(lam), np.ravel(mu)], axis=1), axis=0,
+                           return_inverse=True)
+    Ktab = np.stack([la * Kl + m * Km for la, m in pairs])
+    return np.ascontiguousarray(inv.reshape(-1), dtype=np.int32), Ktab
+
+
 def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float, *, method: str = "numba"
                  ) -> sp.bsr_matrix:
     """Global periodic stiffness matrix, 3 x 3 BSR with sorted indices, DOF ``3 p + c``.
@@ -151,7 +162,8 @@ def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float, *, method: str = "nu
     lam, mu : ndarray, shape (n, n, n) -- Lame parameters per voxel [Pa], indexed [k, j, i]
     h : float -- voxel edge [m]
     method : {"numba", "blas"} -- "numba": one parallel pass writing every row's 27 blocks in
-        sorted column order (:func:`homogenize._kernels.voxel_stencil_blocks`); "blas": the
+        sorted column order (:func:`homogenize._kernels.typed_stencil_blocks` on the
+        :func:`voxel_types` of the fields); "blas": the
         reference path, one dense product ``(N, 16) @ (16, 243)`` then a reordering of the rows
         that wrap. Both give the same matrix up to the summation order (round-off).
     """
@@ -160,22 +172,21 @@ def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float, *, method: str = "nu
         raise ValueError("the periodic 27-point stencil needs n >= 3")
     if method not in ("numba", "blas"):
         raise ValueError(f"method must be 'numba' or 'blas', got {method!r}")
-    G = _stencil_blocks(h)
     if method == "numba":
-        voxel_stencil_blocks = (kn.voxel_stencil_blocks if n ** 3 >= kn.PARALLEL_MIN_ROWS
-                                else kn.voxel_stencil_blocks_serial)
+        etype, Ktab = voxel_types(lam, mu, h)
+        kern = (kn.typed_stencil_blocks if n ** 3 >= kn.PARALLEL_MIN_ROWS
+                else kn.typed_stencil_blocks_serial)
         idx_dtype = np.int32 if 27 * n ** 3 < 2 ** 31 else np.int64
         indices = np.empty(27 * n ** 3, dtype=idx_dtype)
         data = np.empty((27 * n ** 3, 3, 3))
-        voxel_stencil_blocks(n, np.ascontiguousarray(lam, dtype=np.float64).ravel(),
-                             np.ascontiguousarray(mu, dtype=np.float64).ravel(),
-                             _stencil_tables(), _AXIS_ORDER, np.ascontiguousarray(G[:8]),
-                             np.ascontiguousarray(G[8:]), indices, data)
+        kern(n, np.arange(n ** 3, dtype=np.int64), etype, Ktab, _stencil_tables(), _AXIS_ORDER,
+             indices, data)
         indptr = np.arange(0, 27 * n ** 3 + 1, 27, dtype=idx_dtype)
         A = sp.bsr_matrix((data, indices, indptr),
                           shape=(3 * n ** 3, 3 * n ** 3))
         A.has_sorted_indices = True
         return A
+    G = _stencil_blocks(h)
     X = np.concatenate([node_coefficients(lam), node_coefficients(mu)], axis=1)
     data = (X @ G.reshape(16, 243)).reshape(n ** 3, 27, 3, 3)
     del X

@@ -130,26 +130,30 @@ def _greedy_colouring(indptr, indices, colour, mark):
         colour[p] = c
 
 
-def _voxel_stencil_blocks(n, lam, mu, tab, axis_order, Gl, Gm, indices, data):
-    """Rows of the periodic voxel stiffness matrix in sorted BSR order.
+def _typed_stencil_blocks(n, rows, etype, Ktab, tab, axis_order, indices, data):
+    """Block rows ``rows`` (int64) of the periodic stiffness of an element-type field in sorted
+    27-block BSR order; row t of the output is node rows[t].
 
-    lam, mu (n^3,) per voxel (flat index i + n (j + n k)); tab (8, 27) neighbour corner of corner
-    a at offset slot s (-1: outside); axis_order (3, 3): the offsets (-1, 0, 1) of one axis in
-    increasing order of the wrapped neighbour index, row 0 for coordinate 0, row 1 inside, row 2
-    for coordinate n - 1 (z-major flat indices then sort as z, y, x: no per-row sort needed);
-    Gl, Gm (8, 27, 3, 3) element blocks K[a, a + d] for unit lambda / mu. Writes indices
-    (27 n^3,) and data (27 n^3, 3, 3).
-    Block of node p at offset slot s = sum_a lam(voxel with corner a at p) Gl[a, s] + mu Gm[a, s].
+    etype (n^3,) int32: every voxel's index into Ktab (T, 24, 24) (flat voxel index
+    i + n (j + n k), DOF 3 a + c of corner a = ax + 2 ay + 4 az); tab (8, 27) neighbour corner of
+    corner a at offset slot s = (dx+1) + 3 (dy+1) + 9 (dz+1) (-1: outside the voxel); axis_order
+    (3, 3): the offsets (-1, 0, 1) of one axis in increasing order of the wrapped neighbour index,
+    row 0 for coordinate 0, row 1 inside, row 2 for coordinate n - 1 (z-major flat indices then
+    sort as z, y, x: no per-row sort needed). Writes indices (27 len(rows),) and data
+    (27 len(rows), 3, 3). Block of node p at slot s = sum_a Ktab[type of the voxel with corner a
+    at p][3 a:, 3 tab[a, s]:]. Serves the assembled solver (one type per (lambda, mu) pair,
+    homogenize._assembly.assemble_bsr) and the matrix-free levels' assembled rows
+    (homogenize._matfree.typed_rows_bsr).
     """
-    N = n * n * n
-    for p in nb.prange(N):
+    for t in nb.prange(rows.shape[0]):
+        p = rows[t]
         i = p % n
         j = (p // n) % n
         k = p // (n * n)
         ri = 0 if i == 0 else (2 if i == n - 1 else 1)
         rj = 0 if j == 0 else (2 if j == n - 1 else 1)
         rk = 0 if k == 0 else (2 if k == n - 1 else 1)
-        out = 27 * p
+        out = 27 * t
         for oz in range(3):
             dz = axis_order[rk, oz]
             for oy in range(3):
@@ -157,21 +161,22 @@ def _voxel_stencil_blocks(n, lam, mu, tab, axis_order, Gl, Gm, indices, data):
                 for ox in range(3):
                     dx = axis_order[ri, ox]
                     s = (dx + 1) + 3 * (dy + 1) + 9 * (dz + 1)
-                    indices[out] = (i + dx) % n + n * (((j + dy) % n) + n * ((k + dz) % n))
+                    indices[out] = (i + dx + n) % n + n * (((j + dy + n) % n)
+                                                           + n * ((k + dz + n) % n))
                     for r in range(3):
                         for c in range(3):
                             data[out, r, c] = 0.0
                     for a in range(8):
-                        if tab[a, s] >= 0:
+                        bb = tab[a, s]
+                        if bb >= 0:
                             ax = a & 1
                             ay = (a >> 1) & 1
                             az = (a >> 2) & 1
-                            v = (i - ax) % n + n * (((j - ay) % n) + n * ((k - az) % n))
-                            la = lam[v]
-                            ma = mu[v]
+                            v = (i - ax + n) % n + n * (((j - ay + n) % n) + n * ((k - az + n) % n))
+                            e = etype[v]
                             for r in range(3):
                                 for c in range(3):
-                                    data[out, r, c] += la * Gl[a, s, r, c] + ma * Gm[a, s, r, c]
+                                    data[out, r, c] += Ktab[e, 3 * a + r, 3 * bb + c]
                     out += 1
 
 
@@ -205,7 +210,7 @@ bsr_matmat, bsr_matmat_serial = parallel_and_serial(_bsr_matmat)
 bsr_residual, bsr_residual_serial = parallel_and_serial(_bsr_residual)
 bsr_gauss_seidel_colour, bsr_gauss_seidel_colour_serial = parallel_and_serial(_bsr_gauss_seidel_colour)
 greedy_colouring = nb.njit(cache=True)(_greedy_colouring)
-voxel_stencil_blocks, voxel_stencil_blocks_serial = parallel_and_serial(_voxel_stencil_blocks)
+typed_stencil_blocks, typed_stencil_blocks_serial = parallel_and_serial(_typed_stencil_blocks)
 axpy_cols, _ = parallel_and_serial(_axpy_cols)
 xpby_cols, _ = parallel_and_serial(_xpby_cols)
 coldot = nb.njit(cache=True)(_coldot)

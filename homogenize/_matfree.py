@@ -32,6 +32,7 @@ import scipy.sparse as sp
 from micro._numba import parallel_and_serial
 
 from . import _assembly as asm
+from . import _kernels as kn
 from ._kernels import block_acc
 
 __all__ = ["ElementField", "element_field", "MatFreeOperator", "coarsen", "GeometricVCycle",
@@ -143,45 +144,6 @@ def _diag_blocks(n, etype, Ktab, out):
                     out[p, r, c] += Ktab[e, 3 * ca + r, 3 * ca + c]
 
 
-def _typed_stencil_blocks(n, rows, etype, Ktab, tab, axis_order, indices, data):
-    """Block rows ``rows`` (int64) of the periodic stiffness of an element-type field in sorted
-    27-block BSR order (as :func:`homogenize._kernels.voxel_stencil_blocks`, with a 24x24 matrix
-    per type); row t of the output is node rows[t]."""
-    for t in nb.prange(rows.shape[0]):
-        p = rows[t]
-        i = p % n
-        j = (p // n) % n
-        k = p // (n * n)
-        ri = 0 if i == 0 else (2 if i == n - 1 else 1)
-        rj = 0 if j == 0 else (2 if j == n - 1 else 1)
-        rk = 0 if k == 0 else (2 if k == n - 1 else 1)
-        out = 27 * t
-        for oz in range(3):
-            dz = axis_order[rk, oz]
-            for oy in range(3):
-                dy = axis_order[rj, oy]
-                for ox in range(3):
-                    dx = axis_order[ri, ox]
-                    s = (dx + 1) + 3 * (dy + 1) + 9 * (dz + 1)
-                    indices[out] = (i + dx + n) % n + n * (((j + dy + n) % n)
-                                                           + n * ((k + dz + n) % n))
-                    for r in range(3):
-                        for c in range(3):
-                            data[out, r, c] = 0.0
-                    for a in range(8):
-                        bb = tab[a, s]
-                        if bb >= 0:
-                            ax = a & 1
-                            ay = (a >> 1) & 1
-                            az = (a >> 2) & 1
-                            v = (i - ax + n) % n + n * (((j - ay + n) % n) + n * ((k - az + n) % n))
-                            e = etype[v]
-                            for r in range(3):
-                                for c in range(3):
-                                    data[out, r, c] += Ktab[e, 3 * a + r, 3 * bb + c]
-                    out += 1
-
-
 def _prolong_add(nc, xc, x):
     """x += P xc: trilinear interpolation from the periodic nc^3 grid to the (2 nc)^3 grid.
     xc (nc^3, 3, k), x ((2 nc)^3, 3, k)."""
@@ -237,7 +199,6 @@ def _restrict(nc, x, xc):
 
 node_op, node_op_serial = parallel_and_serial(_node_op)
 diag_blocks, _ = parallel_and_serial(_diag_blocks)
-typed_stencil_blocks, _ = parallel_and_serial(_typed_stencil_blocks)
 prolong_add, _ = parallel_and_serial(_prolong_add)
 restrict, _ = parallel_and_serial(_restrict)
 
@@ -270,14 +231,10 @@ def element_field(lam, mu, h: float, composite=None) -> ElementField:
     a :class:`homogenize.cell._Composite` (their matrix: the isotropic base plus the same
     difference the assembled solver adds, so both operators agree to round-off)."""
     n = lam.shape[0]
-    Kl, Km = asm.reference_matrices(h)
-    pairs, inv = np.unique(np.stack([np.ravel(lam), np.ravel(mu)], axis=1), axis=0,
-                           return_inverse=True)
-    inv = inv.reshape(-1).astype(np.int32)
-    shared = np.stack([la * Kl + m * Km for la, m in pairs])
+    inv, shared = asm.voxel_types(lam, mu, h)
+    T0 = len(shared)
     if composite is None or composite.vox.size == 0:
-        return ElementField(n, inv, shared, len(pairs))
-    T0 = len(pairs)
+        return ElementField(n, inv, shared, T0)
     Ktab = np.empty((T0 + composite.vox.size, 24, 24))
     Ktab[:T0] = shared
     for sl, dK in composite._chunks():
@@ -397,7 +354,9 @@ def typed_rows_bsr(field: ElementField, rows) -> sp.bsr_matrix:
     idx_dtype = np.int32 if 27 * max(m, N) < 2 ** 31 else np.int64
     indices = np.empty(27 * m, dtype=idx_dtype)
     data = np.empty((27 * m, 3, 3))
-    typed_stencil_blocks(n, rows, field.etype, field.Ktab, _TAB, asm._AXIS_ORDER, indices, data)
+    kern = (kn.typed_stencil_blocks if m >= kn.PARALLEL_MIN_ROWS
+            else kn.typed_stencil_blocks_serial)
+    kern(n, rows, field.etype, field.Ktab, _TAB, asm._AXIS_ORDER, indices, data)
     indptr = np.arange(0, 27 * m + 1, 27, dtype=idx_dtype)
     A = sp.bsr_matrix((data, indices, indptr), shape=(3 * m, 3 * N))
     A.has_sorted_indices = True

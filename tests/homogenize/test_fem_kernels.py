@@ -51,7 +51,7 @@ def test_greedy_colouring_is_proper():
     assert np.all(colour[rows[off]] != colour[M.indices[off]])       # coupled rows differ
 
 
-def test_voxel_stencil_kernel_equals_blas_assembly():
+def test_typed_stencil_kernel_equals_blas_assembly():
     rng = np.random.default_rng(0)
     for n in (3, 4, 5):                       # n = 3: every neighbour wraps; odd and even n
         ph = rng.random((n, n, n)) < 0.3
@@ -59,9 +59,10 @@ def test_voxel_stencil_kernel_equals_blas_assembly():
         Kn = A.assemble_bsr(lam, mu, 1e-8, method="numba")
         Kb = A.assemble_bsr(lam, mu, 1e-8, method="blas")
         idx, dat = np.empty_like(Kn.indices), np.empty_like(Kn.data)
-        G = A._stencil_blocks(1e-8)
-        K.voxel_stencil_blocks(n, lam.ravel(), mu.ravel(), A._stencil_tables(), A._AXIS_ORDER,
-                               np.ascontiguousarray(G[:8]), np.ascontiguousarray(G[8:]), idx, dat)
+        etype, Ktab = A.voxel_types(lam, mu, 1e-8)
+        assert len(Ktab) == 2
+        K.typed_stencil_blocks(n, np.arange(n ** 3), etype, Ktab, A._stencil_tables(),
+                               A._AXIS_ORDER, idx, dat)
         assert np.array_equal(dat, Kn.data)  # parallel variant == serial one used at this size
         assert np.array_equal(Kn.indices, Kb.indices) and np.array_equal(Kn.indptr, Kb.indptr)
         # same element blocks, summed in a different order: relative round-off
