@@ -17,6 +17,8 @@ each matrix block is read once for all columns.
 """
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -133,7 +135,18 @@ class _Level:
             self.Rop = BSROp(P.T.tobsr(blocksize=(P.blocksize[1], P.blocksize[0])))
         self._tmp = {}
 
+    def use_operator(self, op):
+        """Smooth and take residuals with ``op`` (a :class:`homogenize._matfree.MatFreeOperator`
+        of this level's matrix, the same colours) instead of the assembled blocks, and drop
+        those: a geometric coarse grid handed to smoothed aggregation keeps only its transfer."""
+        self._op = op
+        self.A = types.SimpleNamespace(shape=self.A.shape, residual=op.residual)
+        self.dinv = None
+
     def smooth(self, X, B, order):
+        if getattr(self, "_op", None) is not None:
+            self._op.gauss_seidel(X, B, [self.colours[c] for c in order])
+            return
         k = X.shape[1]
         tmp = self._tmp.get(k)
         if tmp is None:

@@ -172,6 +172,53 @@ def test_galerkin_coarse_operator_elementwise(method):
     assert abs(G2 - mf.typed_bsr(fcc).tocsr()).max() <= 1e-13 * abs(G2).max()
 
 
+def test_isotropic_stencil_zero_pattern_is_exact_and_tight():
+    """The 153-entry pattern the kernel uses for shared (isotropic) stencils: every entry outside
+    it is round-off, every entry inside is a real coupling (PDMS and iron, fine and Galerkin
+    coarse stencils), and the operator with the pattern equals the assembled matrix (the
+    operator tests above run the pattern branch: the shared types are all isotropic)."""
+    mask, kind, pair = mf.stencil_pattern()
+    assert mask.sum() == 153 and (kind == 0).sum() == 7 and (kind == 1).sum() == 12
+    assert all(mask[s][pair[s][0], pair[s][1]] for s in np.flatnonzero(kind == 1))
+    mesh, lam, mu, comp = _fields(12, "centre")
+    field = mf.element_field(lam, mu, mesh.h_m)
+    for f in (field, mf.coarsen(field)):
+        S = mf._shared_stencils(f)
+        assert S.shape[0] == 2
+        for t in range(2):
+            big = np.abs(S[t]).max()
+            assert np.abs(S[t][~mask]).max() <= 1e-14 * big
+            assert np.abs(S[t][mask]).min() >= 1e-3 * big
+        assert np.all(mf.MatFreeOperator(f).iso == 1)
+    # a stencil without the pattern keeps the full-block path
+    S = mf._shared_stencils(field)
+    S[0, 1, 0, 1] = 1e-6 * np.abs(S[0]).max()
+    assert list(mf._isotropic_types(S, mask)) == [0, 1]
+
+
+def test_amg_level_smoothed_matrix_free_equals_assembled():
+    """The assembled grid under the geometric levels keeps its smoothed-aggregation transfer
+    but smooths and takes residuals with the matrix-free operator (``_Level.use_operator``):
+    the same V-cycle as with the assembled blocks, to round-off."""
+    import pyamg
+    from homogenize._amg import BlockVCycle
+    n = 12
+    mesh, lam, mu, comp = _fields(n)
+    field = mf.element_field(lam, mu, mesh.h_m, comp)
+    op = mf.MatFreeOperator(field, 0)
+    A = mf.typed_bsr(field, pin=0, pin_scale=op.pin_scale)
+    ml = pyamg.smoothed_aggregation_solver(A, B=asm.rigid_body_modes(n, mesh.h_m),
+                                           **dict(C.AMG_OPTIONS, max_coarse=50))
+    assert len(ml.levels) >= 2
+    assembled = BlockVCycle(ml, fine_colours=grid_colours(n))
+    free = BlockVCycle(ml, fine_colours=grid_colours(n))
+    free.levels[0].use_operator(op)
+    assert free.levels[0].dinv is None                   # the assembled blocks are dropped
+    B = np.random.default_rng(8).normal(size=(3 * n ** 3, 3))
+    ref = assembled @ B
+    assert np.abs(free @ B - ref).max() <= 1e-12 * np.abs(ref).max()
+
+
 @pytest.mark.parametrize("coarse", ["amg", "lu"])
 def test_vcycle_symmetric_positive_definite(coarse):
     """Also with the assembled grid solved exactly (coarse="lu", the diagnostic of
