@@ -1,0 +1,261 @@
+"""What limits the matrix-free V-cycle's iteration count: five measured hypotheses, the numbers
+behind results/cell/coarse_space_experiments.json and the section "Coarse-space experiments" of
+results/cell/README.md.
+
+RVE family and load as `mapsim bench` and multigrid_robustness.py (homogenize.bench.cell._rve,
+6 unit strains + random particle forces, tol 1e-6); mostly the case "100 particles of 1.25 voxels
+mean radius at 32^3" (rve_voxels 64, voxels 32), where solver="matrix-free" needs 45 / 82
+(strain / magnetic) iterations and solver="fast" 20 / 30.
+
+1. "rigid": coarse-grid locking. The trilinear coarse functions are cut to zero on every node of
+   a voxel holding iron (so no coarse function deforms a particle), and each particle's six
+   rigid modes on those nodes are added as coarse unknowns (coarse functions rigid on every
+   inclusion, the classical robust coarse space for high-contrast inclusions). The coarse matrix
+   [T0 Z]^T K [T0 Z] is assembled (T0^T K T0 element by element, T0^T K Z and Z^T K Z from the
+   sparse K Z) and solved by pyamg smoothed aggregation ("rigid") or a sparse LU ("rigid-lu");
+   "rigid-smoothed": the rigid modes smoothed by one damped Jacobi step, as smoothed
+   aggregation smooths its prolongator.
+2. "capped": the coarse operator built from the fine element matrices with the iron's stiffness
+   capped at `cap` times the matrix's (a preconditioner of a milder problem).
+3. "sweeps": 2 or 3 Gauss-Seidel sweeps per side on the fine level.
+4. "method": the staircase voxels ("centre": isotropic iron and PDMS voxels only, no cut voxel)
+   against the default composite voxels.
+5. "nu": PDMS Poisson's ratio 0.3 / 0.45 (the default, seed) / 0.49, with iron and with particles
+   of the matrix's own stiffness (a homogeneous cell: no contrast at all).
+
+The experimental preconditioners live in this script (they are not part of mapsim); they hook
+into homogenize.cell by replacing the matrix-free solver's preconditioner after its setup.
+Run: .venv/bin/python results/cell/coarse_space_experiments.py   (~8 min, ~1 GB)
+     --out F writes the JSON elsewhere; --missing runs only the cases it does not hold yet.
+"""
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pyamg
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+import homogenize._assembly as asm
+import homogenize._matfree as mf
+import homogenize.cell as cell
+from homogenize._amg import BlockVCycle
+from homogenize.bench.cell import _rve
+from micro.materials import PDMS
+
+HERE = Path(__file__).resolve().parent
+JSON = HERE / "coarse_space_experiments.json"
+
+
+def coarsen_truncated(field: mf.ElementField, keep: np.ndarray) -> mf.ElementField:
+    """``T0^T K T0`` element by element, T0 the trilinear prolongation with the rows of the fine
+    nodes ``~keep`` set to zero."""
+    n = field.n
+    nc = n // 2
+    e = field.etype.reshape(n, n, n)
+    kids = np.stack([e[cz::2, cy::2, cx::2].reshape(-1) for cx, cy, cz in asm.CORNERS], axis=1)
+    k3 = keep.reshape(n, n, n)
+    km = np.empty((nc ** 3, 8, 8), dtype=bool)      # (coarse voxel, child, child's corner)
+    for c, (cx, cy, cz) in enumerate(asm.CORNERS):
+        for a, (ax, ay, az) in enumerate(asm.CORNERS):
+            km[:, c, a] = np.roll(k3, shift=(-(cz + az), -(cy + ay), -(cx + ax)),
+                                  axis=(0, 1, 2))[::2, ::2, ::2].reshape(-1)
+    Pc = mf.child_prolongations()
+    ns = field.n_shared
+    uniform = np.all(kids == kids[:, :1], axis=1) & (kids[:, 0] < ns) & km.all(axis=(1, 2))
+    own = np.flatnonzero(~uniform)
+    Ktab = np.empty((ns + own.size, 24, 24))
+    Ktab[:ns] = np.einsum("cia,tij,cjb->tab", Pc, field.Ktab[:ns], Pc, optimize=True)
+    for s in range(0, own.size, 4096):
+        sl = own[s:s + 4096]
+        acc = np.zeros((sl.size, 24, 24))
+        for c in range(8):
+            P = Pc[c][None] * np.repeat(km[sl, c, :], 3, axis=1)[:, :, None]
+            acc += np.einsum("mia,mij,mjb->mab", P, field.Ktab[kids[sl, c]], P, optimize=True)
+        Ktab[ns + s:ns + s + sl.size] = acc
+    etype = np.where(uniform, kids[:, 0], 0).astype(np.int32)
+    etype[own] = ns + np.arange(own.size, dtype=np.int32)
+    return mf.ElementField(nc, etype, Ktab, ns)
+
+
+class RigidInclusionTwoGrid:
+    """Two-grid V-cycle: fine 8-colour Gauss-Seidel, coarse space [T0, Z] (see module docstring)."""
+
+    def __init__(self, op, field, Z, pin, h, exact, smooth=False):
+        n = field.n
+        nc = n // 2
+        N = n ** 3
+        self.op, self.nc, self.colours = op, nc, mf.grid_colours(n)
+        Z = sp.csr_matrix(Z)
+        snode = np.zeros(3 * N, dtype=bool)
+        snode[np.flatnonzero(np.diff(Z.indptr))] = True
+        snode = snode.reshape(N, 3).any(axis=1)
+        self.keep3 = np.repeat(~snode, 3).astype(float)[:, None]
+        Agg = sp.csr_matrix(mf.typed_bsr(coarsen_truncated(field, ~snode)))
+        d = Agg.diagonal()
+        scale = d[d > 0].mean()
+        # coarse nodes whose whole support lies on iron: no coarse function, unit diagonal
+        Agg = Agg + sp.diags(np.where(d <= 1e-12 * scale, scale, 0.0))
+        T0 = sp.diags(self.keep3[:, 0]) @ mf.prolongation_matrix(nc)
+        KZ = sp.csr_matrix(mf.stiffness_times_sparse(field, Z, pin=-1))
+        if smooth:
+            # the rigid modes smoothed as smoothed aggregation smooths its tentative prolongator:
+            # Z - 4/3 rho^-1 D^-1 K Z (rho: spectral radius of D^-1 K, power iteration), so they
+            # decay into the matrix over one layer of nodes instead of stopping at the surface
+            v = np.random.default_rng(0).normal(size=(op.shape[0], 1))
+            for _ in range(15):
+                w = np.einsum("pij,pjk->pik", op.dinv, (op @ v).reshape(-1, 3, 1)).reshape(-1, 1)
+                rho = np.linalg.norm(w) / np.linalg.norm(v)
+                v = w
+            Dinv = sp.block_diag(list(op.dinv), format="csr")
+            Z = (Z - (4.0 / 3.0 / rho) * (Dinv @ KZ)).tocsr()
+            KZ = sp.csr_matrix(mf.stiffness_times_sparse(field, Z, pin=-1))
+        Agp = (T0.T @ KZ).tocsr()
+        A = sp.bmat([[Agg, Agp], [Agp.T, (Z.T @ KZ).tocsr()]]).tolil()
+        ii, jj, kk = pin % n, (pin // n) % n, pin // (n * n)
+        pc = ii // 2 + nc * (jj // 2 + nc * (kk // 2))
+        for c in range(3):                  # the pinned coarse node, as the fine pin
+            A[3 * pc + c, :] = 0.0
+            A[:, 3 * pc + c] = 0.0
+            A[3 * pc + c, 3 * pc + c] = scale
+        A = A.tocsr()
+        A = sp.bsr_matrix(0.5 * (A + A.T), blocksize=(3, 3))
+        A.sort_indices()
+        if exact:
+            # a tiny shift: columns of T0 that cut to the same few nodes are linearly dependent
+            lu = splu(sp.csc_matrix(A + 1e-9 * scale * sp.identity(A.shape[0])))
+            self.coarse = lambda B: lu.solve(np.asarray(B))
+        else:
+            Bp = splu(sp.csc_matrix(Z.T @ Z)).solve(np.asarray(Z.T @ asm.rigid_body_modes(n, h)))
+            B = np.vstack([asm.rigid_body_modes(nc, 2 * h), Bp])
+            opts = dict(cell.AMG_OPTIONS, max_coarse=max(50, min(600, A.shape[0] // 120)))
+            self.coarse = BlockVCycle(pyamg.smoothed_aggregation_solver(A, B=B, **opts))
+        self.Z, self.ZT = Z, Z.T.tocsr()
+        self.ng = 3 * nc ** 3
+        self.shape = op.shape
+        self.levels, self.coarse_n, self.field_bytes = [None], nc, [0]      # what cell reports
+
+    def __matmul__(self, B):
+        B = np.ascontiguousarray(B, dtype=np.float64)
+        one = B.ndim == 1
+        B2 = B[:, None] if one else B
+        k = B2.shape[1]
+        X = np.zeros_like(B2)
+        self.op.gauss_seidel(X, B2, list(self.colours))
+        R = self.op.residual(X, B2)
+        Rc = np.empty((self.ng, k))
+        mf.restrict(self.nc, np.ascontiguousarray(R * self.keep3).reshape(-1, 3, k),
+                    Rc.reshape(-1, 3, k))
+        Xc = self.coarse(np.vstack([Rc, self.ZT @ R]))
+        tmp = np.zeros_like(X)
+        mf.prolong_add(self.nc, np.ascontiguousarray(Xc[:self.ng]).reshape(-1, 3, k),
+                       tmp.reshape(-1, 3, k))
+        X += tmp * self.keep3 + self.Z @ Xc[self.ng:]
+        self.op.gauss_seidel(X, B2, list(self.colours[::-1]))
+        return X[:, 0] if one else X
+
+    __call__ = __matmul__
+
+    def release(self):
+        self.op.release()
+
+
+def run(case: dict) -> dict:
+    rve = _rve(case["rve_voxels"], 1)
+    forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
+    variant = case["variant"]
+    orig_init, orig_coarsen = cell._CellSolver._init_matrix_free, mf.coarsen
+    orig_vcycle = mf.GeometricVCycle.__init__
+
+    def init(self, lam, mu, composite, stiff_mask):
+        orig_init(self, lam, mu, composite, stiff_mask)
+        if variant in ("rigid", "rigid-lu", "rigid-smoothed"):
+            Z = self._deflation_space(self.mesh.fraction > 0)      # every voxel holding iron
+            self.M = RigidInclusionTwoGrid(self.matvec, self.field, Z, self.pin, self.h,
+                                           exact=variant == "rigid-lu",
+                                           smooth=variant == "rigid-smoothed")
+
+    def capped(field, chunk=4096):
+        if field.n == case["voxels"]:
+            nrm = np.abs(field.Ktab).max(axis=(1, 2))
+            s = np.minimum(1.0, case["cap"] * nrm[:field.n_shared].min() / nrm)
+            field = mf.ElementField(field.n, field.etype, field.Ktab * s[:, None, None],
+                                    field.n_shared)
+        return orig_coarsen(field, chunk)
+
+    def vcycle(self, field, **kw):
+        orig_vcycle(self, field, **dict(kw, sweeps=case.get("sweeps", 1)))
+
+    cell._CellSolver._init_matrix_free = init
+    mf.GeometricVCycle.__init__ = vcycle
+    if variant == "capped":
+        mf.coarsen = capped
+    try:
+        kw = dict(matrix_nu=case.get("nu", PDMS.nu), method=case.get("method", "composite"))
+        if case.get("homogeneous"):
+            kw.update(particle_E_Pa=PDMS.E_Pa, particle_nu=kw["matrix_nu"])
+        t0 = time.perf_counter()
+        r = cell.homogenize_rve(rve, case["voxels"], forces_N=forces, solver=case["solver"], **kw)
+        sec = time.perf_counter() - t0
+    finally:
+        cell._CellSolver._init_matrix_free = orig_init
+        mf.coarsen = orig_coarsen
+        mf.GeometricVCycle.__init__ = orig_vcycle
+    it = r.iterations
+    return dict(case, n_particles=int(rve.n), iterations=it,
+                max_strain_iterations=max(v for k, v in it.items() if k != "magnetic"),
+                magnetic_iterations=it["magnetic"], seconds=sec, E_eff_Pa=r.E_eff_Pa)
+
+
+RESULT = ("n_particles", "iterations", "max_strain_iterations", "magnetic_iterations", "seconds",
+          "E_eff_Pa")
+
+
+def plan() -> list[dict]:
+    base = dict(rve_voxels=64, voxels=32, solver="matrix-free", variant="trilinear")
+    out = [base, dict(base, solver="fast", variant="fast"),
+           dict(base, variant="rigid"), dict(base, variant="rigid-lu"),
+           dict(base, variant="rigid-smoothed"),
+           dict(base, variant="capped", cap=1e3), dict(base, variant="capped", cap=30.0),
+           dict(base, sweeps=2), dict(base, sweeps=3),
+           dict(base, rve_voxels=64, voxels=64, sweeps=1),
+           dict(base, rve_voxels=64, voxels=64, sweeps=2)]
+    for nu in (0.3, 0.49):
+        out += [dict(base, nu=nu), dict(base, nu=nu, solver="fast", variant="fast"),
+                dict(base, nu=nu, variant="rigid")]
+    for nu in (0.3, 0.45, 0.49):
+        out += [dict(base, nu=nu, homogeneous=True),
+                dict(base, nu=nu, homogeneous=True, solver="fast", variant="fast")]
+    # the staircase voxels (no cut voxels: isotropic iron / PDMS only)
+    out += [dict(base, method="centre"), dict(base, method="centre", solver="fast", variant="fast")]
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=JSON)
+    ap.add_argument("--missing", action="store_true",
+                    help="run only the cases the output file does not hold yet")
+    args = ap.parse_args()
+    rows = (json.loads(args.out.read_text())["rows"]
+            if args.missing and args.out.exists() else [])
+    for case in plan():
+        if any(all(r.get(k) == v for k, v in case.items()) and set(case) == set(r) - set(RESULT)
+               for r in rows):
+            continue
+        rows.append(run(case))
+        print({k: rows[-1][k] for k in ("variant", "solver", "voxels", "nu", "homogeneous", "method",
+                                        "cap", "sweeps", "max_strain_iterations",
+                                        "magnetic_iterations", "seconds") if k in rows[-1]},
+              flush=True)
+        doc = {"rows": rows, "command": "results/cell/coarse_space_experiments.py",
+               "note": "iterations of the deflated block CG to relative residual 1e-6 (max over "
+                       "the six strains / the magnetic column); seconds: wall time, not a "
+                       "benchmark"}
+        args.out.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
