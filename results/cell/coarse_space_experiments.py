@@ -28,8 +28,6 @@ into homogenize.cell by replacing the matrix-free solver's preconditioner after 
 Run: .venv/bin/python results/cell/coarse_space_experiments.py   (~8 min, ~1 GB)
      --out F writes the JSON elsewhere; --missing runs only the cases it does not hold yet.
 """
-import argparse
-import json
 import time
 from pathlib import Path
 
@@ -44,6 +42,8 @@ import homogenize.cell as cell
 from homogenize._amg import BlockVCycle
 from homogenize.bench.cell import _rve
 from micro.materials import PDMS
+
+import _resumable
 
 HERE = Path(__file__).resolve().parent
 JSON = HERE / "coarse_space_experiments.json"
@@ -234,13 +234,7 @@ def plan() -> list[dict]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=JSON)
-    ap.add_argument("--missing", action="store_true",
-                    help="run only the cases the output file does not hold yet")
-    args = ap.parse_args()
-    rows = (json.loads(args.out.read_text())["rows"]
-            if args.missing and args.out.exists() else [])
+    out, rows = _resumable.parse(__doc__, JSON)
     for case in plan():
         if any(all(r.get(k) == v for k, v in case.items()) and set(case) == set(r) - set(RESULT)
                for r in rows):
@@ -250,11 +244,10 @@ def main() -> None:
                                         "cap", "sweeps", "max_strain_iterations",
                                         "magnetic_iterations", "seconds") if k in rows[-1]},
               flush=True)
-        doc = {"rows": rows, "command": "results/cell/coarse_space_experiments.py",
-               "note": "iterations of the deflated block CG to relative residual 1e-6 (max over "
-                       "the six strains / the magnetic column); seconds: wall time, not a "
-                       "benchmark"}
-        args.out.write_text(json.dumps(doc, indent=1) + "\n")
+        _resumable.write(out, rows, "results/cell/coarse_space_experiments.py",
+                         "iterations of the deflated block CG to relative residual 1e-6 (max over "
+                         "the six strains / the magnetic column); seconds: wall time, not a "
+                         "benchmark")
 
 
 if __name__ == "__main__":

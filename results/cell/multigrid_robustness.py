@@ -17,8 +17,6 @@ Run: .venv/bin/python results/cell/multigrid_robustness.py          (~15 min, ~3
      --out F writes the JSON to F instead of the committed file; --missing runs only the cases
      that file does not hold yet (the JSON is rewritten after every case).
 """
-import argparse
-import json
 import time
 from pathlib import Path
 
@@ -26,6 +24,8 @@ import numpy as np
 
 import homogenize.cell as cell
 from homogenize.bench.cell import _rve
+
+import _resumable
 
 HERE = Path(__file__).resolve().parent
 JSON = HERE / "multigrid_robustness.json"
@@ -59,14 +59,8 @@ def run(rve_voxels: int, voxels: int, solver: str, coarse) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=JSON)
-    ap.add_argument("--missing", action="store_true",
-                    help="run only the cases the output file does not hold yet")
-    args = ap.parse_args()
+    out, rows = _resumable.parse(__doc__, JSON)
     key = ("rve_voxels", "voxels", "solver", "coarse")
-    rows = (json.loads(args.out.read_text())["rows"]
-            if args.missing and args.out.exists() else [])
     have = {tuple(r[k] for k in key) for r in rows}
     for case in PLAN:
         if case in have:
@@ -74,10 +68,9 @@ def main() -> None:
         rows.append(run(*case))
         print(rows[-1], flush=True)
         rows.sort(key=lambda r: [PLAN.index(tuple(r[k] for k in key))])
-        doc = {"rows": rows, "command": "results/cell/multigrid_robustness.py",
-               "note": "iterations of the deflated block CG to relative residual 1e-6; seconds: "
-                       "wall time, not a benchmark (see results/bench/cell.json for timed runs)"}
-        args.out.write_text(json.dumps(doc, indent=1) + "\n")      # after every case
+        _resumable.write(out, rows, "results/cell/multigrid_robustness.py",
+                         "iterations of the deflated block CG to relative residual 1e-6; seconds: "
+                         "wall time, not a benchmark (see results/bench/cell.json for timed runs)")
 
 
 if __name__ == "__main__":
