@@ -56,33 +56,6 @@ def block_acc(M, r0, c0, R, C, x, q, y, p, k, sign):
                 y[p, r, m] += sign * acc
 
 
-@nb.njit(cache=True, inline="always")
-def pattern_acc(M, kind, a, b, x, q, y, p, k):
-    """y[p, :, m] += M x[q, :, m] for a 3x3 block M that is diagonal (kind 0) or diagonal plus
-    the pair M[a, b], M[b, a] (kind 1): the blocks of an isotropic voxel stencil to a face or an
-    edge neighbour (the other entries vanish by the reflection symmetries; see
-    homogenize._matfree.stencil_pattern). 3 or 5 multiply-adds per column instead of 9."""
-    d0 = M[0, 0]
-    d1 = M[1, 1]
-    d2 = M[2, 2]
-    if kind == 0:
-        for m in range(k):
-            y[p, 0, m] += d0 * x[q, 0, m]
-            y[p, 1, m] += d1 * x[q, 1, m]
-            y[p, 2, m] += d2 * x[q, 2, m]
-    else:
-        oab = M[a, b]
-        oba = M[b, a]
-        for m in range(k):
-            xa = x[q, a, m]
-            xb = x[q, b, m]
-            y[p, 0, m] += d0 * x[q, 0, m]
-            y[p, 1, m] += d1 * x[q, 1, m]
-            y[p, 2, m] += d2 * x[q, 2, m]
-            y[p, a, m] += oab * xb
-            y[p, b, m] += oba * xa
-
-
 def _bsr_matmat(indptr, indices, data, x, y):
     """y = A x for a block-sparse row matrix and k right-hand sides at once.
 

@@ -33,7 +33,7 @@ from micro._numba import parallel_and_serial
 
 from . import _assembly as asm
 from . import _kernels as kn
-from ._kernels import block_acc, pattern_acc
+from ._kernels import block_acc
 
 __all__ = ["ElementField", "element_field", "MatFreeOperator", "coarsen", "GeometricVCycle",
            "child_prolongations", "prolongation_matrix", "typed_bsr", "memory_estimate_bytes"]
@@ -47,8 +47,7 @@ _TAB = asm._stencil_tables()
 # numba kernels (contiguous arrays in, caller-allocated output, cache=True)
 # ------------------------------------------------------------------------------------------------
 
-def _node_op(n, nodes, etype, Ktab, ntype, S, iso, kind, pair, pin, pin_scale, u, b, dinv,
-             out, mode):
+def _node_op(n, nodes, etype, Ktab, ntype, S, pin, pin_scale, u, b, dinv, out, mode):
     """For the nodes ``nodes`` (int64), with ``(K u)_p`` the matrix-free product (pinned node
     ``pin``: row and column replaced by ``pin_scale I``):
 
@@ -57,10 +56,7 @@ def _node_op(n, nodes, etype, Ktab, ntype, S, iso, kind, pair, pin, pin_scale, u
     scratch of len(nodes) rows. The nodes of one Gauss-Seidel call must not share a voxel.
     u, b: (N, 3, k); out: (len(nodes), 3, k); etype (n^3,) int32; Ktab (T, 24, 24); ntype (N,)
     int32 (shared type of all 8 voxels around the node, or -1); S (n_shared, 27, 3, 3) stencils
-    of the shared types; iso (n_shared,) int8: 1 if the type's stencil has the isotropic zero
-    pattern (:func:`stencil_pattern`: kind (27,) 0 diagonal / 1 diagonal + pair / 2 full block,
-    pair (27, 2) the pair's rows), whose face and edge blocks then cost 3 or 5 multiply-adds
-    per column (153 instead of 243 for the node; measured 1.3x on the product at 64^3).
+    of the shared types.
 
     Loop shape (measured, 64^3, 2 threads: 1.3-1.5x over one multiply-add loop per matrix
     entry): every 3x3 block is read once into scalars and applied to all k columns; a node away
@@ -93,10 +89,7 @@ def _node_op(n, nodes, etype, Ktab, ntype, S, iso, kind, pair, pin, pin_scale, u
                     q = ((i + sx + n) % n) + n * (((j + sy + n) % n) + n * ((kk + sz + n) % n))
                 if q == pin:
                     continue
-                if iso[ty] == 0 or kind[s] == 2:
-                    block_acc(S[ty, s], 0, 0, 3, 3, u, q, out, t, k, 1.0)
-                else:
-                    pattern_acc(S[ty, s], kind[s], pair[s, 0], pair[s, 1], u, q, out, t, k)
+                block_acc(S[ty, s], 0, 0, 3, 3, u, q, out, t, k, 1.0)
         else:
             xs = (i - 1 if i > 0 else n - 1, i, i + 1 if i < n - 1 else 0)
             ys = (j - 1 if j > 0 else n - 1, j, j + 1 if j < n - 1 else 0)
@@ -265,41 +258,6 @@ def _shared_stencils(field: ElementField) -> np.ndarray:
     return S
 
 
-def stencil_pattern() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The zero pattern of an isotropic phase's 27-block stencil (and of its Galerkin coarse
-    stencils): the block to the neighbour at offset d has entry (r, c) only if r == c or both
-    d_r and d_c are nonzero (a reflection that flips one offset component leaves the stencil
-    unchanged and flips the sign of the entries coupling that component to another).
-
-    Returns mask (27, 3, 3) bool, kind (27,) int64 (0: diagonal block -- the centre and the 6
-    faces; 1: diagonal plus the pair ``pair[s]`` -- the 12 edges; 2: full -- the 8 corners) and
-    pair (27, 2) int64.
-    """
-    mask = np.zeros((27, 3, 3), dtype=bool)
-    kind = np.zeros(27, dtype=np.int64)
-    pair = np.zeros((27, 2), dtype=np.int64)
-    for s in range(27):
-        d = np.array([s % 3 - 1, (s // 3) % 3 - 1, s // 9 - 1])
-        mask[s] = np.eye(3, dtype=bool) | np.outer(d != 0, d != 0)
-        nz = np.flatnonzero(d)
-        kind[s] = 2 if nz.size == 3 else (1 if nz.size == 2 else 0)
-        if nz.size == 2:
-            pair[s] = nz
-    return mask, kind, pair
-
-
-def _isotropic_types(S: np.ndarray, mask: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
-    """(T,) int8: 1 for the stencils whose entries outside ``mask`` are round-off (<= rtol of the
-    largest entry); those entries are set to exactly zero in place."""
-    iso = np.zeros(S.shape[0], dtype=np.int8)
-    for t in range(S.shape[0]):
-        big = np.abs(S[t]).max()
-        if big > 0 and np.abs(S[t][~mask]).max() <= rtol * big:
-            S[t][~mask] = 0.0
-            iso[t] = 1
-    return iso
-
-
 def _node_types(field: ElementField) -> np.ndarray:
     """(N,) int32: the shared type of all 8 voxels around each node, or -1."""
     n = field.n
@@ -327,8 +285,6 @@ class MatFreeOperator:
         N = self.n ** 3
         self.shape = (3 * N, 3 * N)
         self.S = np.ascontiguousarray(_shared_stencils(field))
-        mask, self._kind, self._pair = stencil_pattern()
-        self.iso = _isotropic_types(self.S, mask)
         self.ntype = _node_types(field)
         D = np.empty((N, 3, 3))
         diag_blocks(self.n, field.etype, field.Ktab, D)
@@ -353,8 +309,7 @@ class MatFreeOperator:
     def _run(self, nodes, X, B, out, mode):
         f = self.field
         k = X.shape[-1]
-        self._op(self.n, nodes, f.etype, f.Ktab, self.ntype, self.S, self.iso, self._kind,
-                 self._pair, self.pin, self.pin_scale,
+        self._op(self.n, nodes, f.etype, f.Ktab, self.ntype, self.S, self.pin, self.pin_scale,
                  X.reshape(-1, 3, k), B.reshape(-1, 3, k),
                  self.dinv if mode == 2 else self.diag, out.reshape(-1, 3, k), mode)
 
@@ -591,8 +546,9 @@ class GeometricVCycle:
             del B
             self.coarse = BlockVCycle(ml, fine_colours=grid_colours(f.n))
             # its finest level is this geometric grid: smoothed and residuals taken matrix-free
-            # (same matrix to round-off; measured 64^3 bench RVE: its sweeps ~2x faster than
-            # the assembled blocks'), the assembled blocks kept only for pyamg's setup
+            # (same matrix to round-off, same time: measured on the 64^3 bench RVE's 32^3 grid)
+            # so that its assembled blocks (27 x 72 B per node: 0.5 GB for the 64^3 grid under a
+            # 128^3 cell) are freed once pyamg's setup has them
             if self.coarse.levels:
                 self.coarse.levels[0].use_operator(cop)
             # keep what the V-cycle uses (its own copies of A and P per level), not pyamg's R, B

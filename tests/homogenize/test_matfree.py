@@ -172,30 +172,6 @@ def test_galerkin_coarse_operator_elementwise(method):
     assert abs(G2 - mf.typed_bsr(fcc).tocsr()).max() <= 1e-13 * abs(G2).max()
 
 
-def test_isotropic_stencil_zero_pattern_is_exact_and_tight():
-    """The 153-entry pattern the kernel uses for shared (isotropic) stencils: every entry outside
-    it is round-off, every entry inside is a real coupling (PDMS and iron, fine and Galerkin
-    coarse stencils), and the operator with the pattern equals the assembled matrix (the
-    operator tests above run the pattern branch: the shared types are all isotropic)."""
-    mask, kind, pair = mf.stencil_pattern()
-    assert mask.sum() == 153 and (kind == 0).sum() == 7 and (kind == 1).sum() == 12
-    assert all(mask[s][pair[s][0], pair[s][1]] for s in np.flatnonzero(kind == 1))
-    mesh, lam, mu, comp = _fields(12, "centre")
-    field = mf.element_field(lam, mu, mesh.h_m)
-    for f in (field, mf.coarsen(field)):
-        S = mf._shared_stencils(f)
-        assert S.shape[0] == 2
-        for t in range(2):
-            big = np.abs(S[t]).max()
-            assert np.abs(S[t][~mask]).max() <= 1e-14 * big
-            assert np.abs(S[t][mask]).min() >= 1e-3 * big
-        assert np.all(mf.MatFreeOperator(f).iso == 1)
-    # a stencil without the pattern keeps the full-block path
-    S = mf._shared_stencils(field)
-    S[0, 1, 0, 1] = 1e-6 * np.abs(S[0]).max()
-    assert list(mf._isotropic_types(S, mask)) == [0, 1]
-
-
 def test_amg_level_smoothed_matrix_free_equals_assembled():
     """The assembled grid under the geometric levels keeps its smoothed-aggregation transfer
     but smooths and takes residuals with the matrix-free operator (``_Level.use_operator``):
