@@ -606,8 +606,8 @@ def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0
     voxels' own 24x24 matrices (4.6 kB each, ``cut_fraction`` of the voxels on the fine level and
     half as many on the coarse one); the assembled (n/2)^3 Galerkin matrix with its pyamg
     hierarchy (3 x 27 blocks of 72 B per coarse node); plus the Python/numba base (0.6 GB).
-    Measured peak RSS (bench, 7 load cases, _rve(n) with cut voxels ~5 %): 0.34 GB at 32^3
-    (model 0.71), 1.07 GB at 64^3 (model 1.50), 5.9 GB at 128^3 (model 7.8): the model is an
+    Measured peak RSS (bench, 7 load cases, _rve(n) with cut voxels ~5 %): 0.32 GB at 32^3
+    (model 0.71), 0.93 GB at 64^3 (model 1.50), 5.5 GB at 128^3 (model 7.8): the model is an
     upper bound, as the refusal before allocating needs.
     """
     N = int(voxels) ** 3
