@@ -1,5 +1,4 @@
 """Every example under examples/ is imported and run by a test (scikit-fem's habit)."""
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -9,13 +8,6 @@ from micro.materials import PDMS, SEED
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
-def load(name: str):
-    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_every_example_has_a_test_that_runs_it():
     tests = "\n".join(p.read_text() for p in Path(__file__).resolve().parent.rglob("test_*.py"))
     for ex in sorted(EXAMPLES.glob("*.py")):
@@ -23,8 +15,8 @@ def test_every_example_has_a_test_that_runs_it():
             f"examples/{ex.name} is not run by any test"
 
 
-def test_python_api_chain():
-    ex = load("python_api")
+def test_python_api_chain(load_script):
+    ex = load_script(EXAMPLES / "python_api.py")
     # the effective body force is the Kelvin force of the RVE's magnetization: for a uniform
     # applied gradient, f_eff = M_eff dB/dz exactly (sum of G m_i over the volume); the FEM
     # reproduces it as the mean of the spread particle forces (to the Ewald accuracy 1e-6)

@@ -1,8 +1,7 @@
-"""One dilute Fe sphere with composite voxels (results/cell/dilute_rate.py, .md): the part of the
+"""One dilute Fe sphere with composite voxels (results/cell/dilute_rate.py; results/cell/README.md): the part of the
 error that depends on the sphere's position against the grid shrinks fast, the systematic part
 does not -- at 16 voxels per diameter the offset-averaged coefficient is still above a curved P2
 value that bounds the exact one from above."""
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -11,14 +10,7 @@ import pytest
 SCRIPT = Path(__file__).resolve().parents[2] / "results" / "cell" / "dilute_rate.py"
 
 
-def _script():
-    spec = importlib.util.spec_from_file_location("dilute_rate", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def test_dilute_sphere_position_error_shrinks_but_the_composite_bias_stays(tmp_path):
+def test_dilute_sphere_position_error_shrinks_but_the_composite_bias_stays(tmp_path, load_script):
     """(G/G_m - 1)/phi of the cubic array at phi 0.01, C44/C55/C66 at the study's first random
     sphere-centre offsets (same seed). Measured with 8 offsets (dilute_rate.json): spread over
     offsets 0.36 % at 8 voxels per diameter and 0.03 % at 16 (order ~3); offset mean +2.2 % above
@@ -30,7 +22,7 @@ def test_dilute_sphere_position_error_shrinks_but_the_composite_bias_stays(tmp_p
        C entries bound the exact ones from above; 2.3775, limit 2.341) lies below the
        composite-voxel mean at 16 voxels per diameter by more than 0.3 % (measured 0.6 %)."""
     pytest.importorskip("gmsh")
-    dr = _script()
+    dr = load_script(SCRIPT)
     offsets = np.random.default_rng(dr.SEED).random((4, 3))
     rows = [dr.voxel_run(30, o) for o in offsets] + [dr.voxel_run(60, o) for o in offsets[:2]]
     c8 = np.array([r["c44_c55_c66"] for r in rows if r["voxels"] == 30])     # D = 8.0

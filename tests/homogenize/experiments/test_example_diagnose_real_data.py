@@ -1,5 +1,4 @@
 """The real-data example: its numbers (what results/diagnose/ reports)."""
-import importlib.util
 from pathlib import Path
 
 import pytest
@@ -8,11 +7,8 @@ EXAMPLE = Path(__file__).resolve().parents[3] / "examples" / "diagnose_real_data
 
 
 @pytest.fixture(scope="module")
-def ex():
-    spec = importlib.util.spec_from_file_location("diagnose_real_data", EXAMPLE)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+def ex(load_script):
+    return load_script(EXAMPLE)
 
 
 def test_seed_point(ex):

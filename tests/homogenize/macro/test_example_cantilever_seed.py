@@ -1,5 +1,4 @@
 """examples/cantilever_seed.py runs and its numbers are consistent."""
-import importlib.util
 from pathlib import Path
 
 import pytest
@@ -8,12 +7,9 @@ from homogenize.macro import closed_form as cf
 
 
 @pytest.fixture(scope="module")
-def ex():
+def ex(load_script):
     path = Path(__file__).resolve().parents[3] / "examples" / "cantilever_seed.py"
-    spec = importlib.util.spec_from_file_location("cantilever_seed_example", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(path)
 
 
 def test_example_numbers(ex):

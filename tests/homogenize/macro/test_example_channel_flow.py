@@ -1,17 +1,13 @@
 """examples/channel_flow.py runs and its numbers are consistent."""
-import importlib.util
 from pathlib import Path
 
 import pytest
 
 
 @pytest.fixture(scope="module")
-def ex():
+def ex(load_script):
     path = Path(__file__).resolve().parents[3] / "examples" / "channel_flow.py"
-    spec = importlib.util.spec_from_file_location("channel_flow_example", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(path)
 
 
 def test_example_numbers(ex):
