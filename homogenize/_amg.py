@@ -134,6 +134,7 @@ class _Level:
             self.P = BSROp(P)
             self.Rop = BSROp(P.T.tobsr(blocksize=(P.blocksize[1], P.blocksize[0])))
         self._tmp = {}
+        self._op = None
 
     def use_operator(self, op):
         """Smooth and take residuals with ``op`` (a :class:`homogenize._matfree.MatFreeOperator`
@@ -144,7 +145,7 @@ class _Level:
         self.dinv = None
 
     def smooth(self, X, B, order):
-        if getattr(self, "_op", None) is not None:
+        if self._op is not None:
             self._op.gauss_seidel(X, B, [self.colours[c] for c in order])
             return
         k = X.shape[1]
