@@ -273,7 +273,6 @@ class _CellSolver:
         self.ml = self.M.ml
         self.matvec = op
         self.K = None
-        self.field = field
         t["amg_setup"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         self.Z = self._deflation_space(stiff_mask) if stiff_mask is not None else None

@@ -173,7 +173,8 @@ def run(case: dict) -> dict:
         orig_init(self, lam, mu, composite, stiff_mask)
         if variant in ("rigid", "rigid-lu", "rigid-smoothed"):
             Z = self._deflation_space(self.mesh.fraction > 0)      # every voxel holding iron
-            self.M = RigidInclusionTwoGrid(self.matvec, self.field, Z, self.pin, self.h,
+            field = mf.element_field(lam, mu, self.h, composite)   # the solver keeps none
+            self.M = RigidInclusionTwoGrid(self.matvec, field, Z, self.pin, self.h,
                                            exact=variant == "rigid-lu",
                                            smooth=variant == "rigid-smoothed")
 
