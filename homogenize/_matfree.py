@@ -297,6 +297,8 @@ class MatFreeOperator:
         N = self.n ** 3
         self.shape = (3 * N, 3 * N)
         self.stype, self.S = node_stencils(field)     # the operator needs no element matrices
+        #: share of the nodes with their own stencil row
+        self.own_share = float(np.mean(self.stype >= max(field.n_shared, 1)))
         D = np.empty((N, 3, 3))
         diag_blocks(self.n, field.etype, field.Ktab, D)
         self.mean_diag = float(np.mean(np.einsum("pii->pi", D)))
@@ -614,10 +616,11 @@ def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0
     result and the fine residual; the energy products afterwards reuse that space), the diagonal
     blocks and their inverses (2 x 72 B), node and element types and indices (16 B); the cut
     voxels' own 24x24 matrices (4.6 kB each, ``cut_fraction`` of the voxels on the fine level and
-    half as many on the coarse one); the assembled (n/2)^3 Galerkin matrix with its pyamg
+    half as many on the coarse one; the operator's own stencil rows, ~2 nodes of 1.9 kB per cut
+    voxel, replace them once the hierarchy is built); the assembled (n/2)^3 Galerkin matrix with its pyamg
     hierarchy (3 x 27 blocks of 72 B per coarse node); plus the Python/numba base (0.6 GB).
     Measured peak RSS (bench, 7 load cases, _rve(n) with cut voxels ~5 %): 0.32 GB at 32^3
-    (model 0.71), 0.93 GB at 64^3 (model 1.50), 5.5 GB at 128^3 (model 7.8): the model is an
+    (model 0.71), 0.93 GB at 64^3 (model 1.50), 5.35 GB at 128^3 (model 7.8): the model is an
     upper bound, as the refusal before allocating needs.
     """
     N = int(voxels) ** 3
