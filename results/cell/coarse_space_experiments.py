@@ -22,10 +22,25 @@ mean radius at 32^3" (rve_voxels 64, voxels 32), where solver="matrix-free" need
    against the default composite voxels.
 5. "nu": PDMS Poisson's ratio 0.3 / 0.45 (the default, seed) / 0.49, with iron and with particles
    of the matrix's own stiffness (a homogeneous cell: no contrast at all).
+6. "sa-two-grid": the first level of smoothed aggregation in the matrix-free solver's place. A
+   two-grid cycle with the same fine smoother (one 8-colour block Gauss-Seidel sweep per side,
+   matrix-free) whose coarse space is the first prolongator P of `"fast"`'s hierarchy (pyamg
+   smoothed aggregation of the assembled fine matrix, cell.AMG_OPTIONS, rigid-body candidates),
+   solved exactly (sparse LU of P^T K P); "sa-two-grid-tentative": the same aggregates with the
+   unsmoothed tentative prolongator T. Against the trilinear two-grid cycle with an exact coarse
+   solve (multigrid_robustness.py, MATFREE_COARSE = "lu") this tells whether the first coarse
+   space is what makes smoothed aggregation robust, and whether its smoothing or its
+   aggregates carry it.
+7. "aggregate-two-grid": the same two-grid cycle with GEOMETRIC aggregates that a matrix-free
+   solver could build without the fine matrix: block^3 node blocks of the grid (block 2 or 4),
+   split by body (each stiff particle's nodes, the matrix's nodes) unless split=False, each
+   aggregate's six rigid modes (orthonormalized per aggregate), unsmoothed; the coarse problem
+   solved exactly ("lu") or by a smoothed-aggregation V-cycle ("amg"). Also on the hard case of
+   multigrid_robustness.py (801 particles of 1.25 voxels mean radius at 64^3).
 
 The experimental preconditioners live in this script (they are not part of mapsim); they hook
 into homogenize.cell by replacing the matrix-free solver's preconditioner after its setup.
-Run: .venv/bin/python results/cell/coarse_space_experiments.py   (~8 min, ~1 GB)
+Run: .venv/bin/python results/cell/coarse_space_experiments.py   (~25 min, ~2 GB)
      --out F writes the JSON elsewhere; --missing runs only the cases it does not hold yet.
 """
 import time
@@ -162,6 +177,114 @@ class RigidInclusionTwoGrid:
         self.op.release()
 
 
+class SATwoGrid:
+    """Two-grid cycle: fine 8-colour Gauss-Seidel (matrix-free), coarse space the first
+    prolongator of smoothed aggregation on the assembled fine matrix (or its tentative one),
+    coarse problem solved exactly (see module docstring, 6)."""
+
+    def __init__(self, op, field, pin, h, tentative):
+        n = field.n
+        self.op, self.colours = op, mf.grid_colours(n)
+        K = mf.typed_bsr(field, pin=pin, pin_scale=op.pin_scale)
+        opts = dict(cell.AMG_OPTIONS, max_coarse=max(300, min(4000, K.shape[0] // 20)))
+        ml = pyamg.smoothed_aggregation_solver(K, B=asm.rigid_body_modes(n, h), keep=tentative,
+                                                **opts)
+        P = sp.csr_matrix(ml.levels[0].T if tentative else ml.levels[0].P)
+        Ac = (P.T @ sp.csr_matrix(K) @ P).tocsc()
+        lu = splu(Ac + 1e-12 * abs(Ac).max() * sp.identity(Ac.shape[0], format="csc"))
+        self.P, self.PT, self.solve = P, P.T.tocsr(), lu.solve
+        self.shape = op.shape
+        self.levels, self.coarse_n, self.field_bytes = [None], int(round((P.shape[1] / 6) ** (1 / 3))), [0]
+
+    def __matmul__(self, B):
+        B = np.ascontiguousarray(B, dtype=np.float64)
+        one = B.ndim == 1
+        B2 = B[:, None] if one else B
+        X = np.zeros_like(B2)
+        self.op.gauss_seidel(X, B2, list(self.colours))
+        R = self.op.residual(X, B2)
+        X += self.P @ self.solve(np.asarray(self.PT @ R))
+        self.op.gauss_seidel(X, B2, list(self.colours[::-1]))
+        return X[:, 0] if one else X
+
+    __call__ = __matmul__
+
+    def release(self):
+        self.op.release()
+
+
+def aggregate_modes(n: int, h: float, body: np.ndarray, block: int) -> sp.csr_matrix:
+    """Tentative prolongator of geometric aggregates: the fine nodes grouped by block^3 node
+    blocks of the grid AND by body (each stiff particle, or the matrix: -1), each group's rigid
+    modes (3 translations, 3 rotations about its centroid, scaled by the block size) made
+    orthonormal per group (columns of groups too small for six independent modes dropped)."""
+    N = n ** 3
+    p = np.arange(N)
+    i, j, k = p % n, (p // n) % n, p // (n * n)
+    blk = (i // block) + (n // block) * ((j // block) + (n // block) * (k // block))
+    _, agg = np.unique(np.stack([blk, body], axis=1), axis=0, return_inverse=True)
+    agg = agg.reshape(-1)
+    x = np.stack([i, j, k], axis=1).astype(float) * h
+    order = np.argsort(agg, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(agg[order]) != 0])
+    ends = np.r_[starts[1:], N]
+    rows, cols, vals = [], [], []
+    col = 0
+    for a, (s0, s1) in enumerate(zip(starts, ends)):
+        nodes = order[s0:s1]
+        d = (x[nodes] - x[nodes].mean(axis=0)) / (block * h)
+        m = nodes.size
+        B = np.zeros((3 * m, 6))
+        for c in range(3):
+            B[c::3, c] = 1.0
+        B[1::3, 3], B[2::3, 3] = -d[:, 2], d[:, 1]
+        B[0::3, 4], B[2::3, 4] = d[:, 2], -d[:, 0]
+        B[0::3, 5], B[1::3, 5] = -d[:, 1], d[:, 0]
+        Q, R = np.linalg.qr(B)
+        keep = np.abs(np.diag(R)) > 1e-8 * np.abs(np.diag(R)).max()
+        Q = Q[:, keep]
+        r3 = (3 * nodes[:, None] + np.arange(3)[None, :]).reshape(-1)
+        rr, cc = np.meshgrid(r3, np.arange(Q.shape[1]) + col, indexing="ij")
+        rows.append(rr.ravel()); cols.append(cc.ravel()); vals.append(Q.ravel())
+        col += Q.shape[1]
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(3 * N, col))
+
+
+class AggregateTwoGrid(SATwoGrid):
+    """:class:`SATwoGrid` with the coarse space of :func:`aggregate_modes` (geometric node
+    blocks, split by body unless ``split`` is False, rigid modes, unsmoothed) instead of pyamg's
+    aggregates; the coarse problem solved exactly (``coarse="lu"``) or by one smoothed-
+    aggregation V-cycle (``"amg"``, cell.AMG_OPTIONS, the fine rigid-body modes restricted as
+    candidates)."""
+
+    def __init__(self, op, field, Z, pin, h, block, split=True, coarse="lu"):
+        n = field.n
+        self.op, self.colours = op, mf.grid_colours(n)
+        Z = sp.csr_matrix(Z)
+        body = -np.ones(n ** 3, dtype=np.int64)
+        if split:
+            zc = Z.tocoo()
+            tr = zc.col % 6 < 3                     # translation columns: node -> its particle
+            body[zc.row[tr] // 3] = zc.col[tr] // 6
+        K = sp.csr_matrix(mf.typed_bsr(field, pin=pin, pin_scale=op.pin_scale))
+        P = aggregate_modes(n, h, body, block)
+        Ac = (P.T @ K @ P).tocsr()
+        del K
+        if coarse == "lu":
+            Ac = Ac.tocsc()
+            lu = splu(Ac + 1e-12 * abs(Ac).max() * sp.identity(Ac.shape[0], format="csc"))
+            self.solve = lu.solve
+        else:
+            Bc = np.asarray(P.T @ asm.rigid_body_modes(n, h))
+            opts = dict(cell.AMG_OPTIONS, max_coarse=max(50, min(600, Ac.shape[0] // 120)))
+            ml = pyamg.smoothed_aggregation_solver(sp.bsr_matrix(Ac), B=Bc, **opts)
+            self.solve = BlockVCycle(ml)
+        self.P, self.PT = P, P.T.tocsr()
+        self.shape = op.shape
+        self.levels, self.coarse_n, self.field_bytes = [None], n // block, [0]
+
+
 def run(case: dict) -> dict:
     rve = _rve(case["rve_voxels"], 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
@@ -177,6 +300,16 @@ def run(case: dict) -> dict:
             self.M = RigidInclusionTwoGrid(self.matvec, field, Z, self.pin, self.h,
                                            exact=variant == "rigid-lu",
                                            smooth=variant == "rigid-smoothed")
+        elif variant == "aggregate-two-grid":
+            field = mf.element_field(lam, mu, self.h, composite)   # the solver keeps none
+            Z = self._deflation_space(self.mesh.fraction >= 0.5)
+            self.M = AggregateTwoGrid(self.matvec, field, Z, self.pin, self.h, case["block"],
+                                      split=case.get("split", True),
+                                      coarse=case.get("coarse", "lu"))
+        elif variant in ("sa-two-grid", "sa-two-grid-tentative"):
+            field = mf.element_field(lam, mu, self.h, composite)   # the solver keeps none
+            self.M = SATwoGrid(self.matvec, field, self.pin, self.h,
+                               tentative=variant == "sa-two-grid-tentative")
 
     def capped(field, chunk=4096):
         if field.n == case["voxels"]:
@@ -193,6 +326,9 @@ def run(case: dict) -> dict:
     mf.GeometricVCycle.__init__ = vcycle
     if variant == "capped":
         mf.coarsen = capped
+    orig_coarse = cell.MATFREE_COARSE
+    if variant == "trilinear-lu":       # the geometric two-grid cycle with an exact coarse solve
+        cell.MATFREE_COARSE = "lu"
     try:
         kw = dict(matrix_nu=case.get("nu", PDMS.nu), method=case.get("method", "composite"))
         if case.get("homogeneous"):
@@ -204,6 +340,7 @@ def run(case: dict) -> dict:
         cell._CellSolver._init_matrix_free = orig_init
         mf.coarsen = orig_coarsen
         mf.GeometricVCycle.__init__ = orig_vcycle
+        cell.MATFREE_COARSE = orig_coarse
     it = r.iterations
     return dict(case, n_particles=int(rve.n), iterations=it,
                 max_strain_iterations=max(v for k, v in it.items() if k != "magnetic"),
@@ -231,6 +368,16 @@ def plan() -> list[dict]:
                 dict(base, nu=nu, homogeneous=True, solver="fast", variant="fast")]
     # the staircase voxels (no cut voxels: isotropic iron / PDMS only)
     out += [dict(base, method="centre"), dict(base, method="centre", solver="fast", variant="fast")]
+    # the first level of smoothed aggregation as the coarse space of a two-grid cycle
+    out += [dict(base, variant="sa-two-grid"), dict(base, variant="sa-two-grid-tentative"),
+            dict(base, variant="trilinear-lu")]
+    out += [dict(base, variant="aggregate-two-grid", block=b) for b in (2, 4)]
+    out += [dict(base, variant="aggregate-two-grid", block=2, split=False),
+            dict(base, variant="aggregate-two-grid", block=2, coarse="amg"),
+            dict(base, variant="aggregate-two-grid", block=4, coarse="amg")]
+    # the hard case of multigrid_robustness.py: 801 particles of 1.25 voxels mean radius at 64^3
+    hard = dict(base, rve_voxels=128, voxels=64)
+    out += [dict(hard, variant="aggregate-two-grid", block=b, coarse="amg") for b in (2, 4)]
     return out
 
 
