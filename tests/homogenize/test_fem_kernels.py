@@ -1,6 +1,7 @@
 """numba kernels of homogenize against plain numpy/scipy references, and the fast cell solver
 against the reference path (BLAS assembly, pyamg's own V-cycle, scipy products)."""
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
 from homogenize import _assembly as A
@@ -114,11 +115,13 @@ def test_colour_sweep_equals_sequential_block_gauss_seidel():
         assert np.allclose(xk, xr, rtol=1e-12, atol=1e-12 * np.abs(xr).max())
 
 
-def test_colour_sweep_with_6x6_blocks_equals_sequential_block_gauss_seidel():
+@pytest.mark.parametrize("k", [1, 3])
+def test_colour_sweep_with_6x6_blocks_equals_sequential_block_gauss_seidel(k):
     """The smoothed-aggregation levels have 6x6 blocks (rigid modes per aggregate): the kernel's
-    general block path against a plain sequential block sweep in colour order."""
+    general block path (one column, several columns) against a plain sequential block sweep in
+    colour order."""
     rng = np.random.default_rng(4)
-    nrow, R, k = 9, 6, 3
+    nrow, R = 9, 6
     M = sp.random(nrow * R, nrow * R, density=0.15, random_state=rng, format="csr")
     M = (M @ M.T + nrow * R * sp.identity(nrow * R)).tobsr(blocksize=(R, R))   # SPD
     M.sort_indices()
