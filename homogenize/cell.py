@@ -238,7 +238,7 @@ class _CellSolver:
         self.timings = t
 
     def _init_matrix_free(self, lam, mu, composite, stiff_mask):
-        """``solver="matrix-free"``: element-type operator, geometric multigrid down to the
+        """``solver="matrix-free"``: stencil-row operator, geometric multigrid down to the
         assembled (n/2)^3 (or coarser) grid with pyamg below it (:mod:`homogenize._matfree`)."""
         n = self.n
         if n % 2 or n < 8:
@@ -718,14 +718,15 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         cases in one block (CG in lock-step, block V-cycle with parallel multicolour Gauss-Seidel
         on every level, numba BSR products); "reference": BLAS assembly, pyamg's default
         hierarchy and own V-cycle, scipy products, one load case after another;
-        "matrix-free" (even voxel counts >= 8): no assembled fine matrix -- element-type
-        products, geometric multigrid (trilinear transfer, element-wise Galerkin coarse
+        "matrix-free" (even voxel counts >= 8): no assembled fine matrix -- products from one
+        27-block stencil row per node (shared by the nodes inside one phase), geometric multigrid (trilinear transfer, element-wise Galerkin coarse
         operators) down to <= 64^3, pyamg below (:mod:`homogenize._matfree`); a fraction of the
         memory, for grids whose assembled matrix does not fit ("fast" switches to it then).
         Same C_eff to the solver tolerance. "fast" stays the default: its iteration count does
         not depend on the microstructure, while the trilinear coarse level of "matrix-free"
         needs 2-4x more iterations with many or small particles
-        (results/cell/multigrid_robustness.json).
+        (results/cell/multigrid_robustness.json; the cause, its first coarse space:
+        results/cell/coarse_space_experiments.json).
 
     Returns
     -------
