@@ -40,7 +40,7 @@ mean radius at 32^3" (rve_voxels 64, voxels 32), where solver="matrix-free" need
 
 The experimental preconditioners live in this script (they are not part of mapsim); they hook
 into homogenize.cell by replacing the matrix-free solver's preconditioner after its setup.
-Run: .venv/bin/python results/cell/coarse_space_experiments.py   (~25 min, ~2 GB)
+Run: .venv/bin/python results/cell/coarse_space_experiments.py   (~50 min from scratch)
      --out F writes the JSON elsewhere; --missing runs only the cases it does not hold yet.
 """
 import time
