@@ -258,14 +258,15 @@ def _node_types(field: ElementField) -> np.ndarray:
 _SLOT_ORDER = np.array([[-1, 0, 1]] * 3, dtype=np.int64)
 
 
-def node_stencils(field: ElementField) -> tuple[np.ndarray, np.ndarray]:
-    """Every node's 27-block stencil row as an index into a table: ``(stype, S)`` with ``stype``
-    (N,) int32 and ``S`` (T, 27, 3, 3). A node whose 8 voxels share one shared type points to that
-    type's stencil (the first ``max(n_shared, 1)`` rows); every other node (next to a cut voxel
-    or a phase boundary) has its own row, assembled from its 8 element matrices. Against the
-    8 x 8 blocks of the element matrices the product then reads 27 blocks per node everywhere
-    (measured at 64^3, bench RVE, 11 % own rows: product and Gauss-Seidel sweep ~1.4x faster),
-    and the table of own rows is about as large as the cut voxels' element matrices."""
+def node_stencils(field: ElementField) -> tuple[np.ndarray, np.ndarray, int]:
+    """Every node's 27-block stencil row as an index into a table: ``(stype, S, n_own)`` with
+    ``stype`` (N,) int32, ``S`` (T, 27, 3, 3) and the number of nodes with their own row. A node
+    whose 8 voxels share one shared type points to that type's stencil (the first
+    ``max(n_shared, 1)`` rows); every other node (next to a cut voxel or a phase boundary) has
+    its own row, assembled from its 8 element matrices. Against the 8 x 8 blocks of the element
+    matrices the product then reads 27 blocks per node everywhere (measured at 64^3, bench RVE,
+    11 % own rows: product and Gauss-Seidel sweep ~1.4x faster), and the table of own rows is
+    about as large as the cut voxels' element matrices."""
     n = field.n
     ntype = _node_types(field)
     own = np.flatnonzero(ntype < 0)
@@ -276,11 +277,11 @@ def node_stencils(field: ElementField) -> tuple[np.ndarray, np.ndarray]:
         scratch = np.empty(27 * own.size, dtype=np.int32 if n ** 3 < 2 ** 31 else np.int64)
         kern = (kn.typed_stencil_blocks if own.size >= kn.PARALLEL_MIN_ROWS
                 else kn.typed_stencil_blocks_serial)
-        kern(n, own.astype(np.int64), field.etype, field.Ktab, _TAB, _SLOT_ORDER, scratch,
+        kern(n, own, field.etype, field.Ktab, _TAB, _SLOT_ORDER, scratch,
              S[ns:].reshape(-1, 3, 3))
     stype = ntype
     stype[own] = ns + np.arange(own.size, dtype=np.int32)
-    return stype, S
+    return stype, S, int(own.size)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -296,9 +297,9 @@ class MatFreeOperator:
         self.n = field.n
         N = self.n ** 3
         self.shape = (3 * N, 3 * N)
-        self.stype, self.S = node_stencils(field)     # the operator needs no element matrices
+        self.stype, self.S, n_own = node_stencils(field)   # no element matrices kept
         #: share of the nodes with their own stencil row
-        self.own_share = float(np.mean(self.stype >= max(field.n_shared, 1)))
+        self.own_share = n_own / N
         D = np.empty((N, 3, 3))
         diag_blocks(self.n, field.etype, field.Ktab, D)
         self.mean_diag = float(np.mean(np.einsum("pii->pi", D)))
@@ -617,8 +618,9 @@ def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0
     blocks and their inverses (2 x 72 B), node and element types and indices (16 B); the cut
     voxels' own 24x24 matrices (4.6 kB each, ``cut_fraction`` of the voxels on the fine level and
     half as many on the coarse one; the operator's own stencil rows, ~2 nodes of 1.9 kB per cut
-    voxel, replace them once the hierarchy is built); the assembled (n/2)^3 Galerkin matrix with its pyamg
-    hierarchy (3 x 27 blocks of 72 B per coarse node); plus the Python/numba base (0.6 GB).
+    voxel, replace them once the hierarchy is built); the assembled (n/2)^3 Galerkin matrix with
+    its pyamg hierarchy (3 x 27 blocks of 72 B per coarse node); plus the Python/numba base
+    (0.6 GB).
     Measured peak RSS (bench, 7 load cases, _rve(n) with cut voxels ~5 %): 0.32 GB at 32^3
     (model 0.71), 0.93 GB at 64^3 (model 1.50), 5.35 GB at 128^3 (model 7.8): the model is an
     upper bound, as the refusal before allocating needs.

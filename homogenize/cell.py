@@ -719,9 +719,10 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         on every level, numba BSR products); "reference": BLAS assembly, pyamg's default
         hierarchy and own V-cycle, scipy products, one load case after another;
         "matrix-free" (even voxel counts >= 8): no assembled fine matrix -- products from one
-        27-block stencil row per node (shared by the nodes inside one phase), geometric multigrid (trilinear transfer, element-wise Galerkin coarse
-        operators) down to <= 64^3, pyamg below (:mod:`homogenize._matfree`); a fraction of the
-        memory, for grids whose assembled matrix does not fit ("fast" switches to it then).
+        27-block stencil row per node (shared by the nodes inside one phase), geometric
+        multigrid (trilinear transfer, element-wise Galerkin coarse operators) down to <= 64^3,
+        pyamg below (:mod:`homogenize._matfree`); a fraction of the memory, for grids whose
+        assembled matrix does not fit ("fast" switches to it then).
         Same C_eff to the solver tolerance. "fast" stays the default: its iteration count does
         not depend on the microstructure, while the trilinear coarse level of "matrix-free"
         needs 2-4x more iterations with many or small particles

@@ -35,8 +35,9 @@ mean radius at 32^3" (rve_voxels 64, voxels 32), where solver="matrix-free" need
    solver could build without the fine matrix: block^3 node blocks of the grid (block 2 or 4),
    split by body (each stiff particle's nodes, the matrix's nodes) unless split=False, each
    aggregate's six rigid modes (orthonormalized per aggregate), unsmoothed; the coarse problem
-   solved exactly ("lu"), by one smoothed-aggregation V-cycle ("amg") or by three ("amg3"). Also on the hard case of
-   multigrid_robustness.py (801 particles of 1.25 voxels mean radius at 64^3).
+   solved exactly ("lu"), by one smoothed-aggregation V-cycle ("amg") or by three ("amg3").
+   Also on the hard case of multigrid_robustness.py (801 particles of 1.25 voxels mean radius
+   at 64^3) and on the 64^3 bench RVE.
 
 The experimental preconditioners live in this script (they are not part of mapsim); they hook
 into homogenize.cell by replacing the matrix-free solver's preconditioner after its setup.
@@ -177,24 +178,38 @@ class RigidInclusionTwoGrid:
         self.op.release()
 
 
-class SATwoGrid:
-    """Two-grid cycle: fine 8-colour Gauss-Seidel (matrix-free), coarse space the first
-    prolongator of smoothed aggregation on the assembled fine matrix (or its tentative one),
-    coarse problem solved exactly (see module docstring, 6)."""
+class TwoGrid:
+    """Two-grid cycle: one fine 8-colour Gauss-Seidel sweep per side (matrix-free), the coarse
+    space spanned by the columns of ``P`` (3N x m), the coarse problem ``P^T K P`` solved
+    exactly (``coarse="lu"``) or by one / three smoothed-aggregation V-cycles (``"amg"``,
+    ``"amg3"``: cell.AMG_OPTIONS, the fine rigid-body modes restricted as candidates; a fixed
+    number of V-cycles is still a symmetric linear operator). Module docstring, 6 and 7."""
 
-    def __init__(self, op, field, pin, h, tentative):
+    def __init__(self, op, field, pin, h, P, coarse="lu"):
         n = field.n
         self.op, self.colours = op, mf.grid_colours(n)
-        K = mf.typed_bsr(field, pin=pin, pin_scale=op.pin_scale)
-        opts = dict(cell.AMG_OPTIONS, max_coarse=max(300, min(4000, K.shape[0] // 20)))
-        ml = pyamg.smoothed_aggregation_solver(K, B=asm.rigid_body_modes(n, h), keep=tentative,
-                                                **opts)
-        P = sp.csr_matrix(ml.levels[0].T if tentative else ml.levels[0].P)
-        Ac = (P.T @ sp.csr_matrix(K) @ P).tocsc()
-        lu = splu(Ac + 1e-12 * abs(Ac).max() * sp.identity(Ac.shape[0], format="csc"))
-        self.P, self.PT, self.solve = P, P.T.tocsr(), lu.solve
+        K = sp.csr_matrix(mf.typed_bsr(field, pin=pin, pin_scale=op.pin_scale))
+        Ac = (P.T @ K @ P).tocsr()
+        del K
+        if coarse == "lu":
+            Ac = Ac.tocsc()
+            lu = splu(Ac + 1e-12 * abs(Ac).max() * sp.identity(Ac.shape[0], format="csc"))
+            self.solve = lu.solve
+        else:
+            Bc = np.asarray(P.T @ asm.rigid_body_modes(n, h))
+            opts = dict(cell.AMG_OPTIONS, max_coarse=max(50, min(600, Ac.shape[0] // 120)))
+            cyc = BlockVCycle(pyamg.smoothed_aggregation_solver(sp.bsr_matrix(Ac), B=Bc, **opts))
+            reps = 3 if coarse == "amg3" else 1
+
+            def solve(B):
+                X = cyc(B)
+                for _ in range(reps - 1):
+                    X = X + cyc(B - Ac @ X)
+                return X
+            self.solve = solve
+        self.P, self.PT = P, P.T.tocsr()
         self.shape = op.shape
-        self.levels, self.coarse_n, self.field_bytes = [None], int(round((P.shape[1] / 6) ** (1 / 3))), [0]
+        self.levels, self.coarse_n, self.field_bytes = [None], P.shape[1], [0]  # what cell reports
 
     def __matmul__(self, B):
         B = np.ascontiguousarray(B, dtype=np.float64)
@@ -211,6 +226,16 @@ class SATwoGrid:
 
     def release(self):
         self.op.release()
+
+
+def sa_prolongator(op, field, pin, h, tentative: bool) -> sp.csr_matrix:
+    """The first prolongator of smoothed aggregation on the assembled fine matrix (pyamg,
+    cell.AMG_OPTIONS as `"fast"` uses them), or its tentative (unsmoothed) one."""
+    K = mf.typed_bsr(field, pin=pin, pin_scale=op.pin_scale)
+    opts = dict(cell.AMG_OPTIONS, max_coarse=max(300, min(4000, K.shape[0] // 20)))
+    ml = pyamg.smoothed_aggregation_solver(K, B=asm.rigid_body_modes(field.n, h), keep=tentative,
+                                            **opts)
+    return sp.csr_matrix(ml.levels[0].T if tentative else ml.levels[0].P)
 
 
 def aggregate_modes(n: int, h: float, body: np.ndarray, block: int) -> sp.csr_matrix:
@@ -251,48 +276,14 @@ def aggregate_modes(n: int, h: float, body: np.ndarray, block: int) -> sp.csr_ma
                          shape=(3 * N, col))
 
 
-class AggregateTwoGrid(SATwoGrid):
-    """:class:`SATwoGrid` with the coarse space of :func:`aggregate_modes` (geometric node
-    blocks, split by body unless ``split`` is False, rigid modes, unsmoothed) instead of pyamg's
-    aggregates; the coarse problem solved exactly (``coarse="lu"``) or by one smoothed-
-    aggregation V-cycle (``"amg"``, cell.AMG_OPTIONS, the fine rigid-body modes restricted as
-    candidates)."""
-
-    def __init__(self, op, field, Z, pin, h, block, split=True, coarse="lu"):
-        n = field.n
-        self.op, self.colours = op, mf.grid_colours(n)
-        Z = sp.csr_matrix(Z)
-        body = -np.ones(n ** 3, dtype=np.int64)
-        if split:
-            zc = Z.tocoo()
-            tr = zc.col % 6 < 3                     # translation columns: node -> its particle
-            body[zc.row[tr] // 3] = zc.col[tr] // 6
-        K = sp.csr_matrix(mf.typed_bsr(field, pin=pin, pin_scale=op.pin_scale))
-        P = aggregate_modes(n, h, body, block)
-        Ac = (P.T @ K @ P).tocsr()
-        del K
-        if coarse == "lu":
-            Ac = Ac.tocsc()
-            lu = splu(Ac + 1e-12 * abs(Ac).max() * sp.identity(Ac.shape[0], format="csc"))
-            self.solve = lu.solve
-        else:
-            Bc = np.asarray(P.T @ asm.rigid_body_modes(n, h))
-            opts = dict(cell.AMG_OPTIONS, max_coarse=max(50, min(600, Ac.shape[0] // 120)))
-            ml = pyamg.smoothed_aggregation_solver(sp.bsr_matrix(Ac), B=Bc, **opts)
-            cyc = BlockVCycle(ml)
-            reps = 3 if coarse == "amg3" else 1
-            if reps == 1:
-                self.solve = cyc
-            else:               # a fixed number of V-cycles: still a symmetric linear operator
-                def solve(B, cyc=cyc, A=Ac, reps=reps):
-                    X = cyc(B)
-                    for _ in range(reps - 1):
-                        X = X + cyc(B - A @ X)
-                    return X
-                self.solve = solve
-        self.P, self.PT = P, P.T.tocsr()
-        self.shape = op.shape
-        self.levels, self.coarse_n, self.field_bytes = [None], n // block, [0]
+def particle_of_node(Z: sp.spmatrix, N: int) -> np.ndarray:
+    """(N,) the stiff particle each node moves with in the deflation space Z (its translation
+    columns), -1 for a matrix node."""
+    zc = sp.coo_matrix(Z)
+    tr = zc.col % 6 < 3
+    body = -np.ones(N, dtype=np.int64)
+    body[zc.row[tr] // 3] = zc.col[tr] // 6
+    return body
 
 
 def run(case: dict) -> dict:
@@ -304,22 +295,25 @@ def run(case: dict) -> dict:
 
     def init(self, lam, mu, composite, stiff_mask):
         orig_init(self, lam, mu, composite, stiff_mask)
+        if variant in ("trilinear", "fast", "capped", "trilinear-lu"):
+            return
+        field = mf.element_field(lam, mu, self.h, composite)       # the solver keeps none
         if variant in ("rigid", "rigid-lu", "rigid-smoothed"):
             Z = self._deflation_space(self.mesh.fraction > 0)      # every voxel holding iron
-            field = mf.element_field(lam, mu, self.h, composite)   # the solver keeps none
             self.M = RigidInclusionTwoGrid(self.matvec, field, Z, self.pin, self.h,
                                            exact=variant == "rigid-lu",
                                            smooth=variant == "rigid-smoothed")
-        elif variant == "aggregate-two-grid":
-            field = mf.element_field(lam, mu, self.h, composite)   # the solver keeps none
-            Z = self._deflation_space(self.mesh.fraction >= 0.5)
-            self.M = AggregateTwoGrid(self.matvec, field, Z, self.pin, self.h, case["block"],
-                                      split=case.get("split", True),
-                                      coarse=case.get("coarse", "lu"))
-        elif variant in ("sa-two-grid", "sa-two-grid-tentative"):
-            field = mf.element_field(lam, mu, self.h, composite)   # the solver keeps none
-            self.M = SATwoGrid(self.matvec, field, self.pin, self.h,
+            return
+        if variant == "aggregate-two-grid":
+            N = field.n ** 3
+            body = (particle_of_node(self._deflation_space(self.mesh.fraction >= 0.5), N)
+                    if case.get("split", True) else -np.ones(N, dtype=np.int64))
+            P = aggregate_modes(field.n, self.h, body, case["block"])
+        else:                                       # "sa-two-grid", "sa-two-grid-tentative"
+            P = sa_prolongator(self.matvec, field, self.pin, self.h,
                                tentative=variant == "sa-two-grid-tentative")
+        self.M = TwoGrid(self.matvec, field, self.pin, self.h, P,
+                         coarse=case.get("coarse", "lu"))
 
     def capped(field, chunk=4096):
         if field.n == case["voxels"]:
