@@ -598,11 +598,24 @@ def composite_reference():
             for t in d.get("table", [])]
 
 
+def _log_axes(ax, xlabel, ylabel, title, xticks):
+    import matplotlib.ticker
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=7)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_xticks(xticks)
+
+
 def plot(path, doc):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import matplotlib.ticker
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.3))
     comp = doc.get("composite_dilute_rate", [])
     if comp:
@@ -621,13 +634,8 @@ def plot(path, doc):
     Dg = np.array([D.min(), D.max()])
     ax.plot(Dg, 100 * tab[-1]["mean_error"] * (Dg / D[-1]) ** -2, color="tab:red", lw=0.6,
             alpha=0.6, label="slope -2")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("sphere diameter [voxels]")
-    ax.set_ylabel("error of c = (G/G_m - 1)/phi vs P2 limit [%]")
-    ax.set_title("One dilute Fe sphere in PDMS (phi 0.01)")
-    ax.legend(fontsize=7)
-    ax.grid(True, which="both", alpha=0.3)
+    _log_axes(ax, "sphere diameter [voxels]", "error of c = (G/G_m - 1)/phi vs P2 limit [%]",
+              "One dilute Fe sphere in PDMS (phi 0.01)", [4, 6, 8, 10, 16, 20, 30])
     lam = doc["laminate"]
     for meth, mk, col in (("composite", "s--", "tab:blue"), ("laminate", "d--", "tab:green")):
         rs = sorted((r for r in lam if r["method"] == meth), key=lambda r: r["voxels"])
@@ -641,18 +649,8 @@ def plot(path, doc):
             bx.plot([r["layer_spacing_voxels"] for r in rs],
                     [max(100 * max(abs(x) for x in r["energy_errors_soft_to_stiff"][:3]), 1e-7)
                      for r in rs], mk, color=col, ms=9, label=f"{meth} (exact to the solver)")
-    bx.set_xscale("log")
-    bx.set_yscale("log")
-    bx.set_xlabel("laminate layer spacing [voxels]")
-    bx.set_ylabel("largest soft-mode energy error [%]")
-    bx.set_title("Fe/PDMS laminate, normal (1,1,1), Fe 50 %")
-    bx.legend(fontsize=7)
-    bx.grid(True, which="both", alpha=0.3)
-    for a in (ax, bx):
-        a.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
-        a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xticks([4, 6, 8, 10, 16, 20, 30])
-    bx.set_xticks([10, 20, 40])
+    _log_axes(bx, "laminate layer spacing [voxels]", "largest soft-mode energy error [%]",
+              "Fe/PDMS laminate, normal (1,1,1), Fe 50 %", [10, 20, 40])
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
