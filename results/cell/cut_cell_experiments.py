@@ -53,7 +53,7 @@ import pyamg
 import scipy.sparse as sp
 
 from homogenize import _assembly as asm
-from homogenize.cell import homogenize_mesh
+from homogenize.cell import homogenize_mesh, voigt_to_tensor
 from homogenize.mesh import VoxelMesh
 from micro.materials import FE, PDMS, elastic
 
@@ -238,17 +238,14 @@ def volume_matched_radius(centre, n, radius=RADIUS):
 # cut-voxel matrices
 # ------------------------------------------------------------------------------------------------
 
-def _voigt_stress_tensor(S):
-    return np.array([[S[0], S[5], S[4]], [S[5], S[1], S[3]], [S[4], S[3], S[2]]])
-
-
 def _iso_K(G, lam, mu):
-    """(..., 24, 24) from G[..., a, b, i, j] = int d_i N_a d_j N_b (DOF 3 a + c)."""
+    """(..., 3F, 3F) from G[..., a, b, i, j] = int d_i f_a d_j f_b of F functions (DOF 3 a + c)."""
     tr = np.einsum("...abii->...ab", G)
     K = lam * np.swapaxes(G, -3, -2)
     K = K + mu * np.moveaxis(G, (-4, -3, -2, -1), (-4, -2, -1, -3))
     K = K + mu * tr[..., :, None, :, None] * np.eye(3)[:, None, :]
-    return K.reshape(G.shape[:-4] + (24, 24))
+    F = G.shape[-4]
+    return K.reshape(G.shape[:-4] + (3 * F, 3 * F))
 
 
 def _side_integrals(subs, sown, ssg, m, h, fn, q=3):
@@ -288,17 +285,14 @@ def xfem_ridge_matrices(phi_c, h, lames, Es):
         return np.concatenate([dN, psi[..., None, None] * dN + N[..., None] * dpsi[..., None, :]],
                               axis=-2)
     G, g1, vol = _side_integrals(subs, sown, ssg, m, h, grads)
-    K = np.zeros((m, 16, 3, 16, 3))
+    K = _iso_K(G[0], *lames[0]) + _iso_K(G[1], *lames[1])
     loads = [np.zeros((m, 16, 3)) for _ in Es]
     for s in range(2):
         lam, mu = lames[s]
-        tr = np.einsum("mabii->mab", G[s])
-        K += lam * G[s].transpose(0, 1, 3, 2, 4) + mu * G[s].transpose(0, 1, 4, 2, 3)
-        K += mu * tr[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
         for e, E in enumerate(Es):
-            St = _voigt_stress_tensor(asm.isotropic_voigt(lam, mu) @ E)
+            St = voigt_to_tensor(asm.isotropic_voigt(lam, mu) @ E)
             loads[e] -= np.einsum("maj,ij->mai", g1[s], St)
-    return K.reshape(m, 48, 48), [f.reshape(m, 48) for f in loads], vol
+    return K, [f.reshape(m, 48) for f in loads], vol
 
 
 def nitsche_matrices(phi_c, h, lames, youngs, Es, safety=2.0, q=3):
@@ -354,7 +348,7 @@ def nitsche_matrices(phi_c, h, lames, youngs, Es, safety=2.0, q=3):
         f = np.zeros((m, 48))
         tavg = 0.0
         for s in range(2):
-            St = _voigt_stress_tensor(asm.isotropic_voigt(*lames[s]) @ E)
+            St = voigt_to_tensor(asm.isotropic_voigt(*lames[s]) @ E)
             f[:, 24 * s:24 * s + 24] -= np.einsum("maj,ij->mai", g1[s], St).reshape(m, 24)
             tavg = tavg + wts[s][town][:, None, None] * np.einsum("ij,sqj->sqi", St, nq)
         np.add.at(f, town, np.einsum("sq,sqki,sqk->si", w, J, tavg))
@@ -414,11 +408,8 @@ def homogenize_cut(phi_fn, n, method, cases=(3, 4, 5), particle=FE_EL, matrix=PD
                            shape=(ndof, ndof)).tocsr()).tocsr()
     F = []
     for e, c in enumerate(cases):
-        Et = np.zeros((3, 3))
-        a, b = asm.VOIGT[c]
-        Et[a, b] = Et[b, a] = 1.0 if a == b else 0.5
         f = np.zeros(ndof)
-        f[:nstd] = asm.affine_load(lam, mu, h, Et)
+        f[:nstd] = asm.affine_load(lam, mu, h, voigt_to_tensor(np.eye(6)[c], engineering=True))
         np.add.at(f, dof.ravel(), loads[e].ravel())
         F.append(f)
     Cv = [asm.isotropic_voigt(*lm) for lm in lames]
