@@ -281,7 +281,7 @@ def _dots(A, B):
     return out
 
 
-def block_cg(A, M, F, *, tol: float, maxiter: int, deflation: Deflation | None = None,
+def block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None = None,
              callback=None):
     """Preconditioned CG on the k columns of F at once, with in-place updates (X, R, P, the
     product A P and the preconditioned residual are the only vectors).
@@ -290,7 +290,8 @@ def block_cg(A, M, F, *, tol: float, maxiter: int, deflation: Deflation | None =
         preconditioner, both symmetric positive definite on the space CG works in); A may offer
         ``A.residual(X, B)`` (= B - A X without a temporary)
     F : ndarray (n, k) -- right-hand sides
-    tol : relative residual ||f - A x|| / ||f|| at which a column stops
+    tol : float or sequence of k floats -- relative residual ||f - A x|| / ||f|| at which a
+        column stops (one value for all columns, or one per column)
     deflation : :class:`Deflation` or None -- deflated CG: start ``Z E^-1 Z^T F``, projection of
         the preconditioned residual, and the correction ``X += Z c, R -= K Z c`` of the residual
         after every step. Deflated CG keeps ``Z^T R = 0`` only in exact arithmetic; the round-off
@@ -307,6 +308,7 @@ def block_cg(A, M, F, *, tol: float, maxiter: int, deflation: Deflation | None =
     n, k = F.shape
     fn = np.linalg.norm(F, axis=0)
     fn[fn == 0.0] = 1.0
+    tols = np.broadcast_to(np.asarray(tol, dtype=np.float64), (k,))
     if deflation is not None:
         X = deflation.start(F)
         R = A.residual(X, F) if hasattr(A, "residual") else F - A(X)
@@ -314,7 +316,7 @@ def block_cg(A, M, F, *, tol: float, maxiter: int, deflation: Deflation | None =
         X = np.zeros((n, k))
         R = F.copy()
     hist = [[float(v)] for v in np.linalg.norm(R, axis=0) / fn]
-    idx = np.flatnonzero([h[0] > tol for h in hist])
+    idx = np.flatnonzero([h[0] > t for h, t in zip(hist, tols)])
     if idx.size == 0:
         return X, hist
     if idx.size < k:                    # columns already converged at the start stay in X
@@ -340,7 +342,7 @@ def block_cg(A, M, F, *, tol: float, maxiter: int, deflation: Deflation | None =
         res = np.linalg.norm(R, axis=0) / fa
         for c, v in zip(idx, res):
             hist[c].append(float(v))
-        done = res <= tol
+        done = res <= tols[idx]
         if callback is not None:
             callback(it, k - idx.size + int(done.sum()), float(res.max()))
         if done.any():                  # converged columns leave the block

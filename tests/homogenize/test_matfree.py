@@ -242,7 +242,8 @@ def test_c_eff_equals_assembled_solver(n):
     a = _c_eff(n, "fast", forces, geom)
     b = _c_eff(n, "matrix-free", forces, geom)
     assert b.settings["solver"] == "matrix-free" and b.settings["geometric_levels"] == 1
-    assert max(b.residuals.values()) <= 1e-8
+    assert max(v for k, v in b.residuals.items() if k != "magnetic") <= 1e-8
+    assert b.residuals["magnetic"] <= C.magnetic_tol(1e-8) == 1e-4
     # variational C_eff: error ~ tol^2 relative; both solvers agree far below the tolerance
     assert np.abs(a.C_eff_Pa - b.C_eff_Pa).max() <= 1e-8 * np.abs(a.C_eff_Pa).max()
     assert np.abs(a.stress_mag_Pa - b.stress_mag_Pa).max() <= 1e-6 * np.abs(a.stress_mag_Pa).max()
