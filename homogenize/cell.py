@@ -19,7 +19,9 @@ fixed by pinning one matrix node (the loads are balanced, so the pin carries no 
   term vanishes identically, and stiff inclusions add a correction of relative order
   ``(a / r)^3``. Because net forces on particles of a PERIODIC system do not tell which image a
   partner sits at, pass the dipole solver's pairwise ``virial_stress_Pa`` when you have it; it
-  replaces the first-moment term (whose cell-cut choice is then irrelevant).
+  replaces the first-moment term (whose cell-cut choice is then irrelevant). Its elastic part
+  is variational in the strain and magnetic solutions (error = the product of their errors),
+  so the magnetic column stops at :func:`magnetic_tol` (sqrt(tol)) unless its field is kept.
 
 Solver (``solver="fast"``): all load cases in one block (:mod:`homogenize._amg`): lock-step CG preconditioned by a
 block V-cycle on a pyamg smoothed-aggregation hierarchy (rigid-body near-nullspace, built once),
