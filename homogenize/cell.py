@@ -409,8 +409,8 @@ def magnetic_tol(tol: float) -> float:
     and magnetic solution errors, so the magnetic column needs about the square root of the
     strain columns' residual for a stress error far below the effective stiffness's
     (results/cell/README.md, "Magnetic column tolerance": at the default 1e-6, stopping it at
-    1e-3 changes the elastic magnetic stress by 2e-9 to 2e-6 of itself on 32^3 and 64^3 bench
-    RVEs). Never tighter than ``tol`` (tol <= 1e-2), never looser than 1e-2."""
+    1e-3 changes the elastic magnetic stress by 8e-9 to 8e-6 of itself on 32^3 and 64^3 bench
+    RVEs, results/cell/magnetic_tolerance.json). Never tighter than ``tol`` (tol <= 1e-2), never looser than 1e-2."""
     return float(min(np.sqrt(tol), 1e-2))
 
 
@@ -757,7 +757,8 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         kept: the variational stress's error is the product of the strain and magnetic
         solution errors (``settings["tol_magnetic"]``; ``settings["stress_mag_linear_error_rel"]``,
         the error of the formula linear in the magnetic solution, was 16-8300 x larger than it
-        where measured: results/cell/magnetic_tolerance.json). ``tol_magnetic`` sets it explicitly, in (0, 1e-2].
+        where measured: results/cell/magnetic_tolerance.json). ``tol_magnetic`` sets it
+        explicitly, in (0, 1e-2].
     keep_fields : bool -- keep the displacement fields (for VTU/PNG output)
     solver : {"fast", "reference", "matrix-free"} -- "fast" (default): numba assembly, all load
         cases in one block (CG in lock-step, block V-cycle with parallel multicolour Gauss-Seidel

@@ -246,7 +246,7 @@ def register(sub, formatter):
     p.add_argument("--tol", type=float_in("--tol", 1e-14, 1e-2), default=1e-6,
                    help="CG relative residual per load case [1] (default 1e-6; C_eff and "
                         "stress_mag are variational: C_eff's error is ~ tol^2; the magnetic "
-                        "case stops at sqrt(tol) unless --vtu keeps its field, stress_mag's "
+                        "case stops at sqrt(tol) unless --vtu/--png keep its field, stress_mag's "
                         "error is the product of the two: see results/cell/README.md)")
     p.add_argument("--solver", default="fast", choices=("fast", "reference", "matrix-free"),
                    help="cell solver: 'fast' (assembled matrix, AMG; switches to matrix-free "
