@@ -22,7 +22,6 @@ Run: .venv/bin/python results/cell/magnetic_tolerance.py          (~6 min, ~1.5 
      --quick: 16^3 and 24^3 only, into --out (default: the committed JSON).
 """
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -31,6 +30,8 @@ import numpy as np
 from homogenize.bench.cell import _rve
 from homogenize.cell import homogenize_rve, tensor_to_voigt
 from micro.dipoles import solve
+
+import _resumable
 
 HERE = Path(__file__).resolve().parent
 JSON = HERE / "magnetic_tolerance.json"
@@ -81,13 +82,11 @@ def main() -> None:
     for n in ((16, 24) if args.quick else (32, 64)):
         rows += study(n)
         # rewritten after every grid: an interrupted study keeps the grids done
-        args.out.write_text(json.dumps({
-            "rows": rows,
-            "command": "results/cell/magnetic_tolerance.py" + (" --quick" if args.quick else ""),
-            "note": "strain columns at relative residual 1e-6, the magnetic column at "
-                    "tol_magnetic; errors relative to the largest component of the reference "
-                    "(every column at 1e-9); seconds: wall time, not a benchmark"},
-            indent=1) + "\n")
+        _resumable.write(args.out, rows, "results/cell/magnetic_tolerance.py"
+                         + (" --quick" if args.quick else ""),
+                         "strain columns at relative residual 1e-6, the magnetic column at "
+                         "tol_magnetic; errors relative to the largest component of the "
+                         "reference (every column at 1e-9); seconds: wall time, not a benchmark")
 
 
 if __name__ == "__main__":
