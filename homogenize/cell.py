@@ -272,7 +272,9 @@ class _CellSolver:
         self.M = mf.GeometricVCycle(field, pin=self.pin, pin_scale=op.pin_scale, h=self.h,
                                     amg_options=AMG_OPTIONS, fine_op=op,
                                     assembled_max=MATFREE_ASSEMBLED_MAX, coarse=MATFREE_COARSE,
-                                    sweeps=MATFREE_SWEEPS)
+                                    sweeps=MATFREE_SWEEPS,
+                                    interface_sweeps=MATFREE_INTERFACE_SWEEPS,
+                                    interface_halo=MATFREE_INTERFACE_HALO)
         self.ml = self.M.ml
         self.matvec = op
         self.K = None
@@ -390,6 +392,13 @@ MATFREE_COARSE = "amg"
 #: 42 / 45) but 679 s against 604 s at 128^3 (108 / 189 against 127 / 221): the iterations fall
 #: by 0.6-0.85x while an iteration costs ~1.35x, so one stays (results/cell/README.md)
 MATFREE_SWEEPS = 1
+#: solver="matrix-free": further Gauss-Seidel sweeps per side over the interface nodes only (own
+#: stencil row: next to a cut voxel or a phase boundary, grown by MATFREE_INTERFACE_HALO nodes;
+#: ~24 % of the nodes of the 64^3 bench RVE). Measured in session 11 (results/cell/README.md,
+#: "Local sweeps at the interfaces"): they take the iterations where two full sweeps take them
+#: at a fraction of the cost
+MATFREE_INTERFACE_SWEEPS = 1
+MATFREE_INTERFACE_HALO = 1
 # smoothed aggregation for the voxel stiffness with stiff particles. strength threshold 0.05:
 # a matrix-particle coupling |a_ij| ~ E_matrix against sqrt(a_ii a_jj) ~ sqrt(E_m E_p) is weak
 # at any contrast above ~400, so aggregates do not straddle a particle surface and the coarse
@@ -702,6 +711,9 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 "amg_operator_complexity": (float(solver.ml.operator_complexity())
                                             if solver.ml is not None else None),
                 "geometric_levels": (len(solver.M.levels) if solver.kind == "matrix-free"
+                                     else 0),
+                # local Gauss-Seidel sweeps per side over the interface nodes (matrix-free)
+                "interface_sweeps": (solver.M.interface_sweeps if solver.kind == "matrix-free"
                                      else 0),
                 "C_linear_error_rel": err_lin, "stress_mag_linear_error_rel": err_stress,
                 "virial_from_dipoles": virial_stress_Pa is not None}

@@ -331,6 +331,9 @@ def run(case: dict) -> dict:
     if variant == "capped":
         mf.coarsen = capped
     orig_coarse = cell.MATFREE_COARSE
+    # the matrix-free V-cycle as when the JSON was made (sessions 6-8): no interface sweeps
+    orig_iface = cell.MATFREE_INTERFACE_SWEEPS
+    cell.MATFREE_INTERFACE_SWEEPS = 0
     if variant == "trilinear-lu":       # the geometric two-grid cycle with an exact coarse solve
         cell.MATFREE_COARSE = "lu"
     try:
@@ -347,6 +350,7 @@ def run(case: dict) -> dict:
         mf.coarsen = orig_coarsen
         mf.GeometricVCycle.__init__ = orig_vcycle
         cell.MATFREE_COARSE = orig_coarse
+        cell.MATFREE_INTERFACE_SWEEPS = orig_iface
     it = r.iterations
     return dict(case, n_particles=int(rve.n), iterations=it,
                 max_strain_iterations=max(v for k, v in it.items() if k != "magnetic"),

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from homogenize.bench.cell import _rve
+import homogenize.cell as cell
 from homogenize.cell import homogenize_rve, tensor_to_voigt
 from micro.dipoles import solve
 
@@ -43,6 +44,17 @@ def _rel(a, b, scale) -> float:
 
 
 def study(voxels: int, solver: str = "matrix-free") -> list[dict]:
+    # the matrix-free V-cycle as when the JSON was made (session 10): no interface sweeps
+    # (homogenize.cell.MATFREE_INTERFACE_SWEEPS, session 11)
+    default = cell.MATFREE_INTERFACE_SWEEPS
+    cell.MATFREE_INTERFACE_SWEEPS = 0
+    try:
+        return _study(voxels, solver)
+    finally:
+        cell.MATFREE_INTERFACE_SWEEPS = default
+
+
+def _study(voxels: int, solver: str) -> list[dict]:
     rve = _rve(voxels)
     st = solve(rve, 0.1, 1.78, "frohlich-kennelly")
     loads = {"dipole": (st.total_force_N, np.asarray(st.virial_stress_Pa)),

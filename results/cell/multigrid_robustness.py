@@ -12,10 +12,13 @@ default), solved on `voxels` per edge:
 * particles at half the resolution (rve_voxels == 2 voxels, mean radius 1.25 voxels);
 * the matrix-free V-cycle with its assembled coarse grid solved EXACTLY (sparse LU,
   homogenize.cell.MATFREE_COARSE = "lu"): if the iterations stay, the geometric (trilinear)
-  level limits convergence, not the AMG below it.
+  level limits convergence, not the AMG below it;
+* the matrix-free cases again with one more Gauss-Seidel sweep per side over the interface
+  nodes (interface_sweeps 1, the default since session 11; the rows with 0 are the V-cycle
+  before it).
 
 Iteration counts are deterministic; seconds are wall times on whatever else the machine ran.
-Run: .venv/bin/python results/cell/multigrid_robustness.py          (~15 min, ~3 GB)
+Run: .venv/bin/python results/cell/multigrid_robustness.py          (~25 min, ~3 GB)
      --out F writes the JSON to F instead of the committed file; --missing runs only the cases
      that file does not hold yet (the JSON is rewritten after every case).
 """
@@ -31,20 +34,27 @@ import _resumable
 
 HERE = Path(__file__).resolve().parent
 JSON = HERE / "multigrid_robustness.json"
-#: (rve_voxels, voxels, solver, coarse)
-PLAN = [(32, 32, "matrix-free", "amg"), (48, 48, "matrix-free", "amg"),
-        (64, 64, "matrix-free", "amg"), (96, 96, "matrix-free", "amg"),
-        (32, 32, "fast", None), (48, 48, "fast", None), (64, 64, "fast", None),
-        (64, 32, "matrix-free", "amg"), (64, 32, "fast", None),
-        (96, 48, "matrix-free", "amg"), (96, 48, "fast", None),
-        (128, 64, "matrix-free", "amg"), (128, 64, "fast", None),
-        (64, 32, "matrix-free", "lu"), (96, 48, "matrix-free", "lu")]
+#: (rve_voxels, voxels, solver, coarse, interface_sweeps); the rows with interface_sweeps 0
+#: are the matrix-free V-cycle before session 11, those with 1 the present default
+#: (homogenize.cell.MATFREE_INTERFACE_SWEEPS: one more sweep per side over the interface nodes)
+_MF = [(32, 32), (48, 48), (64, 64), (96, 96), (64, 32), (96, 48), (128, 64)]
+PLAN = ([(32, 32, "matrix-free", "amg", 0), (48, 48, "matrix-free", "amg", 0),
+         (64, 64, "matrix-free", "amg", 0), (96, 96, "matrix-free", "amg", 0),
+         (32, 32, "fast", None, 0), (48, 48, "fast", None, 0), (64, 64, "fast", None, 0),
+         (64, 32, "matrix-free", "amg", 0), (64, 32, "fast", None, 0),
+         (96, 48, "matrix-free", "amg", 0), (96, 48, "fast", None, 0),
+         (128, 64, "matrix-free", "amg", 0), (128, 64, "fast", None, 0),
+         (64, 32, "matrix-free", "lu", 0), (96, 48, "matrix-free", "lu", 0)]
+        + [(a, b, "matrix-free", "amg", 1) for a, b in _MF]
+        + [(64, 32, "matrix-free", "lu", 1), (96, 48, "matrix-free", "lu", 1)])
 
 
-def run(rve_voxels: int, voxels: int, solver: str, coarse) -> dict:
+def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int) -> dict:
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     cell.MATFREE_COARSE = coarse or "amg"
+    default_sweeps = cell.MATFREE_INTERFACE_SWEEPS
+    cell.MATFREE_INTERFACE_SWEEPS = interface_sweeps
     try:
         t0 = time.perf_counter()
         r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver=solver,
@@ -52,10 +62,11 @@ def run(rve_voxels: int, voxels: int, solver: str, coarse) -> dict:
         sec = time.perf_counter() - t0
     finally:
         cell.MATFREE_COARSE = "amg"
+        cell.MATFREE_INTERFACE_SWEEPS = default_sweeps
     it = r.iterations
     return {"rve_voxels": rve_voxels, "voxels": voxels, "n_particles": int(rve.n),
             "mean_radius_voxels": 2.5 * voxels / rve_voxels, "solver": solver,
-            "coarse": coarse, "iterations": it,
+            "coarse": coarse, "interface_sweeps": interface_sweeps, "iterations": it,
             "max_strain_iterations": max(v for k, v in it.items() if k != "magnetic"),
             "magnetic_iterations": it["magnetic"], "seconds": sec,
             "E_eff_Pa": r.E_eff_Pa}
@@ -63,7 +74,9 @@ def run(rve_voxels: int, voxels: int, solver: str, coarse) -> dict:
 
 def main() -> None:
     out, rows = _resumable.parse(__doc__, JSON)
-    key = ("rve_voxels", "voxels", "solver", "coarse")
+    for r in rows:                      # rows made before session 11: no interface sweeps
+        r.setdefault("interface_sweeps", 0)
+    key = ("rve_voxels", "voxels", "solver", "coarse", "interface_sweeps")
     have = {tuple(r[k] for k in key) for r in rows}
     for case in PLAN:
         if case in have:

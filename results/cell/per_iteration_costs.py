@@ -4,9 +4,15 @@ in results/cell/README.md (section "Matrix-free solver: what was tried ...").
 The bench RVE of `mapsim bench` (homogenize.bench.cell._rve) at 64^3 (100 particles, mean radius
 ~2.5 voxels, composite voxels), the solver built exactly as homogenize_mesh builds it; for
 k = 1..8 right-hand sides (random, fixed seed) the median of 5 timings of: the fine-level product
-K u, one 8-colour block Gauss-Seidel sweep on the fine level, and one whole V-cycle (both sweeps,
-the residual, the transfers and the assembled 32^3 grid's AMG cycle). Also the share of fine
-nodes that read their own stencil row (next to a cut voxel or a phase boundary).
+K u, one 8-colour block Gauss-Seidel sweep on the fine level, one sweep over the interface nodes
+only (since session 11, homogenize.cell.MATFREE_INTERFACE_SWEEPS), and one whole V-cycle (all
+sweeps, the residual, the transfers and the assembled 32^3 grid's AMG cycle). Also the share of
+fine nodes that read their own stencil row (next to a cut voxel or a phase boundary) and the
+share of interface nodes (those grown by MATFREE_INTERFACE_HALO nodes).
+The committed JSON is session 8's: no interface sweeps then (no interface_sweep_s column, the
+V-cycle without them). A run in session 11 on a machine ~1.6x slower than in session 8 (k = 7:
+product 0.091 s, full sweep 0.125 s, interface sweep 0.049 s, V-cycle 0.59 s) was not committed
+(results/cell/README.md, "Local sweeps at the interfaces").
 
 Timings depend on the machine's load: run it alone.
 Run: .venv/bin/python results/cell/per_iteration_costs.py [--voxels 64] [--out F]   (~1 min)
@@ -56,13 +62,17 @@ def main():
         row = {"k": k,
                "product_s": _median_time(lambda: op @ B),
                "gauss_seidel_sweep_s": _median_time(lambda: op.gauss_seidel(X, B, fine.colours)),
+               "interface_sweep_s": _median_time(
+                   lambda: op.gauss_seidel(X, B, fine.interface_colours)),
                "v_cycle_s": _median_time(lambda: M @ B)}
         row["v_cycle_per_column_s"] = row["v_cycle_s"] / k
         rows.append(row)
         print(" ".join(f"{key} {v:.4f}" if isinstance(v, float) else f"{key} {v}"
                        for key, v in row.items()), flush=True)
     out = {"voxels": n, "n_particles": int(mesh.n_particles),
-           "own_stencil_row_share": op.own_share, "rows": rows,
+           "own_stencil_row_share": op.own_share,
+           "interface_share": fine.interface_share,
+           "interface_sweeps_per_side": cell.MATFREE_INTERFACE_SWEEPS, "rows": rows,
            "command": "results/cell/per_iteration_costs.py --voxels %d" % n,
            "note": "medians of 5; random right-hand sides; run alone (timings follow the load)"}
     args.out.write_text(json.dumps(out, indent=1) + "\n")
