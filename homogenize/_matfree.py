@@ -532,8 +532,9 @@ class GeometricVCycle:
     grids only: it tells whether the geometric levels or the AMG below them limit convergence);
     sweeps : Gauss-Seidel sweeps per side over all nodes; interface_sweeps : further sweeps per
     side over the interface nodes only (those with their own stencil row, next to a cut voxel or
-    a phase boundary, grown by ``interface_halo`` nodes): local relaxation where the error the
-    trilinear coarse grid cannot take is (Brandt 1977's local relaxation near singularities).
+    a phase boundary, grown by ``interface_halo`` nodes): extra sweeps confined to where the
+    error the trilinear coarse grid cannot take is ("local relaxation", as Brandt & Livne,
+    Multigrid Techniques, 2nd ed. 2011, use it near singularities).
     Pre-smoothing: the full sweeps, then the interface ones; post-smoothing: the same in reverse
     order and colours, so the cycle stays symmetric.
     """
