@@ -24,6 +24,7 @@ Run: .venv/bin/python results/cell/magnetic_tolerance.py          (~6 min, ~1.5 
 import argparse
 import time
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
@@ -43,18 +44,10 @@ def _rel(a, b, scale) -> float:
     return float(np.abs(np.asarray(a) - np.asarray(b)).max() / scale)
 
 
+# the matrix-free V-cycle as when the JSON was made (session 10): no interface sweeps
+# (homogenize.cell.MATFREE_INTERFACE_SWEEPS, session 11)
+@mock.patch.object(cell, "MATFREE_INTERFACE_SWEEPS", 0)
 def study(voxels: int, solver: str = "matrix-free") -> list[dict]:
-    # the matrix-free V-cycle as when the JSON was made (session 10): no interface sweeps
-    # (homogenize.cell.MATFREE_INTERFACE_SWEEPS, session 11)
-    default = cell.MATFREE_INTERFACE_SWEEPS
-    cell.MATFREE_INTERFACE_SWEEPS = 0
-    try:
-        return _study(voxels, solver)
-    finally:
-        cell.MATFREE_INTERFACE_SWEEPS = default
-
-
-def _study(voxels: int, solver: str) -> list[dict]:
     rve = _rve(voxels)
     st = solve(rve, 0.1, 1.78, "frohlich-kennelly")
     loads = {"dipole": (st.total_force_N, np.asarray(st.virial_stress_Pa)),

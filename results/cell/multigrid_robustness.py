@@ -24,6 +24,7 @@ Run: .venv/bin/python results/cell/multigrid_robustness.py          (~25 min, ~3
 """
 import time
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
@@ -52,17 +53,12 @@ PLAN = ([(32, 32, "matrix-free", "amg", 0), (48, 48, "matrix-free", "amg", 0),
 def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int) -> dict:
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
-    cell.MATFREE_COARSE = coarse or "amg"
-    default_sweeps = cell.MATFREE_INTERFACE_SWEEPS
-    cell.MATFREE_INTERFACE_SWEEPS = interface_sweeps
-    try:
+    with mock.patch.multiple(cell, MATFREE_COARSE=coarse or "amg",
+                             MATFREE_INTERFACE_SWEEPS=interface_sweeps):
         t0 = time.perf_counter()
         r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver=solver,
                                 tol_magnetic=1e-6)
         sec = time.perf_counter() - t0
-    finally:
-        cell.MATFREE_COARSE = "amg"
-        cell.MATFREE_INTERFACE_SWEEPS = default_sweeps
     it = r.iterations
     return {"rve_voxels": rve_voxels, "voxels": voxels, "n_particles": int(rve.n),
             "mean_radius_voxels": 2.5 * voxels / rve_voxels, "solver": solver,

@@ -208,9 +208,9 @@ def test_interface_nodes():
     `halo` of one (periodic), checked by brute force."""
     n = 12
     mesh, lam, mu, comp = _fields(n)
-    op = mf.MatFreeOperator(mf.element_field(lam, mu, mesh.h_m, comp))
-    # own rows: a node whose 8 voxels differ in type or hold a cut voxel (its own type)
     e = mf.element_field(lam, mu, mesh.h_m, comp)
+    op = mf.MatFreeOperator(e)
+    # own rows: a node whose 8 voxels differ in type or hold a cut voxel (its own type)
     et = e.etype.reshape(n, n, n)
     own = np.zeros((n, n, n), dtype=bool)
     for kk in range(n):
