@@ -17,6 +17,7 @@ from __future__ import annotations
 
 
 import numba as nb
+import numpy as np
 
 from micro._numba import parallel_and_serial
 
@@ -213,6 +214,69 @@ def _coldot(A, B, out):
             out[j] += A[i, j] * B[i, j]
 
 
+# coupled block CG (homogenize._amg.coupled_block_cg): (n, k) blocks, k x k coefficients. The
+# reductions sum each chunk of ``chunk`` rows sequentially into its own slot; the caller adds the
+# slots in order, so the result does not depend on the number of threads.
+
+def _gram_parts(A, B, chunk, out):
+    """out[c, i, j] = sum over the rows r of chunk c (rows c chunk .. (c + 1) chunk - 1) of
+    A[r, i] B[r, j]; out (ceil(n / chunk), ka, kb)."""
+    n, ka = A.shape
+    kb = B.shape[1]
+    for c in nb.prange(out.shape[0]):
+        for i in range(ka):
+            for j in range(kb):
+                out[c, i, j] = 0.0
+        for r in range(c * chunk, min(n, (c + 1) * chunk)):
+            for i in range(ka):
+                a = A[r, i]
+                for j in range(kb):
+                    out[c, i, j] += a * B[r, j]
+
+
+def _colsq_parts(A, chunk, out):
+    """out[c, j] = sum over the rows r of chunk c of A[r, j]^2; out (ceil(n / chunk), k)."""
+    n, k = A.shape
+    for c in nb.prange(out.shape[0]):
+        for j in range(k):
+            out[c, j] = 0.0
+        for r in range(c * chunk, min(n, (c + 1) * chunk)):
+            for j in range(k):
+                out[c, j] += A[r, j] * A[r, j]
+
+
+def _block_step(X, R, P, Q, alpha):
+    """X += P alpha, R -= Q alpha, in place (X, R (n, ka); P, Q (n, kp); alpha (kp, ka))."""
+    n, kp = P.shape
+    ka = X.shape[1]
+    for r in nb.prange(n):
+        for j in range(ka):
+            sx = 0.0
+            sr = 0.0
+            for i in range(kp):
+                sx += P[r, i] * alpha[i, j]
+                sr += Q[r, i] * alpha[i, j]
+            X[r, j] += sx
+            R[r, j] -= sr
+
+
+def _block_directions(P, Z, beta, chunk, out):
+    """out = Z + P beta (P (n, kp), Z and out (n, ka), beta (kp, ka)); out may be P itself
+    (ka <= kp: each row of P is read before it is written). Rows in chunks of ``chunk`` (one
+    scratch row per chunk)."""
+    n, kp = P.shape
+    ka = Z.shape[1]
+    for c in nb.prange((n + chunk - 1) // chunk):
+        row = np.empty(kp)
+        for r in range(c * chunk, min(n, (c + 1) * chunk)):
+            for i in range(kp):
+                row[i] = P[r, i]
+            for j in range(ka):
+                s = Z[r, j]
+                for i in range(kp):
+                    s += row[i] * beta[i, j]
+                out[r, j] = s
+
 bsr_matmat, bsr_matmat_serial = parallel_and_serial(_bsr_matmat)
 bsr_residual, bsr_residual_serial = parallel_and_serial(_bsr_residual)
 bsr_gauss_seidel_colour, bsr_gauss_seidel_colour_serial = parallel_and_serial(_bsr_gauss_seidel_colour)
@@ -221,3 +285,7 @@ typed_stencil_blocks, typed_stencil_blocks_serial = parallel_and_serial(_typed_s
 axpy_cols, _ = parallel_and_serial(_axpy_cols)
 xpby_cols, _ = parallel_and_serial(_xpby_cols)
 coldot = nb.njit(cache=True)(_coldot)
+gram_parts, _ = parallel_and_serial(_gram_parts)
+colsq_parts, _ = parallel_and_serial(_colsq_parts)
+block_step, _ = parallel_and_serial(_block_step)
+block_directions, _ = parallel_and_serial(_block_directions)

@@ -643,9 +643,11 @@ class GeometricVCycle:
 def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0.1) -> int:
     """Peak memory model of one matrix-free cell solve [bytes].
 
-    Per fine node: 11 vectors of 3 n_cases float64 (the load block and its pinned copy;
-    in-place block CG: X, the active X, R, P, Q, the preconditioned residual; V-cycle: its
-    result and the fine residual; the energy products afterwards reuse that space), the diagonal
+    Per fine node: 11 vectors of 3 n_cases float64 (the load block, whose pinned rows the solve
+    zeroes in place; block CG: X, the active X, R, P, Q -- kept through the preconditioner by the
+    coupled block CG --, the preconditioned residual, and one spare for the copies made when
+    columns leave the block; V-cycle: its result and the fine residual; the energy products
+    afterwards reuse that space), the diagonal
     blocks and their inverses (2 x 72 B), node and element types and indices (16 B); the cut
     voxels' own 24x24 matrices (4.6 kB each, ``cut_fraction`` of the voxels on the fine level and
     half as many on the coarse one; the operator's own stencil rows, ~2 nodes of 1.9 kB per cut

@@ -28,9 +28,10 @@ block V-cycle on a pyamg smoothed-aggregation hierarchy (rigid-body near-nullspa
 DEFLATED by the six rigid-body modes of every stiff particle. Plain AMG-CG needs ~4x more
 iterations at Fe/PDMS contrast (1e5) than at contrast 1, because each stiff particle adds six
 near-zero modes (its rigid motions in the soft matrix); deflation removes exactly those (Vuik,
-Segal & Meijerink 1999). ``solver="matrix-free"`` keeps the deflated block CG and replaces the
-assembled fine matrix and its AMG by the matrix-free operator and geometric multigrid of
-:mod:`homogenize._matfree`.
+Segal & Meijerink 1999). ``solver="matrix-free"`` replaces the assembled fine matrix and its AMG
+by the matrix-free operator and geometric multigrid of :mod:`homogenize._matfree`, and couples
+the six strain cases in one deflated block CG (:data:`MATFREE_BLOCK_CG`): every strain column
+steps in the span of all their search directions; the magnetic column keeps its own recursion.
 """
 from __future__ import annotations
 
@@ -52,7 +53,7 @@ from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_sht
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
 from .mesh import METHODS, VoxelMesh, voxelize
 from homogenize._amg import BlockVCycle, BSROp, grid_colours
-from homogenize._amg import Deflation, block_cg
+from homogenize._amg import Deflation, block_cg, coupled_block_cg
 import pyamg
 from scipy.sparse.linalg import splu
 
@@ -339,27 +340,48 @@ class _CellSolver:
                           shape=(3 * n ** 3, 6 * parts.size))
         return Z
 
-    def solve(self, F: np.ndarray, callback=None, tols=None):
+    def solve(self, F: np.ndarray, callback=None, tols=None, magnetic: bool = False):
         """Solve K W = F (pinned node) for the columns of F (n_dof, k), deflated AMG-CG.
 
         ``tols``: one relative residual per column (default: the solver's ``tol`` for all).
         Returns (W, histories): zero-mean periodic fluctuations and the relative residual history
         of every column. The fast path solves all columns in one block; the reference path one
-        after another.
+        after another. ``magnetic``: the last column is the magnetic load (its own group of the
+        block CG with MATFREE_BLOCK_CG = "strains").
         """
-        F = np.array(F, dtype=np.float64, order="C")
-        F[3 * self.pin:3 * self.pin + 3] = 0.0
+        # the pinned node's rows are zeroed in F itself for the solve and restored after it (no
+        # copy of the load block: one block of memory less at 128^3)
+        if not (isinstance(F, np.ndarray) and F.dtype == np.float64 and F.flags.c_contiguous
+                and F.flags.writeable):
+            F = np.array(F, dtype=np.float64, order="C")
+        rows = slice(3 * self.pin, 3 * self.pin + 3)
+        pinned = F[rows].copy()
+        F[rows] = 0.0
         tols = [self.tol] * F.shape[1] if tols is None else list(tols)
-        if self.kind == "reference":
-            cols = [block_cg(self.matvec, self.M, F[:, [c]], tol=tols[c], maxiter=self.maxiter,
-                             deflation=self.deflation, callback=callback)
-                    for c in range(F.shape[1])]
-            W = np.concatenate([c[0] for c in cols], axis=1)
-            hist = [c[1][0] for c in cols]
-        else:
-            W, hist = block_cg(self.matvec, self.M, F, tol=tols, maxiter=self.maxiter,
-                               deflation=self.deflation, callback=callback)
-        del F
+        try:
+            if self.kind == "reference":
+                cols = [block_cg(self.matvec, self.M, F[:, [c]], tol=tols[c],
+                                 maxiter=self.maxiter, deflation=self.deflation, callback=callback)
+                        for c in range(F.shape[1])]
+                W = np.concatenate([c[0] for c in cols], axis=1)
+                hist = [c[1][0] for c in cols]
+            else:
+                mode = MATFREE_BLOCK_CG if self.kind == "matrix-free" else "independent"
+                if mode not in BLOCK_CG_MODES:
+                    raise ValueError(f"MATFREE_BLOCK_CG must be one of {BLOCK_CG_MODES}, "
+                                     f"got {mode!r}")
+                self.block_cg = mode
+                kw = dict(tol=tols, maxiter=self.maxiter, deflation=self.deflation,
+                          callback=callback)
+                if mode == "independent":
+                    W, hist = block_cg(self.matvec, self.M, F, **kw)
+                else:
+                    k = F.shape[1]
+                    groups = ([0] * (k - 1) + [1] if mode == "strains" and magnetic
+                              else [0] * k)
+                    W, hist = coupled_block_cg(self.matvec, self.M, F, groups=groups, **kw)
+        finally:
+            F[rows] = pinned
         if self.kind == "matrix-free":
             self.M.release()
         W[3 * self.pin:3 * self.pin + 3] = 0.0
@@ -399,6 +421,18 @@ MATFREE_SWEEPS = 1
 #: at a fraction of the cost
 MATFREE_INTERFACE_SWEEPS = 1
 MATFREE_INTERFACE_HALO = 1
+#: solver="matrix-free": how the load cases' CGs share their search directions
+#: (homogenize._amg.coupled_block_cg): "coupled" -- one block CG, every column steps in the span
+#: of all the block's directions (the outlying eigenvalues the geometric V-cycle leaves are found
+#: by the whole block); "strains" -- the six strains coupled, the magnetic column on its own;
+#: "independent" -- lock-step single-column CGs (homogenize._amg.block_cg). Measured in session
+#: 12 (results/cell/README.md, "Coupled block CG"): "strains" and "coupled" take the same time
+#: up to 96^3, but at 128^3 the magnetic column converges more slowly once the strains have left
+#: a coupled block (220 against 190 iterations): 591 s "strains", 662 s "coupled", 634 s
+#: "independent". solver="fast" keeps independent columns: its smoothed aggregation leaves no
+#: such outliers (the same iterations coupled, 64^3 bench RVE).
+MATFREE_BLOCK_CG = "strains"
+BLOCK_CG_MODES = ("coupled", "strains", "independent")
 # smoothed aggregation for the voxel stiffness with stiff particles. strength threshold 0.05:
 # a matrix-particle coupling |a_ij| ~ E_matrix against sqrt(a_ii a_jj) ~ sqrt(E_m E_p) is weak
 # at any contrast above ~400, so aggregates do not straddle a particle surface and the coarse
@@ -610,7 +644,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     tol_mag = (float(tol_magnetic) if tol_magnetic is not None
                else magnetic_tol(tol) if len(cases) == 6 and not keep_fields else tol)
     tols = [tol] * len(cases) + ([tol_mag] if forces_N is not None else [])
-    W, histories = solver.solve(F, callback=callback, tols=tols)
+    W, histories = solver.solve(F, callback=callback, tols=tols, magnetic=forces_N is not None)
     if bar is not None:
         bar.close()
     for c, name in enumerate(names):
@@ -715,6 +749,9 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 # local Gauss-Seidel sweeps per side over the interface nodes (matrix-free)
                 "interface_sweeps": (solver.M.interface_sweeps if solver.kind == "matrix-free"
                                      else 0),
+                # the load cases' CG: "coupled" (one block Krylov space, matrix-free) or
+                # "independent" (lock-step single-column CGs)
+                "block_cg": getattr(solver, "block_cg", "independent"),
                 "C_linear_error_rel": err_lin, "stress_mag_linear_error_rel": err_stress,
                 "virial_from_dipoles": virial_stress_Pa is not None}
     return CellResult(

@@ -334,6 +334,9 @@ def run(case: dict) -> dict:
     # the matrix-free V-cycle as when the JSON was made (sessions 6-8): no interface sweeps
     orig_iface = cell.MATFREE_INTERFACE_SWEEPS
     cell.MATFREE_INTERFACE_SWEEPS = 0
+    # ... and independent columns (homogenize.cell.MATFREE_BLOCK_CG, session 12)
+    orig_block = cell.MATFREE_BLOCK_CG
+    cell.MATFREE_BLOCK_CG = "independent"
     if variant == "trilinear-lu":       # the geometric two-grid cycle with an exact coarse solve
         cell.MATFREE_COARSE = "lu"
     try:
@@ -351,6 +354,7 @@ def run(case: dict) -> dict:
         mf.GeometricVCycle.__init__ = orig_vcycle
         cell.MATFREE_COARSE = orig_coarse
         cell.MATFREE_INTERFACE_SWEEPS = orig_iface
+        cell.MATFREE_BLOCK_CG = orig_block
     it = r.iterations
     return dict(case, n_particles=int(rve.n), iterations=it,
                 max_strain_iterations=max(v for k, v in it.items() if k != "magnetic"),

@@ -15,7 +15,10 @@ default), solved on `voxels` per edge:
   level limits convergence, not the AMG below it;
 * the matrix-free cases again with one more Gauss-Seidel sweep per side over the interface
   nodes (interface_sweeps 1, the default since session 11; the rows with 0 are the V-cycle
-  before it).
+  before it);
+* the matrix-free cases with the load cases in one coupled block CG (block_cg "coupled",
+  homogenize.cell.MATFREE_BLOCK_CG, the default since session 12; rows without the key, or
+  with "independent", ran lock-step independent CGs).
 
 Iteration counts are deterministic; seconds are wall times on whatever else the machine ran.
 Run: .venv/bin/python results/cell/multigrid_robustness.py          (~25 min, ~3 GB)
@@ -35,26 +38,33 @@ import _resumable
 
 HERE = Path(__file__).resolve().parent
 JSON = HERE / "multigrid_robustness.json"
-#: (rve_voxels, voxels, solver, coarse, interface_sweeps); the rows with interface_sweeps 0
-#: are the matrix-free V-cycle before session 11, those with 1 the present default
-#: (homogenize.cell.MATFREE_INTERFACE_SWEEPS: one more sweep per side over the interface nodes)
+#: (rve_voxels, voxels, solver, coarse, interface_sweeps, block_cg); the rows with
+#: interface_sweeps 0 are the matrix-free V-cycle before session 11, those with 1 and
+#: "independent" the default of session 11 (homogenize.cell.MATFREE_INTERFACE_SWEEPS: one more
+#: sweep per side over the interface nodes), those with "coupled" the present default
+#: (homogenize.cell.MATFREE_BLOCK_CG: one block Krylov space for all load cases)
 _MF = [(32, 32), (48, 48), (64, 64), (96, 96), (64, 32), (96, 48), (128, 64)]
-PLAN = ([(32, 32, "matrix-free", "amg", 0), (48, 48, "matrix-free", "amg", 0),
-         (64, 64, "matrix-free", "amg", 0), (96, 96, "matrix-free", "amg", 0),
-         (32, 32, "fast", None, 0), (48, 48, "fast", None, 0), (64, 64, "fast", None, 0),
-         (64, 32, "matrix-free", "amg", 0), (64, 32, "fast", None, 0),
-         (96, 48, "matrix-free", "amg", 0), (96, 48, "fast", None, 0),
-         (128, 64, "matrix-free", "amg", 0), (128, 64, "fast", None, 0),
-         (64, 32, "matrix-free", "lu", 0), (96, 48, "matrix-free", "lu", 0)]
-        + [(a, b, "matrix-free", "amg", 1) for a, b in _MF]
-        + [(64, 32, "matrix-free", "lu", 1), (96, 48, "matrix-free", "lu", 1)])
+_I, _C = "independent", "coupled"
+PLAN = ([(32, 32, "matrix-free", "amg", 0, _I), (48, 48, "matrix-free", "amg", 0, _I),
+         (64, 64, "matrix-free", "amg", 0, _I), (96, 96, "matrix-free", "amg", 0, _I),
+         (32, 32, "fast", None, 0, _I), (48, 48, "fast", None, 0, _I),
+         (64, 64, "fast", None, 0, _I),
+         (64, 32, "matrix-free", "amg", 0, _I), (64, 32, "fast", None, 0, _I),
+         (96, 48, "matrix-free", "amg", 0, _I), (96, 48, "fast", None, 0, _I),
+         (128, 64, "matrix-free", "amg", 0, _I), (128, 64, "fast", None, 0, _I),
+         (64, 32, "matrix-free", "lu", 0, _I), (96, 48, "matrix-free", "lu", 0, _I)]
+        + [(a, b, "matrix-free", "amg", 1, _I) for a, b in _MF]
+        + [(64, 32, "matrix-free", "lu", 1, _I), (96, 48, "matrix-free", "lu", 1, _I)]
+        + [(a, b, "matrix-free", "amg", 1, _C) for a, b in _MF])
 
 
-def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int) -> dict:
+def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int,
+        block_cg: str) -> dict:
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     with mock.patch.multiple(cell, MATFREE_COARSE=coarse or "amg",
-                             MATFREE_INTERFACE_SWEEPS=interface_sweeps):
+                             MATFREE_INTERFACE_SWEEPS=interface_sweeps,
+                             MATFREE_BLOCK_CG=block_cg):
         t0 = time.perf_counter()
         r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver=solver,
                                 tol_magnetic=1e-6)
@@ -62,7 +72,8 @@ def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int
     it = r.iterations
     return {"rve_voxels": rve_voxels, "voxels": voxels, "n_particles": int(rve.n),
             "mean_radius_voxels": 2.5 * voxels / rve_voxels, "solver": solver,
-            "coarse": coarse, "interface_sweeps": interface_sweeps, "iterations": it,
+            "coarse": coarse, "interface_sweeps": interface_sweeps,
+            "block_cg": r.settings["block_cg"], "iterations": it,
             "max_strain_iterations": max(v for k, v in it.items() if k != "magnetic"),
             "magnetic_iterations": it["magnetic"], "seconds": sec,
             "E_eff_Pa": r.E_eff_Pa}
@@ -70,9 +81,10 @@ def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int
 
 def main() -> None:
     out, rows = _resumable.parse(__doc__, JSON)
-    for r in rows:                      # rows made before session 11: no interface sweeps
+    for r in rows:      # rows made before session 11: no interface sweeps; before 12: independent
         r.setdefault("interface_sweeps", 0)
-    key = ("rve_voxels", "voxels", "solver", "coarse", "interface_sweeps")
+        r.setdefault("block_cg", "independent")
+    key = ("rve_voxels", "voxels", "solver", "coarse", "interface_sweeps", "block_cg")
     have = {tuple(r[k] for k in key) for r in rows}
     for case in PLAN:
         if case in have:

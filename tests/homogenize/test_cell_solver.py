@@ -4,9 +4,10 @@ deflated iteration stays stable far below the default tolerance."""
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
-from homogenize._amg import BlockVCycle, block_cg, grid_colours
+from homogenize._amg import BlockVCycle, Deflation, block_cg, coupled_block_cg, grid_colours
 from homogenize.cell import homogenize_rve, magnetic_tol
 
 L = 1e-6
@@ -19,13 +20,16 @@ def _rve():
     return SimpleNamespace(box_m=L, centers_m=c, radii_m=np.array([0.2, 0.15, 0.12, 0.1]) * L)
 
 
-def test_block_cg_equals_single_column_cg():
-    rng = np.random.default_rng(0)
-    n = 60
+def _spd_system(n, k, seed, shift):
+    """A random SPD matrix (Gram matrix + shift * n I), its Jacobi preconditioner and k loads."""
+    rng = np.random.default_rng(seed)
     Q = rng.normal(size=(n, n))
-    A = Q @ Q.T + n * np.eye(n)
-    D = np.diag(1.0 / np.diag(A))
-    F = rng.normal(size=(n, 3))
+    A = Q @ Q.T + shift * n * np.eye(n)
+    return A, np.diag(1.0 / np.diag(A)), rng.normal(size=(n, k))
+
+
+def test_block_cg_equals_single_column_cg():
+    A, D, F = _spd_system(60, 3, 0, 1.0)
     X, hist = block_cg(lambda Y: A @ Y, lambda Y: D @ Y, F, tol=1e-12, maxiter=200)
     assert np.allclose(A @ X, F, rtol=0, atol=1e-10 * np.abs(F).max())
     for c in range(3):
@@ -33,6 +37,85 @@ def test_block_cg_equals_single_column_cg():
         # the same recursion per column: same iterates to round-off, same iteration count
         assert len(h1[0]) == len(hist[c])
         assert np.allclose(x1[:, 0], X[:, c], rtol=0, atol=1e-12 * np.abs(X).max())
+
+
+
+def test_coupled_block_cg_ends_when_the_block_krylov_space_is_exhausted():
+    """A matrix with m distinct eigenvalues (one eigenvector each): single-column CG needs up to
+    m steps, block CG on k columns at most ceil(m / k) (its Krylov space grows by k directions a
+    step). Both give the exact solution."""
+    rng = np.random.default_rng(3)
+    m, k = 24, 6
+    Qm, _ = np.linalg.qr(rng.normal(size=(m, m)))
+    A = Qm @ np.diag(np.linspace(1.0, 50.0, m)) @ Qm.T
+    F = rng.normal(size=(m, k))
+    eye = lambda Y: Y.copy()
+    X, hist = coupled_block_cg(lambda Y: A @ Y, eye, F, tol=1e-10, maxiter=100)
+    assert np.allclose(A @ X, F, rtol=0, atol=1e-9 * np.abs(F).max())
+    assert max(len(h) - 1 for h in hist) <= m // k + 1
+    _, hist1 = block_cg(lambda Y: A @ Y, eye, F, tol=1e-10, maxiter=100)
+    assert min(len(h) - 1 for h in hist1) >= m - 4
+
+
+def test_coupled_block_cg_one_column_is_cg_and_survives_dependent_columns():
+    n = 60
+    A, D, F = _spd_system(n, 2, 0, 1.0)
+    x1, h1 = coupled_block_cg(lambda Y: A @ Y, lambda Y: D @ Y, F[:, [0]], tol=1e-12, maxiter=200)
+    x0, h0 = block_cg(lambda Y: A @ Y, lambda Y: D @ Y, F[:, [0]], tol=1e-12, maxiter=200)
+    # one column: the same recursion as CG (same iterates to round-off)
+    assert len(h1[0]) == len(h0[0])
+    assert np.allclose(x1, x0, rtol=0, atol=1e-12 * np.abs(x0).max())
+    # duplicate, scaled and zero columns and per-column tolerances: no breakdown (the dependent
+    # directions are dropped from the step), each column at its own tolerance
+    G = np.column_stack([F[:, 0], F[:, 1], F[:, 0], 3.0 * F[:, 1], np.zeros(n)])
+    tols = [1e-12, 1e-12, 1e-12, 1e-4, 1e-12]
+    X, hist = coupled_block_cg(lambda Y: A @ Y, lambda Y: D @ Y, G, tol=tols, maxiter=200)
+    for c, t in enumerate(tols):
+        assert hist[c][-1] <= t
+        r = np.linalg.norm(G[:, c] - A @ X[:, c])
+        assert r <= 10.0 * t * max(np.linalg.norm(G[:, c]), 1.0)
+    assert np.allclose(X[:, 2], X[:, 0], rtol=0, atol=1e-10 * np.abs(X).max())
+    assert not np.any(X[:, 4])
+    assert len(hist[3]) < len(hist[1])
+
+
+
+def test_coupled_block_cg_groups():
+    """One group per column is the independent lock-step CG (same iterates); two groups are
+    two block CGs sharing the products (each group as if solved alone)."""
+    A, D, F = _spd_system(50, 4, 4, 0.5)
+    mat, pre = (lambda Y: A @ Y), (lambda Y: D @ Y)
+    X0, h0 = block_cg(mat, pre, F, tol=1e-11, maxiter=200)
+    X1, h1 = coupled_block_cg(mat, pre, F, tol=1e-11, maxiter=200, groups=[0, 1, 2, 3])
+    assert [len(h) for h in h1] == [len(h) for h in h0]
+    assert np.allclose(X1, X0, rtol=0, atol=1e-10 * np.abs(X0).max())
+    X2, h2 = coupled_block_cg(mat, pre, F, tol=1e-11, maxiter=200, groups=[5, 5, 9, 9])
+    Xa, ha = coupled_block_cg(mat, pre, F[:, :2], tol=1e-11, maxiter=200)
+    Xb, hb = coupled_block_cg(mat, pre, F[:, 2:], tol=1e-11, maxiter=200)
+    assert [len(h) for h in h2] == [len(h) for h in ha + hb]
+    assert np.allclose(X2, np.hstack([Xa, Xb]), rtol=0, atol=1e-10 * np.abs(X0).max())
+    with pytest.raises(ValueError, match="one label per column"):
+        coupled_block_cg(mat, pre, F, tol=1e-11, maxiter=200, groups=[0, 1])
+
+
+def test_coupled_block_cg_with_deflation_solves_the_system():
+    """Deflated: the start Z E^-1 Z^T F, the projected directions and the residual correction
+    work in the block recursion as in the single-column one; the solution is the direct one."""
+    rng = np.random.default_rng(7)
+    n, m, k = 80, 4, 3
+    d = np.concatenate([1e-4 * (1.0 + rng.random(m)), 1.0 + rng.random(n - m)])
+    Qm, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    A = Qm @ np.diag(d) @ Qm.T
+    Z = Qm[:, :m] + 1e-3 * rng.normal(size=(n, m))       # near the small eigenvectors
+    KZ = A @ Z
+    E = Z.T @ KZ
+    defl = Deflation(sp.csr_matrix(Z), sp.csr_matrix(KZ), lambda y: np.linalg.solve(E, y))
+    F = rng.normal(size=(n, k))
+    X, hist = coupled_block_cg(lambda Y: A @ Y, lambda Y: Y.copy(), F, tol=1e-10, maxiter=200,
+                               deflation=defl)
+    assert np.allclose(X, np.linalg.solve(A, F), rtol=0, atol=1e-8 * np.abs(np.linalg.solve(A, F)).max())
+    _, plain = coupled_block_cg(lambda Y: A @ Y, lambda Y: Y.copy(), F, tol=1e-10, maxiter=200)
+    assert max(map(len, hist)) < max(map(len, plain))
 
 
 def test_block_vcycle_is_symmetric_positive_definite():

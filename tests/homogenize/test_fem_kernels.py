@@ -138,3 +138,41 @@ def test_colour_sweep_with_6x6_blocks_equals_sequential_block_gauss_seidel(k):
     xr = _sequential_block_sweep(M.toarray(), b, x, np.concatenate(colours), R)
     assert np.allclose(xk, xr, rtol=1e-12, atol=1e-12 * np.abs(xr).max())
     assert not np.allclose(xk, x)           # the sweep did something
+
+
+def test_coupled_block_cg_kernels_equal_numpy_and_do_not_depend_on_threads():
+    import numba
+    rng = np.random.default_rng(5)
+    n, kp, ka, chunk = 1000, 5, 3, 64
+    P, Q = rng.normal(size=(n, kp)), rng.normal(size=(n, kp))
+    X, R, Z = rng.normal(size=(n, ka)), rng.normal(size=(n, ka)), rng.normal(size=(n, ka))
+    alpha, beta = rng.normal(size=(kp, ka)), rng.normal(size=(kp, ka))
+    nch = (n + chunk - 1) // chunk
+    parts = np.empty((nch, kp, ka))
+    K.gram_parts(P, R, chunk, parts)
+    assert np.allclose(parts.sum(axis=0), P.T @ R, rtol=1e-13, atol=1e-12)
+    assert np.allclose(parts[1], P[chunk:2 * chunk].T @ R[chunk:2 * chunk], rtol=1e-13, atol=1e-12)
+    sq = np.empty((nch, ka))
+    K.colsq_parts(R, chunk, sq)
+    assert np.allclose(sq.sum(axis=0), (R ** 2).sum(axis=0), rtol=1e-13)
+    X1, R1 = X.copy(), R.copy()
+    K.block_step(X1, R1, P, Q, alpha)
+    assert np.allclose(X1, X + P @ alpha, rtol=1e-13, atol=1e-12)
+    assert np.allclose(R1, R - Q @ alpha, rtol=1e-13, atol=1e-12)
+    out = np.empty((n, ka))
+    K.block_directions(P, Z, beta, chunk, out)
+    assert np.allclose(out, Z + P @ beta, rtol=1e-13, atol=1e-12)
+    # in place (square coefficient block): every row of P is read before it is written
+    P2, Z2, b2 = P[:, :ka].copy(), Z.copy(), beta[:ka].copy()
+    ref = Z2 + P2 @ b2
+    K.block_directions(P2, Z2, b2, chunk, P2)
+    assert np.allclose(P2, ref, rtol=1e-13, atol=1e-12)
+    # the partial sums are per fixed chunk: bitwise the same on 1 and on all threads
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = np.empty_like(parts)
+        K.gram_parts(P, R, chunk, one)
+    finally:
+        numba.set_num_threads(threads)
+    assert np.array_equal(one, parts)
