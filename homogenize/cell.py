@@ -426,11 +426,12 @@ MATFREE_INTERFACE_HALO = 1
 #: of all the block's directions (the outlying eigenvalues the geometric V-cycle leaves are found
 #: by the whole block); "strains" -- the six strains coupled, the magnetic column on its own;
 #: "independent" -- lock-step single-column CGs (homogenize._amg.block_cg). Measured in session
-#: 12 (results/cell/README.md, "Coupled block CG"): "strains" and "coupled" take the same time
-#: up to 96^3, but at 128^3 the magnetic column converges more slowly once the strains have left
-#: a coupled block (220 against 190 iterations): 591 s "strains", 662 s "coupled", 634 s
-#: "independent". solver="fast" keeps independent columns: its smoothed aggregation leaves no
-#: such outliers (the same iterations coupled, 64^3 bench RVE).
+#: 12 (results/cell/block_cg_modes.py, results/cell/README.md "Coupled block CG"): at 128^3 the
+#: magnetic column converges more slowly once the strains have left a coupled block (220 against
+#: 190 iterations): 591 s "strains", 662 s "coupled", 634 s "independent"; on mid-size RVEs
+#: "coupled" was as fast or faster (timings vary by 20 % between runs). solver="fast" keeps
+#: independent columns: its smoothed aggregation leaves no such outliers (the same iterations
+#: coupled, 64^3 bench RVE).
 MATFREE_BLOCK_CG = "strains"
 BLOCK_CG_MODES = ("coupled", "strains", "independent")
 # smoothed aggregation for the voxel stiffness with stiff particles. strength threshold 0.05:
