@@ -412,14 +412,14 @@ def _colnorms(A):
 def _pinv_spd(G):
     """Pseudo-inverse of the symmetric positive semi-definite Gram matrix G = P^T A P, dropping
     the directions that are linearly dependent after scaling G to unit diagonal (eigenvalue
-    below RANK_TOL). Returns (G^+, rank)."""
+    below RANK_TOL)."""
     G = 0.5 * (G + G.T)
     d = np.sqrt(np.abs(np.diag(G)))
     d[d == 0.0] = 1.0
     w, V = np.linalg.eigh(G / np.outer(d, d))
     keep = w > RANK_TOL * max(float(w.max()), 0.0)
     Vk = V[:, keep] / d[:, None]
-    return (Vk / w[keep]) @ Vk.T, int(keep.sum())
+    return (Vk / w[keep]) @ Vk.T
 
 
 def _group_pinv(G, groups):
@@ -428,7 +428,7 @@ def _group_pinv(G, groups):
     out = np.zeros_like(G)
     for g in np.unique(groups):
         sel = np.flatnonzero(groups == g)
-        out[np.ix_(sel, sel)] = _pinv_spd(G[np.ix_(sel, sel)])[0]
+        out[np.ix_(sel, sel)] = _pinv_spd(G[np.ix_(sel, sel)])
     return out
 
 

@@ -46,6 +46,7 @@ Run: .venv/bin/python results/cell/coarse_space_experiments.py   (~50 min from s
 """
 import time
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pyamg
@@ -330,15 +331,13 @@ def run(case: dict) -> dict:
     mf.GeometricVCycle.__init__ = vcycle
     if variant == "capped":
         mf.coarsen = capped
-    orig_coarse = cell.MATFREE_COARSE
-    # the matrix-free V-cycle as when the JSON was made (sessions 6-8): no interface sweeps
-    orig_iface = cell.MATFREE_INTERFACE_SWEEPS
-    cell.MATFREE_INTERFACE_SWEEPS = 0
-    # ... and independent columns (homogenize.cell.MATFREE_BLOCK_CG, session 12)
-    orig_block = cell.MATFREE_BLOCK_CG
-    cell.MATFREE_BLOCK_CG = "independent"
-    if variant == "trilinear-lu":       # the geometric two-grid cycle with an exact coarse solve
-        cell.MATFREE_COARSE = "lu"
+    # the matrix-free V-cycle as when the JSON was made (sessions 6-8): no interface sweeps,
+    # independent CG columns (homogenize.cell.MATFREE_BLOCK_CG, session 12); "trilinear-lu": the
+    # geometric two-grid cycle with an exact coarse solve
+    consts = mock.patch.multiple(
+        cell, MATFREE_INTERFACE_SWEEPS=0, MATFREE_BLOCK_CG="independent",
+        MATFREE_COARSE="lu" if variant == "trilinear-lu" else cell.MATFREE_COARSE)
+    consts.start()
     try:
         kw = dict(matrix_nu=case.get("nu", PDMS.nu), method=case.get("method", "composite"))
         if case.get("homogeneous"):
@@ -352,9 +351,7 @@ def run(case: dict) -> dict:
         cell._CellSolver._init_matrix_free = orig_init
         mf.coarsen = orig_coarsen
         mf.GeometricVCycle.__init__ = orig_vcycle
-        cell.MATFREE_COARSE = orig_coarse
-        cell.MATFREE_INTERFACE_SWEEPS = orig_iface
-        cell.MATFREE_BLOCK_CG = orig_block
+        consts.stop()
     it = r.iterations
     return dict(case, n_particles=int(rve.n), iterations=it,
                 max_strain_iterations=max(v for k, v in it.items() if k != "magnetic"),
