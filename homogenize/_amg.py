@@ -147,9 +147,15 @@ class _Level:
         self.A = types.SimpleNamespace(shape=self.A.shape, residual=op.residual)
         self.dinv = None
 
-    def smooth(self, X, B, order):
+    def smooth(self, X, B, order, from_zero: bool = False):
+        """Gauss-Seidel over the colour classes ``order`` in place in X; ``from_zero``: X is
+        zero on entry (the V-cycle's pre-smoothing), which the matrix-free operator exploits."""
         if self._op is not None:
-            self._op.gauss_seidel(X, B, [self.colours[c] for c in order])
+            cols = [self.colours[c] for c in order]
+            if from_zero:
+                self._op.gauss_seidel_from_zero(X, B, cols)
+            else:
+                self._op.gauss_seidel(X, B, cols)
             return
         k = X.shape[1]
         tmp = self._tmp.get(k)
@@ -221,7 +227,7 @@ class BlockVCycle:
         X = np.zeros_like(B)
         nc = len(L.colours)
         fwd, bwd = list(range(nc)), list(range(nc - 1, -1, -1))
-        L.smooth(X, B, fwd * self.sweeps)
+        L.smooth(X, B, fwd * self.sweeps, from_zero=True)
         cB = L.Rop @ L.A.residual(X, B)
         X += L.P @ self._cycle(i + 1, cB)
         L.smooth(X, B, bwd * self.sweeps)

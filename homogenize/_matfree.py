@@ -55,6 +55,11 @@ def _node_op(n, nodes, stype, S, pin, pin_scale, u, b, dinv, out, mode):
     mode 0: out[t] = (K u)_p;  mode 1: out[t] = b_p - (K u)_p  (p = nodes[t]);
     mode 2: one block Gauss-Seidel update in place, u[p] += dinv[p] (b_p - (K u)_p); out is
     scratch of len(nodes) rows. The nodes of one Gauss-Seidel call must not share a voxel.
+    mode 3: mode 2 for the first forward sweep of an even grid from u = 0 over the 8 parity
+    colours in order (colour c = (i & 1) + 2 (j & 1) + 4 (kk & 1)): only the neighbours of a
+    lower colour are nonzero yet, so the blocks of the others (and the node's own) are skipped
+    -- the same sums as mode 2 without its products with exact zeros (13 of 27 blocks on
+    average).
     u, b: (N, 3, k); out: (len(nodes), 3, k); stype (N,) int32: every node's row in the stencil
     table S (T, 27, 3, 3) (block of neighbour slot s = (dx+1) + 3 (dy+1) + 9 (dz+1)).
 
@@ -64,8 +69,10 @@ def _node_op(n, nodes, stype, S, pin, pin_scale, u, b, dinv, out, mode):
     """
     k = u.shape[2]
     offs = np.empty(27, dtype=np.int64)
+    flip = np.empty(27, dtype=np.int64)     # the parity colour bits a neighbour slot flips
     for s in range(27):
         offs[s] = (s % 3 - 1) + n * ((s // 3) % 3 - 1) + n * n * (s // 9 - 1)
+        flip[s] = (s % 3 != 1) + 2 * ((s // 3) % 3 != 1) + 4 * (s // 9 != 1)
     for t in nb.prange(nodes.shape[0]):
         p = nodes[t]
         i = p % n
@@ -81,7 +88,10 @@ def _node_op(n, nodes, stype, S, pin, pin_scale, u, b, dinv, out, mode):
         else:
             ty = stype[p]
             inner = 0 < i < n - 1 and 0 < j < n - 1 and 0 < kk < n - 1
+            col = (i & 1) + 2 * (j & 1) + 4 * (kk & 1)
             for s in range(27):
+                if mode == 3 and (col ^ flip[s]) >= col:
+                    continue
                 if inner:
                     q = p + offs[s]
                 else:
@@ -94,7 +104,7 @@ def _node_op(n, nodes, stype, S, pin, pin_scale, u, b, dinv, out, mode):
             for r in range(3):
                 for m in range(k):
                     out[t, r, m] = b[p, r, m] - out[t, r, m]
-        elif mode == 2:
+        elif mode >= 2:
             for r in range(3):
                 for m in range(k):
                     out[t, r, m] = b[p, r, m] - out[t, r, m]
@@ -327,7 +337,7 @@ class MatFreeOperator:
         k = X.shape[-1]
         self._op(self.n, nodes, self.stype, self.S, self.pin, self.pin_scale,
                  X.reshape(-1, 3, k), B.reshape(-1, 3, k),
-                 self.dinv if mode == 2 else self.diag, out.reshape(-1, 3, k), mode)
+                 self.dinv if mode >= 2 else self.diag, out.reshape(-1, 3, k), mode)
 
     def __matmul__(self, X):
         X = np.ascontiguousarray(X, dtype=np.float64)
@@ -355,6 +365,24 @@ class MatFreeOperator:
             tmp = self._tmp[k] = np.empty((rows, 3, k))
         for c in colours:
             self._run(c, X, B, tmp, 2)
+
+    def gauss_seidel_from_zero(self, X, B, colours):
+        """``gauss_seidel(X, B, colours)`` for X = 0 (checked by the caller: the V-cycle's
+        pre-smoothing). On an even grid whose first 8 classes of ``colours`` are the parity
+        colours in order (:func:`grid_colours`), that first sweep skips the neighbours that are
+        still zero (same result to the last bit, ~half the work of a sweep)."""
+        n = self.n
+        if n % 2 or len(colours) < 8:
+            return self.gauss_seidel(X, B, colours)
+        k = X.shape[1]
+        rows = max(c.size for c in colours)
+        tmp = self._tmp.get(k)
+        if tmp is None or tmp.shape[0] < rows:
+            tmp = self._tmp[k] = np.empty((rows, 3, k))
+        for c in colours[:8]:
+            self._run(c, X, B, tmp, 3)
+        if len(colours) > 8:
+            self.gauss_seidel(X, B, colours[8:])
 
     def interface_nodes(self, halo: int = 1) -> np.ndarray:
         """(N,) bool: the nodes with their own stencil row (next to a cut voxel or a phase
@@ -612,7 +640,7 @@ class GeometricVCycle:
         fwd = ([L.colours[c] for c in range(nc)] * self.sweeps
                + L.interface_colours * self.interface_sweeps)
         bwd = fwd[::-1]
-        L.op.gauss_seidel(X, B, fwd)
+        L.op.gauss_seidel_from_zero(X, B, fwd)
         R = L.op.residual(X, B)
         ncg = L.n // 2
         Rc = np.empty((3 * ncg ** 3, k))

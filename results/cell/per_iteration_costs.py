@@ -9,10 +9,11 @@ only (since session 11, homogenize.cell.MATFREE_INTERFACE_SWEEPS), and one whole
 sweeps, the residual, the transfers and the assembled 32^3 grid's AMG cycle). Also the share of
 fine nodes that read their own stencil row (next to a cut voxel or a phase boundary) and the
 share of interface nodes (those grown by MATFREE_INTERFACE_HALO nodes).
-The committed JSON is session 8's: no interface sweeps then (no interface_sweep_s column, the
-V-cycle without them). A run in session 11 on a machine ~1.6x slower than in session 8 (k = 7:
-product 0.091 s, full sweep 0.125 s, interface sweep 0.049 s, V-cycle 0.59 s) was not committed
-(results/cell/README.md, "Local sweeps at the interfaces").
+Since session 13 also the pre-smoothing sweep from zero, plain and skipping the neighbours that
+are still zero (``MatFreeOperator.gauss_seidel_from_zero``, both after zeroing the block), and the
+V-cycle with the plain first sweep (as before session 13) next to the present one; these two
+pairs are timed alternately, medians of 9 each.
+Before session 13 the committed JSON was session 8's (no interface sweeps then).
 
 Timings depend on the machine's load: run it alone.
 Run: .venv/bin/python results/cell/per_iteration_costs.py [--voxels 64] [--out F]   (~1 min)
@@ -42,6 +43,25 @@ def _median_time(f, reps=5):
     return float(np.median(ts))
 
 
+def _paired_medians(f, g, reps=9):
+    """Medians of f's and g's timings taken alternately (f, g, f, g, ...), so that both see
+    the same machine state."""
+    f(), g()
+    tf, tg = [], []
+    for _ in range(reps):
+        for fun, ts in ((f, tf), (g, tg)):
+            t0 = time.perf_counter()
+            fun()
+            ts.append(time.perf_counter() - t0)
+    return float(np.median(tf)), float(np.median(tg))
+
+
+def plain_first_sweep(op):
+    """A stand-in for ``op.gauss_seidel_from_zero`` that runs the plain sweep (the V-cycle as
+    before session 13)."""
+    return lambda X, B, colours: op.gauss_seidel(X, B, colours)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--voxels", type=int, default=64)
@@ -64,7 +84,20 @@ def main():
                "gauss_seidel_sweep_s": _median_time(lambda: op.gauss_seidel(X, B, fine.colours)),
                "interface_sweep_s": _median_time(
                    lambda: op.gauss_seidel(X, B, fine.interface_colours)),
-               "v_cycle_s": _median_time(lambda: M @ B)}
+               # the V-cycle's pre-smoothing sweep from zero: X zeroed, then the plain sweep or
+               # the one that skips the neighbours still zero (session 13)
+               }
+        row["zero_then_sweep_s"], row["zero_then_sweep_from_zero_s"] = _paired_medians(
+            lambda: (X.fill(0.0), op.gauss_seidel(X, B, fine.colours)),
+            lambda: (X.fill(0.0), op.gauss_seidel_from_zero(X, B, fine.colours)))
+        from_zero, plain = op.gauss_seidel_from_zero, plain_first_sweep(op)
+
+        def cycle(first):
+            op.gauss_seidel_from_zero = first
+            return M @ B
+        row["v_cycle_s"], row["v_cycle_plain_first_sweep_s"] = _paired_medians(
+            lambda: cycle(from_zero), lambda: cycle(plain))
+        del op.gauss_seidel_from_zero
         row["v_cycle_per_column_s"] = row["v_cycle_s"] / k
         rows.append(row)
         print(" ".join(f"{key} {v:.4f}" if isinstance(v, float) else f"{key} {v}"
