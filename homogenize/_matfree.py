@@ -372,7 +372,11 @@ class MatFreeOperator:
         colours in order (:func:`grid_colours`), that first sweep skips the neighbours that are
         still zero (same result to the last bit, ~half the work of a sweep)."""
         n = self.n
-        if n % 2 or len(colours) < 8:
+
+        def parity(p):
+            return (p % n) % 2 + 2 * ((p // n) % n % 2) + 4 * ((p // (n * n)) % 2)
+        if n % 2 or len(colours) < 8 or any(c.size and parity(int(c[0])) != i
+                                            for i, c in enumerate(colours[:8])):
             return self.gauss_seidel(X, B, colours)
         k = X.shape[1]
         rows = max(c.size for c in colours)

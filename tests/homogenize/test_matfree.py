@@ -141,6 +141,11 @@ def test_gauss_seidel_from_zero_skips_only_zeros(n):
     op.gauss_seidel(X1, B, cols)
     op.gauss_seidel_from_zero(X2, B, cols)
     assert not np.array_equal(X1, X2)
+    # classes that are not the parity colours in order: the plain sweep runs
+    X1, X2 = np.zeros_like(B), np.zeros_like(B)
+    op.gauss_seidel(X1, B, cols[::-1])
+    op.gauss_seidel_from_zero(X2, B, cols[::-1])
+    assert np.array_equal(X1, X2)
 
 
 def test_gauss_seidel_from_zero_odd_grid_falls_back():
