@@ -1,0 +1,206 @@
+"""Particle-patch smoothing in the matrix-free V-cycle (session 13, an experiment, NOT in mapsim):
+the numbers behind "Particle patches" in results/cell/README.md.
+
+One patch per particle: the fine-grid nodes within r + delta voxels of its centre (periodic; the
+pinned node left out). The patch's principal submatrix of K, assembled from the operator's own
+stencil rows (homogenize._matfree.node_stencils), is factorized densely (Cholesky). In the V-cycle
+the patches are solved one after the other (multiplicative Schwarz):
+- after the fine level's pre-smoothing, in particle order;
+- before its post-smoothing, in reverse order.
+So the preconditioner stays symmetric. Every particle then sits whole inside a subdomain with an
+exact local solve. Overlapping Schwarz with inclusions inside the subdomains is the setting in
+which two-level methods are robust to the contrast (Graham, Lechner & Scheichl, Numer. Math. 106,
+2007).
+
+For each RVE:
+- the default matrix-free solver at tol 1e-6 and 1e-8;
+- the same with the patches (delta = 1 voxel) at 1e-6, 1e-8 and 1e-10;
+- a reference (default solver, tol 1e-10) for the errors of E_eff and of the magnetic stress
+  (the largest component's error over the largest reference component).
+The magnetic column stops at homogenize.cell.magnetic_tol(tol) = sqrt(tol) throughout. Iterations
+are deterministic. Seconds are NOT comparable: the patch loop here is Python, one numba call per
+patch.
+
+A `geometry` row per RVE gives the patch sizes (nodes) and the memory of the dense factors,
+(3 nodes)^2 x 8 B per patch. The (128, 128) row is geometry only: the 128^3 bench RVE, which
+this script does not solve.
+
+RVEs: homogenize.bench.cell._rve(rve_voxels) on `voxels`^3, random particle forces:
+(64, 32): 100 particles of 1.25 voxels mean radius; (128, 64): 801 of 1.25 voxels (the hard
+case of multigrid_robustness); (64, 64): the 64^3 bench RVE, 100 particles of ~2.5 voxels.
+
+Run: .venv/bin/python results/cell/particle_patch_experiments.py [--missing]   (~25 min)
+"""
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+JSON = HERE / "particle_patch_experiments.json"
+RVES = [(64, 32), (128, 64), (64, 64)]
+GEOMETRY_ONLY = [(128, 128)]
+DELTA = 1.0
+VARIANTS = [("reference", 1e-10), ("default", 1e-6), ("default", 1e-8), ("patches", 1e-6),
+            ("patches", 1e-8), ("patches", 1e-10)]
+
+
+def patch_nodes(rve, n: int, delta: float, pin: int = -1) -> list:
+    """Per particle: the fine nodes (index i + n (j + n k), position (i, j, k) h) within
+    r + delta voxels of its centre, periodic; the pinned node left out."""
+    h = rve.box_m / n
+    out = []
+    for c, r in zip(np.asarray(rve.centers_m) / h, np.asarray(rve.radii_m) / h):
+        R = r + delta
+        lo, hi = np.floor(c - R).astype(int), np.ceil(c + R).astype(int)
+        I, J, K = np.meshgrid(*[np.arange(lo[d], hi[d] + 1) for d in range(3)], indexing="ij")
+        m = (I - c[0]) ** 2 + (J - c[1]) ** 2 + (K - c[2]) ** 2 <= R * R
+        nodes = np.unique((I[m] % n) + n * ((J[m] % n) + n * (K[m] % n))).astype(np.int64)
+        out.append(nodes[nodes != pin])
+    return out
+
+
+def patch_matrix(op, nodes) -> np.ndarray:
+    """Dense principal submatrix K[nodes, nodes] (pinned operator) from the stencil rows."""
+    n = op.n
+    loc = np.full(n ** 3, -1, np.int64)
+    loc[nodes] = np.arange(nodes.size)
+    i, j, k = nodes % n, (nodes // n) % n, nodes // (n * n)
+    rows = op.S[op.stype[nodes]]                      # (m, 27, 3, 3)
+    A = np.zeros((nodes.size, 3, nodes.size, 3))
+    for s in range(27):
+        dx, dy, dz = s % 3 - 1, (s // 3) % 3 - 1, s // 9 - 1
+        q = loc[((i + dx) % n) + n * (((j + dy) % n) + n * ((k + dz) % n))]
+        a = np.flatnonzero(q >= 0)
+        A[a, :, q[a], :] = rows[a, s]
+    return A.reshape(3 * nodes.size, 3 * nodes.size)
+
+
+class PatchedCycle:
+    """GeometricVCycle._cycle with the particle patches solved after the fine pre-smoothing and
+    before the fine post-smoothing (reverse order)."""
+
+    def __init__(self, rve, delta):
+        self.rve, self.delta, self.patches = rve, delta, None
+
+    def _build(self, op):
+        from scipy.linalg import cho_factor
+        self.patches = [(nodes, cho_factor(patch_matrix(op, nodes)))
+                        for nodes in patch_nodes(self.rve, op.n, self.delta, op.pin)]
+
+    def _sweep(self, op, X, B, order):
+        from scipy.linalg import cho_solve
+        k = X.shape[1]
+        Xv = X.reshape(-1, 3, k)
+        for t in order:
+            nodes, fac = self.patches[t]
+            r = np.empty((nodes.size, 3, k))
+            op._run(nodes, X, B, r, 1)                # residual on the patch rows
+            Xv[nodes] += cho_solve(fac, r.reshape(-1, k)).reshape(-1, 3, k)
+
+    def __call__(self, vcycle, i, B, _orig):
+        from homogenize import _matfree as mf
+        if i != 0:
+            return _orig(vcycle, i, B)
+        L = vcycle.levels[0]
+        op = L.op
+        if self.patches is None:
+            self._build(op)
+        k = B.shape[1]
+        X = np.zeros_like(B)
+        fwd = ([L.colours[c] for c in range(len(L.colours))] * vcycle.sweeps
+               + L.interface_colours * vcycle.interface_sweeps)
+        op.gauss_seidel_from_zero(X, B, fwd)
+        self._sweep(op, X, B, range(len(self.patches)))
+        R = op.residual(X, B)
+        nc = L.n // 2
+        Rc = np.empty((3 * nc ** 3, k))
+        mf.restrict(nc, R.reshape(-1, 3, k), Rc.reshape(-1, 3, k))
+        Xc = np.ascontiguousarray(_orig(vcycle, 1, Rc))
+        mf.prolong_add(nc, Xc.reshape(-1, 3, k), X.reshape(-1, 3, k))
+        self._sweep(op, X, B, range(len(self.patches) - 1, -1, -1))
+        op.gauss_seidel(X, B, fwd[::-1])
+        return X
+
+
+def geometry_row(rve_voxels: int, voxels: int) -> dict:
+    from homogenize.bench.cell import _rve
+    rve = _rve(rve_voxels, 1)
+    sizes = np.array([p.size for p in patch_nodes(rve, voxels, DELTA)])
+    return {"variant": "geometry", "rve_voxels": rve_voxels, "voxels": voxels,
+            "n_particles": int(rve.n), "delta_voxels": DELTA,
+            "patch_nodes_mean": float(sizes.mean()), "patch_nodes_max": int(sizes.max()),
+            "patch_node_share": float(sizes.sum() / voxels ** 3),
+            "dense_factors_GB": float((9 * sizes.astype(float) ** 2 * 8).sum() / 1e9)}
+
+
+def run_rve(rve_voxels: int, voxels: int) -> list:
+    from unittest import mock
+
+    import homogenize.cell as cell
+    from homogenize import _matfree as mf
+    from homogenize.bench.cell import _rve
+    rve = _rve(rve_voxels, 1)
+    forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
+    orig = mf.GeometricVCycle._cycle
+    rows = [geometry_row(rve_voxels, voxels)]
+    ref = None
+    for variant, tol in VARIANTS:
+        patched = PatchedCycle(rve, DELTA)
+        ctx = (mock.patch.object(mf.GeometricVCycle, "_cycle",
+                                 lambda self, i, B: patched(self, i, B, orig))
+               if variant == "patches" else mock.patch.object(cell, "MATFREE_BLOCK_CG",
+                                                              cell.MATFREE_BLOCK_CG))
+        with ctx:
+            t0 = time.perf_counter()
+            r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", tol=tol)
+            sec = time.perf_counter() - t0
+        sm = np.asarray(r.stress_mag_Pa)
+        if variant == "reference":
+            ref = (r.E_eff_Pa, sm)
+        it = r.iterations
+        rows.append({"variant": variant, "tol": tol, "rve_voxels": rve_voxels, "voxels": voxels,
+                     "n_particles": int(rve.n), "iterations": it,
+                     "max_strain_iterations": max(v for c, v in it.items() if c != "magnetic"),
+                     "magnetic_iterations": it["magnetic"], "E_eff_Pa": r.E_eff_Pa,
+                     "E_eff_error_rel": abs(r.E_eff_Pa - ref[0]) / ref[0],
+                     "stress_mag_error_rel": float(np.abs(sm - ref[1]).max()
+                                                   / np.abs(ref[1]).max()),
+                     "seconds": sec})
+    return rows
+
+
+def main() -> None:
+    if sys.argv[1:2] == ["--one"]:
+        print(json.dumps(run_rve(int(sys.argv[2]), int(sys.argv[3]))))
+        return
+    sys.path.insert(0, str(HERE))
+    import _resumable
+    out, rows = _resumable.parse(__doc__, JSON)
+    have = {(r["rve_voxels"], r["voxels"]) for r in rows}
+    for a, b in GEOMETRY_ONLY:
+        if (a, b) not in have:
+            rows.append(geometry_row(a, b))
+    for a, b in RVES:
+        if (a, b) in have:
+            continue
+        res = subprocess.run([sys.executable, __file__, "--one", str(a), str(b)],
+                             check=True, capture_output=True, text=True)
+        new = json.loads(res.stdout.strip().splitlines()[-1])
+        rows.extend(new)
+        for r in new:
+            print({k: r[k] for k in r if k in ("variant", "tol", "rve_voxels", "voxels",
+                                               "max_strain_iterations", "magnetic_iterations",
+                                               "E_eff_error_rel", "stress_mag_error_rel",
+                                               "patch_nodes_mean", "dense_factors_GB")},
+                  flush=True)
+        _resumable.write(out, rows, "results/cell/particle_patch_experiments.py",
+                         "iterations deterministic; seconds not comparable (the patch loop is "
+                         "Python); errors against the default solver at tol 1e-10")
+
+
+if __name__ == "__main__":
+    main()
