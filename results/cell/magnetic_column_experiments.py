@@ -217,12 +217,9 @@ def main() -> None:
     if sys.argv[1:2] == ["--one"]:
         print(json.dumps(one(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
         return
-    full = "--full" in sys.argv
-    if full:
-        sys.argv.remove("--full")
     sys.path.insert(0, str(HERE))
     import _resumable
-    out, rows = _resumable.parse(__doc__, JSON)
+    out, rows, full = _resumable.parse(__doc__, JSON, with_full=True)
     key = ("variant", "rve_voxels", "voxels")
     plan = PLAN + (FULL_PLAN if full else [])
     have = {tuple(r[k] for k in key) for r in rows}

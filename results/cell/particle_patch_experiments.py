@@ -29,7 +29,9 @@ RVEs: homogenize.bench.cell._rve(rve_voxels) on `voxels`^3, random particle forc
 (64, 32): 100 particles of 1.25 voxels mean radius; (128, 64): 801 of 1.25 voxels (the hard
 case of multigrid_robustness); (64, 64): the 64^3 bench RVE, 100 particles of ~2.5 voxels.
 
-Run: .venv/bin/python results/cell/particle_patch_experiments.py [--missing]   (~25 min)
+Run: .venv/bin/python results/cell/particle_patch_experiments.py [--missing] [--full]
+     (~25 min; --full adds the patches alone on the 128^3 bench RVE at tol 1e-8, ~20 min, peak
+     ~10 GB: the dense factors take 4.1 GB)
 """
 import json
 import subprocess
@@ -173,13 +175,49 @@ def run_rve(rve_voxels: int, voxels: int) -> list:
     return rows
 
 
+def run_patches_only(rve_voxels: int, voxels: int, tol: float) -> list:
+    """The patches alone at one tol (no reference, no errors): the 128^3 bench RVE, whose
+    default solve is in results/bench/cell.json (70-94 / 190 iterations at tol 1e-6)."""
+    import resource
+    from unittest import mock
+
+    import homogenize.cell as cell
+    from homogenize import _matfree as mf
+    from homogenize.bench.cell import _rve
+    rve = _rve(rve_voxels, 1)
+    forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
+    orig = mf.GeometricVCycle._cycle
+    patched = PatchedCycle(rve, DELTA)
+    with mock.patch.object(mf.GeometricVCycle, "_cycle",
+                           lambda self, i, B: patched(self, i, B, orig)):
+        t0 = time.perf_counter()
+        r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", tol=tol)
+        sec = time.perf_counter() - t0
+    it = r.iterations
+    return [{"variant": "patches", "tol": tol, "rve_voxels": rve_voxels, "voxels": voxels,
+             "n_particles": int(rve.n), "iterations": it,
+             "max_strain_iterations": max(v for c, v in it.items() if c != "magnetic"),
+             "magnetic_iterations": it["magnetic"], "E_eff_Pa": r.E_eff_Pa,
+             "E_eff_error_rel": None, "stress_mag_error_rel": None, "seconds": sec,
+             "peak_rss_GB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9}]
+
+
+#: with --full: the patches on the 128^3 bench RVE (~20 min, peak ~10 GB: beyond the issue's
+#: 6 GB, this only counts iterations)
+FULL_CASES = [(128, 128, 1e-8)]
+
+
 def main() -> None:
     if sys.argv[1:2] == ["--one"]:
         print(json.dumps(run_rve(int(sys.argv[2]), int(sys.argv[3]))))
         return
+    if sys.argv[1:2] == ["--patches-only"]:
+        print(json.dumps(run_patches_only(int(sys.argv[2]), int(sys.argv[3]),
+                                          float(sys.argv[4]))))
+        return
     sys.path.insert(0, str(HERE))
     import _resumable
-    out, rows = _resumable.parse(__doc__, JSON)
+    out, rows, full = _resumable.parse(__doc__, JSON, with_full=True)
     have = {(r["rve_voxels"], r["voxels"]) for r in rows}
     for a, b in GEOMETRY_ONLY:
         if (a, b) not in have:
@@ -200,6 +238,18 @@ def main() -> None:
         _resumable.write(out, rows, "results/cell/particle_patch_experiments.py",
                          "iterations deterministic; seconds not comparable (the patch loop is "
                          "Python); errors against the default solver at tol 1e-10")
+    for a, b, tol in (FULL_CASES if full else []):
+        if any(r["variant"] == "patches" and (r["rve_voxels"], r["voxels"]) == (a, b)
+               for r in rows):
+            continue
+        res = subprocess.run([sys.executable, __file__, "--patches-only", str(a), str(b),
+                              str(tol)], check=True, capture_output=True, text=True)
+        rows.extend(json.loads(res.stdout.strip().splitlines()[-1]))
+        print({k: v for k, v in rows[-1].items() if k != "iterations"}, flush=True)
+        _resumable.write(out, rows, "results/cell/particle_patch_experiments.py --full",
+                         "iterations deterministic; seconds not comparable (the patch loop is "
+                         "Python); errors against the default solver at tol 1e-10 (none for "
+                         "the 128^3 patches-only row)")
 
 
 if __name__ == "__main__":
