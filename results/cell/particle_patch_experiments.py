@@ -30,8 +30,8 @@ RVEs: homogenize.bench.cell._rve(rve_voxels) on `voxels`^3, random particle forc
 case of multigrid_robustness); (64, 64): the 64^3 bench RVE, 100 particles of ~2.5 voxels.
 
 Run: .venv/bin/python results/cell/particle_patch_experiments.py [--missing] [--full]
-     (~25 min; --full adds the patches alone on the 128^3 bench RVE at tol 1e-8, ~20 min, peak
-     ~10 GB: the dense factors take 4.1 GB)
+     (~25 min; --full adds the patches alone on the 128^3 bench RVE at tol 1e-8, ~7 min, peak
+     9.4 GB: the dense factors take 4.1 GB; and shells of 0.5 and 2 voxels on the hard case)
 """
 import json
 import subprocess
@@ -175,7 +175,7 @@ def run_rve(rve_voxels: int, voxels: int) -> list:
     return rows
 
 
-def run_patches_only(rve_voxels: int, voxels: int, tol: float) -> list:
+def run_patches_only(rve_voxels: int, voxels: int, tol: float, delta: float = DELTA) -> list:
     """The patches alone at one tol (no reference, no errors): the 128^3 bench RVE, whose
     default solve is in results/bench/cell.json (70-94 / 190 iterations at tol 1e-6)."""
     import resource
@@ -187,14 +187,17 @@ def run_patches_only(rve_voxels: int, voxels: int, tol: float) -> list:
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     orig = mf.GeometricVCycle._cycle
-    patched = PatchedCycle(rve, DELTA)
+    patched = PatchedCycle(rve, delta)
     with mock.patch.object(mf.GeometricVCycle, "_cycle",
                            lambda self, i, B: patched(self, i, B, orig)):
         t0 = time.perf_counter()
         r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", tol=tol)
         sec = time.perf_counter() - t0
     it = r.iterations
+    sizes = np.array([p[0].size for p in patched.patches])
     return [{"variant": "patches", "tol": tol, "rve_voxels": rve_voxels, "voxels": voxels,
+             "delta_voxels": delta, "patch_nodes_mean": float(sizes.mean()),
+             "dense_factors_GB": float((9 * sizes.astype(float) ** 2 * 8).sum() / 1e9),
              "n_particles": int(rve.n), "iterations": it,
              "max_strain_iterations": max(v for c, v in it.items() if c != "magnetic"),
              "magnetic_iterations": it["magnetic"], "E_eff_Pa": r.E_eff_Pa,
@@ -202,9 +205,10 @@ def run_patches_only(rve_voxels: int, voxels: int, tol: float) -> list:
              "peak_rss_GB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9}]
 
 
-#: with --full: the patches on the 128^3 bench RVE (~20 min, peak ~10 GB: beyond the issue's
-#: 6 GB, this only counts iterations)
-FULL_CASES = [(128, 128, 1e-8)]
+#: with --full, (rve_voxels, voxels, tol, delta): the patches on the 128^3 bench RVE (~7 min,
+#: peak 9.4 GB: beyond the issue's 6 GB, this only counts iterations), and the patch shell's
+#: width on the hard case (E_eff error against its reference row)
+FULL_CASES = [(128, 128, 1e-8, 1.0), (128, 64, 1e-8, 0.5), (128, 64, 1e-8, 2.0)]
 
 
 def main() -> None:
@@ -213,7 +217,7 @@ def main() -> None:
         return
     if sys.argv[1:2] == ["--patches-only"]:
         print(json.dumps(run_patches_only(int(sys.argv[2]), int(sys.argv[3]),
-                                          float(sys.argv[4]))))
+                                          float(sys.argv[4]), float(sys.argv[5]))))
         return
     sys.path.insert(0, str(HERE))
     import _resumable
@@ -238,13 +242,20 @@ def main() -> None:
         _resumable.write(out, rows, "results/cell/particle_patch_experiments.py",
                          "iterations deterministic; seconds not comparable (the patch loop is "
                          "Python); errors against the default solver at tol 1e-10")
-    for a, b, tol in (FULL_CASES if full else []):
-        if any(r["variant"] == "patches" and (r["rve_voxels"], r["voxels"]) == (a, b)
+    for a, b, tol, delta in (FULL_CASES if full else []):
+        if any(r["variant"] == "patches" and (r["rve_voxels"], r["voxels"], r["tol"],
+                                              r.get("delta_voxels", DELTA)) == (a, b, tol, delta)
                for r in rows):
             continue
         res = subprocess.run([sys.executable, __file__, "--patches-only", str(a), str(b),
-                              str(tol)], check=True, capture_output=True, text=True)
-        rows.extend(json.loads(res.stdout.strip().splitlines()[-1]))
+                              str(tol), str(delta)], check=True, capture_output=True, text=True)
+        new = json.loads(res.stdout.strip().splitlines()[-1])
+        ref = [r for r in rows if r["variant"] == "reference"
+               and (r["rve_voxels"], r["voxels"]) == (a, b)]
+        if ref:
+            e_ref = ref[0]["E_eff_Pa"]
+            new[0]["E_eff_error_rel"] = abs(new[0]["E_eff_Pa"] - e_ref) / e_ref
+        rows.extend(new)
         print({k: v for k, v in rows[-1].items() if k != "iterations"}, flush=True)
         _resumable.write(out, rows, "results/cell/particle_patch_experiments.py --full",
                          "iterations deterministic; seconds not comparable (the patch loop is "
