@@ -356,13 +356,17 @@ class MatFreeOperator:
         self._run(self._all, X, B, out, 1)
         return out
 
-    def gauss_seidel(self, X, B, colours):
-        """Block Gauss-Seidel sweeps over the node colour classes ``colours``, in place in X."""
-        k = X.shape[1]
+    def _scratch(self, k, colours):
+        """Scratch of the largest colour class in ``colours`` for k columns (kept per k)."""
         rows = max(c.size for c in colours)
         tmp = self._tmp.get(k)
-        if tmp is None or tmp.shape[0] < rows:     # scratch of one colour class
+        if tmp is None or tmp.shape[0] < rows:
             tmp = self._tmp[k] = np.empty((rows, 3, k))
+        return tmp
+
+    def gauss_seidel(self, X, B, colours):
+        """Block Gauss-Seidel sweeps over the node colour classes ``colours``, in place in X."""
+        tmp = self._scratch(X.shape[1], colours)
         for c in colours:
             self._run(c, X, B, tmp, 2)
 
@@ -378,11 +382,7 @@ class MatFreeOperator:
         if n % 2 or len(colours) < 8 or any(c.size and parity(int(c[0])) != i
                                             for i, c in enumerate(colours[:8])):
             return self.gauss_seidel(X, B, colours)
-        k = X.shape[1]
-        rows = max(c.size for c in colours)
-        tmp = self._tmp.get(k)
-        if tmp is None or tmp.shape[0] < rows:
-            tmp = self._tmp[k] = np.empty((rows, 3, k))
+        tmp = self._scratch(X.shape[1], colours[:8])
         for c in colours[:8]:
             self._run(c, X, B, tmp, 3)
         if len(colours) > 8:

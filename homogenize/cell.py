@@ -750,8 +750,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 # local Gauss-Seidel sweeps per side over the interface nodes (matrix-free)
                 "interface_sweeps": (solver.M.interface_sweeps if solver.kind == "matrix-free"
                                      else 0),
-                # the load cases' CG: "coupled" (one block Krylov space, matrix-free) or
-                # "independent" (lock-step single-column CGs)
+                # the load cases' CG (MATFREE_BLOCK_CG for the matrix-free solver): "coupled",
+                # "strains" or "independent" (lock-step single-column CGs)
                 "block_cg": getattr(solver, "block_cg", "independent"),
                 "C_linear_error_rel": err_lin, "stress_mag_linear_error_rel": err_stress,
                 "virial_from_dipoles": virial_stress_Pa is not None}
