@@ -34,6 +34,7 @@ from micro._numba import parallel_and_serial
 
 from . import _assembly as asm
 from . import _kernels as kn
+from . import _patches
 from ._kernels import block_acc
 
 __all__ = ["ElementField", "element_field", "MatFreeOperator", "coarsen", "GeometricVCycle",
@@ -567,20 +568,23 @@ class GeometricVCycle:
     a phase boundary, grown by ``interface_halo`` nodes): extra sweeps confined to where the
     error the trilinear coarse grid cannot take is ("local relaxation", as Brandt & Livne,
     Multigrid Techniques, 2nd ed. 2011, use it near singularities).
-    Pre-smoothing: the full sweeps, then the interface ones; post-smoothing: the same in reverse
-    order and colours, so the cycle stays symmetric.
+    patches : None or a :class:`homogenize._patches.ParticlePatches` of the fine operator: its
+    forward sweep after the fine pre-smoothing, its backward sweep before the fine post-smoothing.
+    Pre-smoothing: the full sweeps, then the interface ones (then the patches); post-smoothing: the
+    same in reverse order and colours, so the cycle stays symmetric.
     """
 
     def __init__(self, field: ElementField, *, pin: int, pin_scale: float, h: float,
                  amg_options: dict, assembled_max: int = 64, fine_op: MatFreeOperator | None = None,
                  sweeps: int = 1, coarse: str = "amg", interface_sweeps: int = 0,
-                 interface_halo: int = 1):
+                 interface_halo: int = 1, patches=None):
         import pyamg
         from ._amg import BlockVCycle
         if coarse not in ("amg", "lu"):
             raise ValueError(f"coarse must be 'amg' or 'lu', got {coarse!r}")
         self.levels = []
         self.sweeps = int(sweeps)
+        self.patches = patches
         f, p, hh = field, pin, h
         op = fine_op if fine_op is not None else MatFreeOperator(f, p, pin_scale)
         self.interface_sweeps = int(interface_sweeps)
@@ -645,6 +649,8 @@ class GeometricVCycle:
                + L.interface_colours * self.interface_sweeps)
         bwd = fwd[::-1]
         L.op.gauss_seidel_from_zero(X, B, fwd)
+        if i == 0 and self.patches is not None:
+            self.patches.forward(X, B)
         R = L.op.residual(X, B)
         ncg = L.n // 2
         Rc = np.empty((3 * ncg ** 3, k))
@@ -654,6 +660,8 @@ class GeometricVCycle:
         del Rc
         prolong_add(ncg, Xc.reshape(-1, 3, k), X.reshape(-1, 3, k))
         del Xc
+        if i == 0 and self.patches is not None:
+            self.patches.backward(X, B)
         L.op.gauss_seidel(X, B, bwd)
         return X
 
@@ -684,8 +692,9 @@ def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0
     voxels' own 24x24 matrices (4.6 kB each, ``cut_fraction`` of the voxels on the fine level and
     half as many on the coarse one; the operator's own stencil rows, ~2 nodes of 1.9 kB per cut
     voxel, replace them once the hierarchy is built); the assembled (n/2)^3 Galerkin matrix with
-    its pyamg hierarchy (3 x 27 blocks of 72 B per coarse node); plus the Python/numba base
-    (0.6 GB).
+    its pyamg hierarchy (3 x 27 blocks of 72 B per coarse node); the particle patches' factors
+    at their limit (:data:`homogenize._patches.BYTES_PER_NODE` per node); plus the Python/numba
+    base (0.6 GB).
     Measured peak RSS (bench, 7 load cases, _rve(n) with cut voxels ~5 %): 0.32 GB at 32^3
     (model 0.71), 0.93 GB at 64^3 (model 1.50), 5.35 GB at 128^3 (model 7.8): the model is an
     upper bound, as the refusal before allocating needs.
@@ -695,4 +704,5 @@ def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0
     per_node = (2 * 72 + 16) * N
     cut = 1.5 * cut_fraction * N * 24 * 24 * 8
     coarse = 3 * 27 * 72 * (N // 8)
-    return int(vec + per_node + cut + coarse + 0.6e9)
+    patches = _patches.BYTES_PER_NODE * N
+    return int(vec + per_node + cut + coarse + patches + 0.6e9)

@@ -32,6 +32,8 @@ Segal & Meijerink 1999). ``solver="matrix-free"`` replaces the assembled fine ma
 by the matrix-free operator and geometric multigrid of :mod:`homogenize._matfree`, and couples
 the six strain cases in one deflated block CG (:data:`MATFREE_BLOCK_CG`): every strain column
 steps in the span of all their search directions; the magnetic column keeps its own recursion.
+Its V-cycle solves every particle with a shell of matrix exactly in the fine level
+(:data:`MATFREE_PATCH_SHELL`, :mod:`homogenize._patches`).
 """
 from __future__ import annotations
 
@@ -49,6 +51,7 @@ from micro.rve import minimum_image
 from . import _assembly as asm
 from . import _budget
 from . import _matfree as mf
+from ._patches import ParticlePatches
 from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
 from .mesh import METHODS, VoxelMesh, voxelize
@@ -280,6 +283,12 @@ class _CellSolver:
         self.matvec = op
         self.K = None
         t["amg_setup"] = time.perf_counter() - t0
+        if MATFREE_PATCH_SHELL is not None and self.mesh.n_particles:
+            # after the hierarchy: its setup's temporaries are gone before the factors come
+            t0 = time.perf_counter()
+            self.M.patches = ParticlePatches(op, self.mesh.centers_m / self.h,
+                                             self.mesh.radii_m / self.h, MATFREE_PATCH_SHELL)
+            t["patch_setup"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         self.Z = self._deflation_space(stiff_mask) if stiff_mask is not None else None
         self.deflation = self._deflation(
@@ -421,6 +430,20 @@ MATFREE_SWEEPS = 1
 #: at a fraction of the cost
 MATFREE_INTERFACE_SWEEPS = 1
 MATFREE_INTERFACE_HALO = 1
+#: solver="matrix-free": particle patches (homogenize._patches): the fine nodes within r + this
+#: many voxels of each particle's centre solved exactly in the fine level of the V-cycle (None:
+#: no patches). Measured in session 14 (results/cell/README.md "Particle patches in the solver",
+#: tol 1e-6, same error as without them): the 128^3 bench RVE 213 s and 5.8 GB against 584 s
+#: (strain / magnetic iterations 35 / 36 against 94 / 190); 801 particles of 1.25 voxels at
+#: 64^3 ~2x faster; 100 of 1.25 voxels at 32^3 ~1.2x faster; the 64^3 bench RVE (100 particles
+#: of ~2.5 voxels, which the multigrid alone handles in 23 / 37) ~1.15x slower. A 1-voxel shell
+#: took 188 s but 6.1 GB at 128^3 (18 / 35 iterations)
+MATFREE_PATCH_SHELL = 0.5
+#: with particle patches the CG's relative residual is tol * MATFREE_PATCH_TOL_FACTOR: their exact
+#: local solves leave little residual where much error is left (the iron's rows carry the norm),
+#: so at the same residual the error energy is up to ~1000x the default solver's; at tol / 100
+#: it is at most the default's in every column (results/cell/patch_stopping.py, three RVEs)
+MATFREE_PATCH_TOL_FACTOR = 1e-2
 #: solver="matrix-free": how the load cases' CGs share their search directions
 #: (homogenize._amg.coupled_block_cg): "coupled" -- one block CG, every column steps in the span
 #: of all the block's directions (the outlying eigenvalues the geometric V-cycle leaves are found
@@ -642,9 +665,16 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                                 refresh=True)
     # the magnetic column stops at magnetic_tol(tol) when only its variational mean stress is
     # used (all six strain solutions at hand, no fields kept); otherwise at tol like the strains
+    # with particle patches the CG runs to tol * MATFREE_PATCH_TOL_FACTOR (and the magnetic column
+    # to magnetic_tol of that): same error as without them at tol (MATFREE_PATCH_TOL_FACTOR)
+    patches = getattr(solver.M, "patches", None)
+    f_cg = MATFREE_PATCH_TOL_FACTOR if patches is not None else 1.0
     tol_mag = (float(tol_magnetic) if tol_magnetic is not None
                else magnetic_tol(tol) if len(cases) == 6 and not keep_fields else tol)
-    tols = [tol] * len(cases) + ([tol_mag] if forces_N is not None else [])
+    tol_mag_cg = (float(tol_magnetic) * f_cg if tol_magnetic is not None
+                  else magnetic_tol(tol * f_cg) if len(cases) == 6 and not keep_fields
+                  else tol * f_cg)
+    tols = [tol * f_cg] * len(cases) + ([tol_mag_cg] if forces_N is not None else [])
     W, histories = solver.solve(F, callback=callback, tols=tols, magnetic=forces_N is not None)
     if bar is not None:
         bar.close()
@@ -739,6 +769,9 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 "particle_E_Pa": particle.E_Pa, "particle_nu": particle.nu, "rigid": rigid,
                 "deflate": solver.Z is not None, "tol": tol,
                 "tol_magnetic": tol_mag if forces_N is not None else None,
+                # the relative residuals the CG ran to (tighter than tol with particle patches)
+                "tol_cg": tols[0] if cases else None,
+                "tol_magnetic_cg": tols[-1] if forces_N is not None else None,
                 "method": mesh.method,
                 "solver": solver.kind,
                 # no AMG below the geometric levels with MATFREE_COARSE = "lu" (a diagnostic)
@@ -753,6 +786,11 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 # the load cases' CG (MATFREE_BLOCK_CG for the matrix-free solver): "coupled",
                 # "strains" or "independent" (lock-step single-column CGs)
                 "block_cg": getattr(solver, "block_cg", "independent"),
+                # particle patches (matrix-free): the matrix shell around each particle [voxels],
+                # the particles with a patch, and the share of the grid nodes in a patch
+                "patch_shell_voxels": patches.shell_voxels if patches is not None else None,
+                "patched_particles": int(patches.particles.size) if patches is not None else 0,
+                "patch_node_share": patches.node_share if patches is not None else None,
                 "C_linear_error_rel": err_lin, "stress_mag_linear_error_rel": err_stress,
                 "virial_from_dipoles": virial_stress_Pa is not None}
     return CellResult(
@@ -808,7 +846,9 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         solution errors (``settings["tol_magnetic"]``; ``settings["stress_mag_linear_error_rel"]``,
         the error of the formula linear in the magnetic solution, was 16-8300 x larger than it
         where measured: results/cell/magnetic_tolerance.json). ``tol_magnetic`` sets it
-        explicitly, in (0, 1e-2].
+        explicitly, in (0, 1e-2]. With particle patches (matrix-free solver) the CG runs to
+        :data:`MATFREE_PATCH_TOL_FACTOR` x these (``settings["tol_cg"]``), which gives the error
+        of the solver without patches at ``tol``.
     keep_fields : bool -- keep the displacement fields (for VTU/PNG output)
     solver : {"fast", "reference", "matrix-free"} -- "fast" (default): numba assembly, all load
         cases in one block (CG in lock-step, block V-cycle with parallel multicolour Gauss-Seidel

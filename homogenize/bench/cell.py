@@ -214,6 +214,8 @@ def _matfree_records(sizes) -> list[dict]:
                "max_residual": m["max_residual"],
                "magnetic_residual": m.get("magnetic_residual"),
                "tol_magnetic": m.get("tol_magnetic"), "n_particles": m["n_particles"],
+               "patch_shell_voxels": m.get("patch_shell_voxels"),
+               "patched_particles": m.get("patched_particles"), "tol_cg": m.get("tol_cg"),
                "memory_estimate_GB": _budget.cell_memory_bytes(n, "matrix-free", 7) / 1e9,
                "target_seconds": t_target, "target_peak_rss_GB": gb_target,
                **({"reference_skipped": a["error"]} if "error" in a else {}), **_machine()}
@@ -291,6 +293,8 @@ def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
         C = r.C_eff_Pa
         extra = {"iterations": r.iterations, "E_eff_Pa": r.E_eff_Pa, "timings_s": r.timings_s,
                  "n_particles": r.n_particles, "solver": r.settings["solver"],
+                 **{k: r.settings.get(k) for k in ("patch_shell_voxels", "patched_particles",
+                                                   "tol_cg")},
                  **_residual_fields(r)}
     elif tool.startswith("full-"):               # 6 strains + magnetic load, given method
         rve = _rve(voxels, seed)

@@ -41,7 +41,8 @@ def one(rve_voxels: int, voxels: int, mode: str) -> dict:
     from homogenize.bench.cell import _rve
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
-    with mock.patch.object(cell, "MATFREE_BLOCK_CG", mode):
+    # no particle patches (session 14): the block CG modes as measured in session 12
+    with mock.patch.multiple(cell, MATFREE_BLOCK_CG=mode, MATFREE_PATCH_SHELL=None):
         t0 = time.perf_counter()
         r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free")
         sec = time.perf_counter() - t0

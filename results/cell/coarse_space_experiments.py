@@ -335,7 +335,7 @@ def run(case: dict) -> dict:
     # independent CG columns (homogenize.cell.MATFREE_BLOCK_CG, session 12); "trilinear-lu": the
     # geometric two-grid cycle with an exact coarse solve
     consts = mock.patch.multiple(
-        cell, MATFREE_INTERFACE_SWEEPS=0, MATFREE_BLOCK_CG="independent",
+        cell, MATFREE_INTERFACE_SWEEPS=0, MATFREE_BLOCK_CG="independent", MATFREE_PATCH_SHELL=None,
         MATFREE_COARSE="lu" if variant == "trilinear-lu" else cell.MATFREE_COARSE)
     consts.start()
     try:

@@ -188,7 +188,9 @@ def one(variant: str, rve_voxels: int, voxels: int) -> dict:
         seen["hist"] = h
         return X, h
     patches = [mock.patch.object(cell, "MATFREE_BLOCK_CG", mode),
-               mock.patch.object(cell, "coupled_block_cg", spy)]
+               mock.patch.object(cell, "coupled_block_cg", spy),
+               # the solver of session 13: no particle patches (the default since session 14)
+               mock.patch.object(cell, "MATFREE_PATCH_SHELL", None)]
     if variant == "history":                     # every column to 1e-6
         patches.append(mock.patch.object(cell, "magnetic_tol", lambda tol: tol))
     for p in patches:

@@ -47,7 +47,9 @@ def _rel(a, b, scale) -> float:
 # the matrix-free V-cycle as when the JSON was made (session 10): no interface sweeps
 # (homogenize.cell.MATFREE_INTERFACE_SWEEPS, session 11), independent CG columns
 # (homogenize.cell.MATFREE_BLOCK_CG, session 12)
-@mock.patch.multiple(cell, MATFREE_INTERFACE_SWEEPS=0, MATFREE_BLOCK_CG="independent")
+# and no particle patches (homogenize.cell.MATFREE_PATCH_SHELL, session 14)
+@mock.patch.multiple(cell, MATFREE_INTERFACE_SWEEPS=0, MATFREE_BLOCK_CG="independent",
+                     MATFREE_PATCH_SHELL=None)
 def study(voxels: int, solver: str = "matrix-free") -> list[dict]:
     rve = _rve(voxels)
     st = solve(rve, 0.1, 1.78, "frohlich-kennelly")

@@ -64,7 +64,9 @@ def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     with mock.patch.multiple(cell, MATFREE_COARSE=coarse or "amg",
                              MATFREE_INTERFACE_SWEEPS=interface_sweeps,
-                             MATFREE_BLOCK_CG=block_cg):
+                             MATFREE_BLOCK_CG=block_cg,
+                             # no particle patches (session 14): the multigrid as measured here
+                             MATFREE_PATCH_SHELL=None):
         t0 = time.perf_counter()
         r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver=solver,
                                 tol_magnetic=1e-6)

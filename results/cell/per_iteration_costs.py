@@ -68,6 +68,8 @@ def main():
     ap.add_argument("--out", type=Path, default=HERE / "per_iteration_costs.json")
     args = ap.parse_args()
     n = args.voxels
+    # the V-cycle of session 13, without particle patches (the default since session 14)
+    cell.MATFREE_PATCH_SHELL = None
     mesh = voxelize(_rve(n), n, method="composite")
     lam, mu, comp = cell._composite_fields(mesh, elastic(PDMS), elastic(FE))
     s = cell._CellSolver(mesh, lam, mu, deflate=True, stiff_mask=mesh.fraction >= 0.5, tol=1e-6,
