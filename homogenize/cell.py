@@ -32,8 +32,9 @@ Segal & Meijerink 1999). ``solver="matrix-free"`` replaces the assembled fine ma
 by the matrix-free operator and geometric multigrid of :mod:`homogenize._matfree`, and couples
 the six strain cases in one deflated block CG (:data:`MATFREE_BLOCK_CG`): every strain column
 steps in the span of all their search directions; the magnetic column keeps its own recursion.
-Its V-cycle solves every particle with a shell of matrix exactly in the fine level
-(:data:`MATFREE_PATCH_SHELL`, :mod:`homogenize._patches`).
+On RVEs of many or small particles (:func:`use_patches`) its V-cycle also solves every particle
+with a shell of matrix exactly in the fine level (:data:`MATFREE_PATCH_SHELL`,
+:mod:`homogenize._patches`).
 """
 from __future__ import annotations
 
@@ -283,7 +284,7 @@ class _CellSolver:
         self.matvec = op
         self.K = None
         t["amg_setup"] = time.perf_counter() - t0
-        if MATFREE_PATCH_SHELL is not None and self.mesh.n_particles:
+        if use_patches(self.mesh.n_particles, self.mesh.radii_m / self.h):
             # after the hierarchy: its setup's temporaries are gone before the factors come
             t0 = time.perf_counter()
             self.M.patches = ParticlePatches(op, self.mesh.centers_m / self.h,
@@ -432,17 +433,23 @@ MATFREE_INTERFACE_SWEEPS = 1
 MATFREE_INTERFACE_HALO = 1
 #: solver="matrix-free": particle patches (homogenize._patches): the fine nodes within r + this
 #: many voxels of each particle's centre solved exactly in the fine level of the V-cycle (None:
-#: no patches). Measured in session 14 (results/cell/README.md "Particle patches in the solver",
-#: tol 1e-6, same error as without them): the 128^3 bench RVE 213 s and 5.8 GB against 584 s
-#: (strain / magnetic iterations 35 / 36 against 94 / 190); 801 particles of 1.25 voxels at
-#: 64^3 ~2x faster; 100 of 1.25 voxels at 32^3 ~1.2x faster; the 64^3 bench RVE (100 particles
-#: of ~2.5 voxels, which the multigrid alone handles in 23 / 37) ~1.15x slower. A 1-voxel shell
-#: took 188 s but 6.1 GB at 128^3 (18 / 35 iterations)
+#: never), built when :func:`use_patches` says so. A 1-voxel shell took 188 s but 6.1 GB at 128^3
+#: (18 / 35 iterations), half a voxel 213-219 s and 5.8 GB (35 / 36)
 MATFREE_PATCH_SHELL = 0.5
+#: the patches are built for RVEs of at least this many particles, or whose particles' mean radius
+#: is below MATFREE_PATCH_SMALL_RADIUS_VOXELS. Measured (results/cell/README.md "Particle patches
+#: in the solver", sessions 14-15; tol 1e-6, whole homogenize_rve, one process each): the bench
+#: RVEs of ~2.5-voxel particles, patches against none: 13 particles at 32^3 1.8 / 1.6 s,
+#: 42 at 48^3 9.5 / 9.1 s, 100 at 64^3 22-23 / 18-19 s (the multigrid alone needs only 23 / 37
+#: iterations there), 338 at 96^3 81 / 99 s, 801 at 128^3 219 / 584 s; particles of ~1.25 voxels:
+#: 100 at 32^3 ~1.2x faster, 801 at 64^3 ~2x faster with the patches
+MATFREE_PATCH_MIN_PARTICLES = 200
+MATFREE_PATCH_SMALL_RADIUS_VOXELS = 2.0
 #: with particle patches the CG's relative residual is tol * MATFREE_PATCH_TOL_FACTOR: their exact
-#: local solves leave little residual where much error is left (the iron's rows carry the norm),
-#: so at the same residual the error energy is up to ~1000x the default solver's; at tol / 100
-#: it is at most the default's in every column (results/cell/patch_stopping.py, three RVEs)
+#: local solves leave little residual where much error is left, so at the same residual the
+#: error energy is up to ~1000x the default solver's; at tol / 100 it is at most the default's at
+#: tol in every column of three RVEs (results/cell/patch_stopping.json; results/cell/README.md
+#: "Particle patches in the solver")
 MATFREE_PATCH_TOL_FACTOR = 1e-2
 #: solver="matrix-free": how the load cases' CGs share their search directions
 #: (homogenize._amg.coupled_block_cg): "coupled" -- one block CG, every column steps in the span
@@ -479,6 +486,16 @@ def magnetic_tol(tol: float) -> float:
     1e-3 changes the elastic magnetic stress by 8e-9 to 8e-6 of itself on 32^3 and 64^3 bench
     RVEs, results/cell/magnetic_tolerance.json). Never tighter than ``tol`` (tol <= 1e-2), never looser than 1e-2."""
     return float(min(np.sqrt(tol), 1e-2))
+
+
+def use_patches(n_particles: int, radii_voxels) -> bool:
+    """Whether the matrix-free solver builds particle patches for an RVE of ``n_particles``
+    particles of radii ``radii_voxels`` [voxels] (:data:`MATFREE_PATCH_SHELL`,
+    :data:`MATFREE_PATCH_MIN_PARTICLES`, :data:`MATFREE_PATCH_SMALL_RADIUS_VOXELS`)."""
+    if MATFREE_PATCH_SHELL is None or n_particles == 0:
+        return False
+    return (n_particles >= MATFREE_PATCH_MIN_PARTICLES
+            or float(np.mean(radii_voxels)) < MATFREE_PATCH_SMALL_RADIUS_VOXELS)
 
 
 def _choose_solver(solver: str, voxels: int, n_cases: int) -> str:

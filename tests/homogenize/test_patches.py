@@ -199,3 +199,15 @@ def test_patches_cut_iterations_on_small_particles(monkeypatch):
                 / np.abs(ref.stress_mag_Pa).max())
     e0, e1 = err(out[None]), err(out[0.5])
     assert e1[0] <= max(2 * e0[0], 1e-9) and e1[1] <= max(2 * e0[1], 1e-9), (e0, e1)
+
+
+def test_patch_rule(monkeypatch):
+    """Patches for many particles or small ones (homogenize.cell.use_patches), none for the
+    64^3 bench RVE's 100 particles of ~2.5 voxels (where they cost more than they save), none
+    without particles or with MATFREE_PATCH_SHELL = None."""
+    assert not C.use_patches(100, np.full(100, 2.5))
+    assert C.use_patches(C.MATFREE_PATCH_MIN_PARTICLES, np.full(C.MATFREE_PATCH_MIN_PARTICLES, 2.5))
+    assert C.use_patches(100, np.full(100, 1.25))
+    assert not C.use_patches(0, np.zeros(0))
+    monkeypatch.setattr(C, "MATFREE_PATCH_SHELL", None)
+    assert not C.use_patches(1000, np.full(1000, 1.0))
