@@ -5,11 +5,13 @@ Public API is what ``__all__`` lists; modules starting with ``_`` are private. T
 ``macro``, ``experiments``, ``studies``, ``bench`` and ``cli`` are imported on their own.
 """
 from .cell import CellConfig, CellResult, Material, homogenize, homogenize_mesh, homogenize_rve
+from .cut import CutResult, homogenize_cut
 from .mesh import VoxelMesh, voxelize
 from .tables import Table, read_table, run_batch
 from ._study import Study, load_study
 
 __all__: list[str] = [
     "CellConfig", "CellResult", "Material", "homogenize", "homogenize_rve", "homogenize_mesh",
+    "CutResult", "homogenize_cut",
     "VoxelMesh", "voxelize", "Table", "read_table", "run_batch", "Study", "load_study",
 ]

@@ -248,7 +248,10 @@ def _solve_cg(K, F, xyz, master, basis, phase, centres, free, tol):
                                            # pseudo-inverse (measured on the dilute-sphere P2
                                            # meshes: 45 of 63 s at 23k DOF; 118k DOF 18 min /
                                            # 9.3 GB -> 4 min / 3.6 GB, same C to 5e-11)
-                                           coarse_solver="splu")
+                                           coarse_solver="splu",
+                                           # Gershgorin weights: pyamg's default spectral-radius
+                                           # estimate starts from np.random.rand (not repeatable)
+                                           smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}))
     pre = ml.aspreconditioner(cycle="V")
     # deflation: the rigid modes of each particle at the DOFs of its elements
     dofs_elem = basis.element_dofs                           # (30, n_tets) unfolded DOFs

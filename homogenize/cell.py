@@ -232,8 +232,11 @@ class _CellSolver:
             self.M = BlockVCycle(self.ml, fine_colours=grid_colours(self.n))
             self.matvec = BSROp(K)
         else:
-            self.ml = pyamg.smoothed_aggregation_solver(K, B=B, symmetry="hermitian",
-                                                        max_coarse=300, coarse_solver="splu")
+            # pyamg's own hierarchy, but with Gershgorin smoother weights: its default spectral-
+            # radius estimate starts from np.random.rand, so two calls differed at the tolerance
+            self.ml = pyamg.smoothed_aggregation_solver(
+                K, B=B, symmetry="hermitian", max_coarse=300, coarse_solver="splu",
+                smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}))
             pre = self.ml.aspreconditioner(cycle="V")
             self.M = lambda R: np.stack([pre @ R[:, c] for c in range(R.shape[1])], axis=1)
             self.matvec = K.__matmul__

@@ -1,12 +1,14 @@
 """Cut-cell experiments for issue 15's "dilute rate about second order": why composite voxels are
 first order at Fe/PDMS contrast, and a discretization of the same voxel grid that is second order.
 
-The experimental discretizations live in this script, not in mapsim (like coarse_space_experiments).
-All use the project's periodic Q1 voxel grid (homogenize._assembly: node i + n (j + n k), SRI
-element in the voxels that no interface cuts) and a nodal level set phi (< 0: iron, > 0: PDMS).
-A voxel is CUT when its corner values change sign; its 6 Kuhn tetrahedra (all along the main
-diagonal, so the faces match between voxels) are split exactly by the plane of the linear
-interpolant of phi, which gives the discrete interface (planar facets, O(h^2) from the sphere).
+The Nitsche cut voxels, their geometry (Kuhn splitting, quadrature, volume matching) and the
+cut-voxel cell solver now live in mapsim (homogenize.cut, imported here); the ridge XFEM, the
+experiments and their analysis stay in this script. All use the project's periodic Q1 voxel
+grid (homogenize._assembly: node i + n (j + n k), SRI element in the voxels that no interface
+cuts) and a nodal level set phi (< 0: iron, > 0: PDMS). A voxel is CUT when its corner values
+change sign; its 6 Kuhn tetrahedra (all along the main diagonal, so the faces match between
+voxels) are split exactly by the plane of the linear interpolant of phi, which gives the
+discrete interface (planar facets, O(h^2) from the sphere).
 
 Methods compared:
 - "composite": the project's default, Reuss voxels at the exact cut fraction (homogenize.cell).
@@ -23,7 +25,9 @@ Methods compared:
   offset, one-off). The level set of a sphere is the distance to its centre minus a radius
   chosen so that the discrete particle holds the exact particle volume ("volume-matched"; the
   nominal radius loses 11 % of the volume at 4.3 voxels per diameter and 2.7 % at 8.6, which
-  hides part of the error: rows with volume_matched false in the JSON).
+  hides part of the error: rows with volume_matched false in the JSON). This script computes
+  C from the energy formula linear in the solution, as when its JSON was made
+  (homogenize.cut's public functions use the variational one).
 
 Experiments:
 1. Tilted periodic Fe/PDMS laminate, normal (1, 1, 1)/sqrt 3, Fe fraction 0.5, against the exact
@@ -49,11 +53,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pyamg
-import scipy.sparse as sp
 
 from homogenize import _assembly as asm
+from homogenize import cut
 from homogenize.cell import homogenize_mesh, voigt_to_tensor
+from homogenize.cut import (_iso_K, _side_integrals, cut_pieces, nitsche_matrices, nodal_phi,
+                            sphere_fn)
 from homogenize.mesh import VoxelMesh
 from micro.materials import FE, PDMS, elastic
 
@@ -68,208 +73,11 @@ LAMINATE_NORMAL = (1, 1, 1)
 LAMINATE_F = 0.5
 LAMINATE_SHIFT = 0.3    # [voxels along m . (i, j, k)]: keeps every node off the interfaces
 
-CORN = asm.CORNERS.astype(float)       # local corner a = x + 2 y + 4 z -> (x, y, z)
-KUHN = np.array([[0] + [sum(1 << d for d in perm[:k + 1]) for k in range(3)]
-                 for perm in itertools.permutations(range(3))])   # 6 x 4 corner indices
-
 
 # ------------------------------------------------------------------------------------------------
-# geometry and quadrature
+# the cut-voxel cell problem: the Nitsche cut voxels, their geometry and the cell solver live in
+# homogenize.cut; the ridge-enriched XFEM stays here (it locks at Fe/PDMS contrast)
 # ------------------------------------------------------------------------------------------------
-
-def _gauss01(q):
-    x, w = np.polynomial.legendre.leggauss(q)
-    return 0.5 * (x + 1.0), 0.5 * w
-
-
-def tet_rule(q):
-    """Collapsed (Duffy) Gauss rule on a tetrahedron: barycentric points (Q, 4), weights (Q,)
-    as fractions of the volume."""
-    x, w = _gauss01(q)
-    a, b, c = (g.ravel() for g in np.meshgrid(x, x, x, indexing="ij"))
-    wa, wb, wc = (g.ravel() for g in np.meshgrid(w, w, w, indexing="ij"))
-    lam = np.stack([1 - a, a * (1 - b), a * b * (1 - c), a * b * c], axis=1)
-    return lam, wa * wb * wc * a ** 2 * b * 6.0
-
-
-def tri_rule(q):
-    """Collapsed Gauss rule on a triangle: barycentric points (Q, 3), area fractions (Q,)."""
-    x, w = _gauss01(q)
-    a, b = (g.ravel() for g in np.meshgrid(x, x, indexing="ij"))
-    wa, wb = (g.ravel() for g in np.meshgrid(w, w, indexing="ij"))
-    return np.stack([1 - a, a * (1 - b), a * b], axis=1), wa * wb * a * 2.0
-
-
-def split_tet(P, phi):
-    """Split tetrahedron P (4, 3) by the zero plane of the linear phi (4,): sub-tetrahedra
-    [(4, 3), sign], interface triangles [(3, 3)] and the unit normal towards phi > 0."""
-    neg = phi < 0
-    k = int(neg.sum())
-    if k in (0, 4):
-        return [(P, -1 if k == 4 else 1)], [], None
-    g = np.linalg.solve(P[1:] - P[0], phi[1:] - phi[0])
-
-    def cut(i, j):
-        return P[i] + phi[i] / (phi[i] - phi[j]) * (P[j] - P[i])
-
-    def prism(T1, T2):
-        return [np.array([T1[0], T1[1], T1[2], T2[0]]), np.array([T1[1], T1[2], T2[0], T2[1]]),
-                np.array([T1[2], T2[0], T2[1], T2[2]])]
-    if k in (1, 3):
-        lone_sign = -1 if k == 1 else 1
-        a = int(np.flatnonzero(neg if k == 1 else ~neg)[0])
-        others = [i for i in range(4) if i != a]
-        cp = [cut(a, o) for o in others]
-        parts = [(np.array([P[a]] + cp), lone_sign)]
-        parts += [(t, -lone_sign) for t in prism(cp, [P[o] for o in others])]
-        return parts, [np.array(cp)], g / np.linalg.norm(g)
-    a, b = np.flatnonzero(neg)
-    c, d = np.flatnonzero(~neg)
-    pac, pad, pbc, pbd = cut(a, c), cut(a, d), cut(b, c), cut(b, d)
-    parts = [(t, -1) for t in prism([P[a], pac, pad], [P[b], pbc, pbd])]
-    parts += [(t, 1) for t in prism([P[c], pac, pbc], [P[d], pad, pbd])]
-    return parts, [np.array([pac, pad, pbd]), np.array([pac, pbd, pbc])], g / np.linalg.norm(g)
-
-
-def q1(xi):
-    """Q1 shape functions N (..., 8) and d N / d xi (..., 8, 3) of the unit cube."""
-    x, y, z = xi[..., 0, None], xi[..., 1, None], xi[..., 2, None]
-    cx, cy, cz = CORN[:, 0], CORN[:, 1], CORN[:, 2]
-    fx = cx * x + (1 - cx) * (1 - x)
-    fy = cy * y + (1 - cy) * (1 - y)
-    fz = cz * z + (1 - cz) * (1 - z)
-    dN = np.stack([(2 * cx - 1) * fy * fz, fx * (2 * cy - 1) * fz, fx * fy * (2 * cz - 1)], -1)
-    return fx * fy * fz, dN
-
-
-def cut_pieces(phi_c):
-    """Sub-tetrahedra (S, 4, 3) [voxel units], their voxel and sign, and interface triangles
-    (T, 3, 3), their voxel and normal, of cut voxels with corner values phi_c (m, 8)."""
-    subs, sown, ssg, tris, town, tnrm = [], [], [], [], [], []
-    for v in range(phi_c.shape[0]):
-        for t in KUHN:
-            parts, faces, nrm = split_tet(CORN[t], phi_c[v, t])
-            for P, s in parts:
-                subs.append(P), sown.append(v), ssg.append(s)
-            for T in faces:
-                tris.append(T), town.append(v), tnrm.append(nrm)
-    return (np.array(subs), np.array(sown), np.array(ssg), np.array(tris).reshape(-1, 3, 3),
-            np.array(town, dtype=np.int64), np.array(tnrm).reshape(-1, 3))
-
-
-def tet_negative_volume(P, ph):
-    """Volume (T,) of {phi < 0} in tetrahedra P (T, 4, 3) with vertex values ph (T, 4)."""
-    vol = np.abs(np.linalg.det(P[:, 1:] - P[:, :1])) / 6.0
-    neg = ph < 0
-    k = neg.sum(axis=1)
-    out = np.where(k == 4, vol, 0.0)
-    for kk, lone_neg in ((1, True), (3, False)):
-        sel = np.flatnonzero(k == kk)
-        if sel.size:
-            lone = np.argmax(neg[sel] if lone_neg else ~neg[sel], axis=1)
-            pa = ph[sel, lone]
-            frac = np.ones(sel.size)
-            for o in range(4):
-                other = lone != o
-                frac[other] *= pa[other] / (pa[other] - ph[sel, o][other])
-            out[sel] = vol[sel] * (frac if lone_neg else 1.0 - frac)
-    sel = np.flatnonzero(k == 2)
-    if sel.size:
-        order = np.argsort(~neg[sel], axis=1, kind="stable")          # negatives first
-        Ps = np.take_along_axis(P[sel], order[:, :, None], axis=1)
-        ps = np.take_along_axis(ph[sel], order, axis=1)
-
-        def cut(i, j):
-            return Ps[:, i] + (ps[:, i] / (ps[:, i] - ps[:, j]))[:, None] * (Ps[:, j] - Ps[:, i])
-
-        def tv(x0, x1, x2, x3):
-            return np.abs(np.linalg.det(np.stack([x1 - x0, x2 - x0, x3 - x0], axis=1))) / 6.0
-        a, b = Ps[:, 0], Ps[:, 1]
-        pac, pad, pbc, pbd = cut(0, 2), cut(0, 3), cut(1, 2), cut(1, 3)
-        out[sel] = tv(a, pac, pad, b) + tv(pac, pad, b, pbc) + tv(pad, b, pbc, pbd)
-    return out
-
-
-def _grid(n):
-    k, j, i = np.meshgrid(*(np.arange(n),) * 3, indexing="ij")
-    nodes = np.stack([((i + ax) % n + n * (((j + ay) % n) + n * ((k + az) % n))).ravel()
-                      for ax, ay, az in asm.CORNERS], axis=1)               # (n^3, 8)
-    return np.stack([i, j, k], axis=-1) / n, nodes
-
-
-def nodal_phi(phi_fn, n):
-    x, nodes = _grid(n)
-    phi = phi_fn(x).ravel()
-    return np.where(phi == 0.0, 1e-12 / n, phi), nodes
-
-
-def discrete_volume(phi_fn, n):
-    """Volume [box^3] of {phi_h < 0} (the Kuhn-linear interpolant) on the n^3 grid."""
-    phi, nodes = nodal_phi(phi_fn, n)
-    pc = phi[nodes]
-    nneg = (pc < 0).sum(axis=1)
-    cut = np.flatnonzero((nneg > 0) & (nneg < 8))
-    P = np.broadcast_to(CORN[KUHN], (cut.size, 6, 4, 3)).reshape(-1, 4, 3)
-    vals = pc[cut][:, KUHN].reshape(-1, 4)
-    return ((nneg == 8).sum() + tet_negative_volume(P, vals).sum()) / n ** 3
-
-
-def sphere_fn(centre, radius):
-    def phi(x):
-        d = x - centre
-        return np.linalg.norm(d - np.round(d), axis=-1) - radius
-    return phi
-
-
-def volume_matched_radius(centre, n, radius=RADIUS):
-    """Radius whose discrete sphere (Kuhn-linear interface) holds 4/3 pi radius^3 (secant)."""
-    target = 4.0 / 3.0 * np.pi * radius ** 3
-    r0, r1 = radius, 1.02 * radius
-    v0, v1 = (discrete_volume(sphere_fn(centre, r), n) for r in (r0, r1))
-    for _ in range(12):
-        r0, v0, r1 = r1, v1, r1 + (target - v1) * (r1 - r0) / (v1 - v0)
-        v1 = discrete_volume(sphere_fn(centre, r1), n)
-        if abs(v1 / target - 1.0) < 1e-11:
-            break
-    return r1
-
-
-# ------------------------------------------------------------------------------------------------
-# cut-voxel matrices
-# ------------------------------------------------------------------------------------------------
-
-def _iso_K(G, lam, mu):
-    """(..., 3F, 3F) from G[..., a, b, i, j] = int d_i f_a d_j f_b of F functions (DOF 3 a + c)."""
-    tr = np.einsum("...abii->...ab", G)
-    K = lam * np.swapaxes(G, -3, -2)
-    K = K + mu * np.moveaxis(G, (-4, -3, -2, -1), (-4, -2, -1, -3))
-    K = K + mu * tr[..., :, None, :, None] * np.eye(3)[:, None, :]
-    F = G.shape[-4]
-    return K.reshape(G.shape[:-4] + (3 * F, 3 * F))
-
-
-def _side_integrals(subs, sown, ssg, m, h, fn, q=3):
-    """Per side (0: phi < 0, 1: phi > 0) of each cut voxel: G[a, b, i, j] = int d_i f_a d_j f_b,
-    int d_i f_a and the volume, for the scalar functions ``fn(xi, N, dN, owner, sign)`` -> grads."""
-    lam, wq = tet_rule(q)
-    G = g1 = None
-    vol = np.zeros((2, m))
-    for s0 in range(0, subs.shape[0], 2000):
-        sl = slice(s0, s0 + 2000)
-        P, ow, sg = subs[sl], sown[sl], ssg[sl]
-        v = np.abs(np.linalg.det(P[:, 1:] - P[:, :1])) / 6.0 * h ** 3
-        xi = np.einsum("qk,skd->sqd", lam, P)
-        N, dN = q1(xi)
-        g = fn(N, dN / h, ow, sg)                                       # (S, Q, F, 3)
-        if G is None:
-            F = g.shape[2]
-            G, g1 = np.zeros((2, m, F, F, 3, 3)), np.zeros((2, m, F, 3))
-        wg = (wq[None, :] * v[:, None])[..., None, None] * g
-        side = (sg > 0).astype(int)
-        np.add.at(G, (side, ow), np.einsum("sqai,sqbj->sabij", wg, g, optimize=True))
-        np.add.at(g1, (side, ow), wg.sum(axis=1))
-        np.add.at(vol, (side, ow), v)
-    return G, g1, vol
 
 
 def xfem_ridge_matrices(phi_c, h, lames, Es):
@@ -295,155 +103,34 @@ def xfem_ridge_matrices(phi_c, h, lames, Es):
     return K, [f.reshape(m, 48) for f in loads], vol
 
 
-def nitsche_matrices(phi_c, h, lames, youngs, Es, safety=2.0, q=3):
-    """Two Q1 copies per cut voxel ([phi < 0 copy, phi > 0 copy]) glued by symmetric Nitsche:
-    (m, 48, 48), loads, side volumes and the penalty (m,) [Pa / m]."""
-    m = phi_c.shape[0]
-    subs, sown, ssg, tris, town, tnrm = cut_pieces(phi_c)
-    G, g1, vol = _side_integrals(subs, sown, ssg, m, h, lambda N, dN, ow, sg: dN, q=q)
-    gbar = g1.reshape(2, m, 24) / np.maximum(vol, 1e-300)[:, :, None]    # side-mean d_c N_a
-    Kb = np.stack([_iso_K(G[s], 0.0, lames[s][1])
-                   + lames[s][0] * vol[s][:, None, None] * gbar[s][:, :, None] * gbar[s][:, None, :]
-                   for s in range(2)])                                   # B-bar per side
-    lt, wt = tri_rule(q + 1)
-    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]),
-                                axis=1) * h ** 2
-    N, dN = q1(np.einsum("qk,skd->sqd", lt, tris))
-    dN = dN / h
-    nq = np.broadcast_to(tnrm[:, None, :], N.shape[:2] + (3,))
-    w = wt[None, :] * area[:, None]
-    dn = np.einsum("sqak,sqk->sqa", dN, nq)
-    Tn = []
-    for s in range(2):      # traction (B-bar stress) of the 24 functions, (T, Q, 3, 24)
-        lam, mu = lames[s]
-        T = np.zeros(N.shape[:2] + (3, 8, 3))
-        for k in range(3):
-            for c in range(3):
-                T[..., k, :, c] = mu * dN[..., :, k] * nq[..., c, None]
-            T[..., k, :, k] += mu * dn
-        T = T.reshape(N.shape[:2] + (3, 24))
-        Tn.append(T + lam * nq[..., :, None] * gbar[s][town][:, None, None, :])
-    kap = vol / np.asarray(youngs)[:, None]
-    wts = kap / kap.sum(axis=0)
-    lmax = np.zeros((2, m))
-    for s in range(2):
-        A = np.zeros((m, 24, 24))
-        np.add.at(A, town, np.einsum("sq,sqki,sqkj->sij", w, Tn[s], Tn[s]))
-        L = np.linalg.cholesky(Kb[s] + 1e-12 * np.abs(Kb[s]).max(axis=(1, 2))[:, None, None]
-                               * np.eye(24))
-        Li = np.linalg.inv(L)
-        lmax[s] = np.linalg.eigvalsh(Li @ A @ np.swapaxes(Li, 1, 2))[:, -1]
-    alpha = safety * (wts ** 2 * lmax).sum(axis=0)
-    Jm = np.einsum("sqa,kc->sqkac", N, np.eye(3)).reshape(N.shape[:2] + (3, 24))
-    J = np.concatenate([Jm, -Jm], axis=-1)          # [v] = v(phi < 0) - v(phi > 0)
-    Tavg = np.concatenate([wts[s][town][:, None, None, None] * Tn[s] for s in range(2)], -1)
-    JT = np.einsum("sq,sqki,sqkj->sij", w, J, Tavg)
-    JJ = np.einsum("sq,sqki,sqkj->sij", w, J, J)
-    K = np.zeros((m, 48, 48))
-    np.add.at(K, town, -JT - np.swapaxes(JT, 1, 2) + alpha[town][:, None, None] * JJ)
-    K[:, :24, :24] += Kb[0]
-    K[:, 24:, 24:] += Kb[1]
-    loads = []
-    for E in Es:
-        f = np.zeros((m, 48))
-        tavg = 0.0
-        for s in range(2):
-            St = voigt_to_tensor(asm.isotropic_voigt(*lames[s]) @ E)
-            f[:, 24 * s:24 * s + 24] -= np.einsum("maj,ij->mai", g1[s], St).reshape(m, 24)
-            tavg = tavg + wts[s][town][:, None, None] * np.einsum("ij,sqj->sqi", St, nq)
-        np.add.at(f, town, np.einsum("sq,sqki,sqk->si", w, J, tavg))
-        loads.append(f)
-    return K, loads, vol, alpha
-
-
-# ------------------------------------------------------------------------------------------------
-# the periodic cell problem with cut voxels
-# ------------------------------------------------------------------------------------------------
-
-def homogenize_cut(phi_fn, n, method, cases=(3, 4, 5), particle=FE_EL, matrix=PDMS_EL,
-                   tol=1e-10, safety=2.0):
+def cell_problem(phi_fn, n, method, cases=(3, 4, 5), particle=FE_EL, matrix=PDMS_EL,
+                 tol=1e-10, safety=2.0):
     """C_eff entries (len(cases) x len(cases), Voigt, Pa) of the periodic cell [0, 1)^3 with the
-    particle where phi_fn < 0, ``method`` "nitsche" or "xfem-ridge"; also the discrete particle
+    particle where phi_fn < 0, ``method`` "nitsche" (homogenize.cut.nitsche_matrices) or
+    "xfem-ridge", solved by homogenize.cut's cut-voxel cell problem; also the discrete particle
     volume fraction, CG iterations and, for "nitsche", the penalty range alpha h / E_matrix."""
     h = 1.0 / n
     lames = (particle.lame_Pa, matrix.lame_Pa)
     phi, nodes = nodal_phi(phi_fn, n)
-    pc = phi[nodes]
-    nneg = (pc < 0).sum(axis=1)
-    cut = (nneg > 0) & (nneg < 8)
-    full = nneg == 8
-    lam = np.where(full, lames[0][0], lames[1][0]).reshape(n, n, n)
-    mu = np.where(full, lames[0][1], lames[1][1]).reshape(n, n, n)
-    lam[cut.reshape(n, n, n)] = mu[cut.reshape(n, n, n)] = 0.0
-    Es = [np.eye(6)[c] for c in cases]
-    cvox = np.flatnonzero(cut)
+    if method == "nitsche":
+        def cut_matrices(pc, h, Es):
+            return nitsche_matrices(pc, h, lames, (particle.E_Pa, matrix.E_Pa), Es, safety)
+    elif method == "xfem-ridge":
+        def cut_matrices(pc, h, Es):
+            return (*xfem_ridge_matrices(pc, h, lames, Es), None)
+    else:
+        raise ValueError(method)
+    # energy "linear": the C formula this study's JSON was made with (homogenize.cut's public
+    # functions use the variational one, whose error is quadratic in the CG error)
+    C, phi_h, its, _, _, alpha = cut._cut_cell_problem(
+        phi, nodes, n, lames, list(cases), tol, cut_matrices, two_copies=method == "nitsche",
+        energy="linear")
     extra = {}
     if method == "nitsche":
-        Ke, loads, vol, alpha = nitsche_matrices(pc[cvox], h, lames,
-                                                 (particle.E_Pa, matrix.E_Pa), Es, safety)
         extra["alpha_h_over_E_matrix"] = [float(np.min(alpha) * h / matrix.E_Pa),
                                           float(np.median(alpha) * h / matrix.E_Pa),
                                           float(np.max(alpha) * h / matrix.E_Pa)]
-    elif method == "xfem-ridge":
-        Ke, loads, vol = xfem_ridge_matrices(pc[cvox], h, lames, Es)
-    else:
-        raise ValueError(method)
-    xnodes = np.unique(nodes[cvox])
-    xid = -np.ones(n ** 3, np.int64)
-    xid[xnodes] = np.arange(xnodes.size)
-    nstd, ndof = 3 * n ** 3, 3 * n ** 3 + 3 * xnodes.size
-    cn = nodes[cvox]
-    std = 3 * cn[:, :, None] + np.arange(3)
-    ext = nstd + 3 * xid[cn][:, :, None] + np.arange(3)
-    if method == "nitsche":     # a node's own phase uses its standard unknowns
-        negnode = (phi[cn] < 0)[:, :, None]
-        dof = np.concatenate([np.where(negnode, std, ext), np.where(negnode, ext, std)], axis=1)
-    else:
-        dof = np.concatenate([std, ext], axis=1)
-    dof = dof.reshape(-1, 48)
-    K = asm.assemble_bsr(lam, mu, h).tocsr()
-    K.resize((ndof, ndof))
-    K = (K + sp.coo_matrix((Ke.ravel(), (np.repeat(dof, 48, axis=1).ravel(),
-                                         np.tile(dof, (1, 48)).ravel())),
-                           shape=(ndof, ndof)).tocsr()).tocsr()
-    F = []
-    for e, c in enumerate(cases):
-        f = np.zeros(ndof)
-        f[:nstd] = asm.affine_load(lam, mu, h, voigt_to_tensor(np.eye(6)[c], engineering=True))
-        np.add.at(f, dof.ravel(), loads[e].ravel())
-        F.append(f)
-    Cv = [asm.isotropic_voigt(*lm) for lm in lames]
-    whole = np.where(full[~cut, None, None], Cv[0], Cv[1])
-    aff = np.array([[h ** 3 * np.einsum("i,mij,j->", Ea, whole, Eb)
-                     + sum(vol[s].sum() * (Ea @ Cv[s] @ Eb) for s in range(2))
-                     for Eb in Es] for Ea in Es])
-    keep = np.ones(ndof, bool)
-    keep[:3] = False                  # pin node 0 (the callers keep it in the matrix)
-    Kr = K[keep][:, keep].tocsr()
-    B = np.zeros((ndof, 6))
-    rb = asm.rigid_body_modes(n, h)
-    B[:nstd] = rb
-    if method == "nitsche":           # both copies move with a rigid motion of the cell
-        B[nstd:] = rb.reshape(n ** 3, 3, 6)[xnodes].reshape(-1, 6)
-    ml = pyamg.smoothed_aggregation_solver(Kr, B=B[keep], symmetry="hermitian",
-                                           coarse_solver="splu", max_coarse=2000)
-    W, its = [], []
-    fmax = max(np.linalg.norm(f) for f in F)
-    for f in F:
-        w = np.zeros(ndof)
-        if np.linalg.norm(f) > 1e-12 * fmax:        # a load that vanishes by symmetry
-            res = []
-            w[keep] = ml.solve(f[keep], tol=tol, accel="cg", maxiter=5000, residuals=res)
-            if res[-1] > 10 * tol * res[0]:
-                raise RuntimeError(f"CG did not converge: {res[-1] / res[0]:.1e}")
-            its.append(len(res) - 1)
-        else:
-            its.append(0)
-        W.append(w)
-    C = np.array([[aff[a, b] - F[a] @ W[b] for b in range(len(cases))]
-                  for a in range(len(cases))])
-    phi_h = ((full.sum() * h ** 3) + vol[0].sum())
-    return C, float(phi_h), its, extra
+    return C, phi_h, its, extra
 
 
 # ------------------------------------------------------------------------------------------------
@@ -509,7 +196,7 @@ def laminate_run(n, method):
         r = homogenize_mesh(mesh, deflate=False, solver="matrix-free", maxiter=5000)
         C, its, phi_h = r.C_eff_Pa, list(r.iterations.values()), float(fr.mean())
     else:
-        C, phi_h, its, _ = homogenize_cut(laminate_phi(n), n, method, cases=range(6))
+        C, phi_h, its, _ = cell_problem(laminate_phi(n), n, method, cases=range(6))
     err, _ = laminate_errors(C)
     return {"method": method, "voxels": n, "layer_spacing_voxels": n / np.sqrt(3.0),
             "phi_h": phi_h, "energy_errors_soft_to_stiff": err, "cg_iterations": its,
@@ -525,8 +212,8 @@ def sphere_run(n, offset, method="nitsche", matched=True, safety=2.0):
     0.5 + offset / n."""
     t0 = time.perf_counter()
     centre = 0.5 + np.asarray(offset) / n
-    radius = volume_matched_radius(centre, n) if matched else RADIUS
-    C, phi_h, its, extra = homogenize_cut(sphere_fn(centre, radius), n, method, safety=safety)
+    radius = cut.volume_matched_radius(centre, n, RADIUS) if matched else RADIUS
+    C, phi_h, its, extra = cell_problem(sphere_fn(centre, radius), n, method, safety=safety)
     g_m = PDMS_EL.bulk_shear_Pa[1]
     c = [(C[a, a] / g_m - 1.0) / PHI for a in range(3)]
     return {"method": method, "voxels": n, "diameter_voxels": 2 * RADIUS * n,

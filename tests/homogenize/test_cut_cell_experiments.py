@@ -1,6 +1,8 @@
 """Cut-cell experiments (results/cell/cut_cell_experiments.py; results/cell/README.md): composite
 voxels are first order on a tilted Fe/PDMS laminate, the Nitsche cut voxels reproduce it exactly
-and converge at second order on the dilute sphere."""
+and converge at second order on the dilute sphere. The Nitsche cut voxels themselves (geometry,
+volume matching, solver) are in homogenize.cut and tested in test_cut.py; this file checks the
+script's experiments through them."""
 from pathlib import Path
 
 import numpy as np
@@ -24,25 +26,11 @@ def test_one_material_on_both_sides_gives_that_material(cc, method, geometry):
     n = 8 if geometry == "sphere" else 10
     phi = (cc.sphere_fn(np.array([0.53, 0.47, 0.51]), 0.31) if geometry == "sphere"
            else cc.laminate_phi(n))
-    C, phi_h, _, _ = cc.homogenize_cut(phi, n, method, cases=range(6), particle=cc.PDMS_EL)
+    C, phi_h, _, _ = cc.cell_problem(phi, n, method, cases=range(6), particle=cc.PDMS_EL)
     exact = cc.asm.isotropic_voigt(*cc.PDMS_EL.lame_Pa)
     assert np.abs(C - exact).max() < 1e-8 * exact.max()
     if geometry == "sphere":     # the faceted sphere lies inside the true one
         assert 0.9 < phi_h / (4.0 / 3.0 * np.pi * 0.31 ** 3) < 1.0
-
-
-def test_discrete_volume_against_the_split_and_a_plane(cc):
-    """The closed-form negative volume of a tetrahedron equals the sum of its split pieces, and
-    a grid cut by a plane x . m = t holds the exact slab volume."""
-    rng = np.random.default_rng(3)
-    P = rng.random((200, 4, 3))
-    ph = rng.normal(size=(200, 4))
-    fast = cc.tet_negative_volume(P, ph)
-    ref = [sum(abs(np.linalg.det(T[1:] - T[0])) / 6 for T, s in cc.split_tet(P[i], ph[i])[0]
-               if s < 0) for i in range(200)]
-    assert np.allclose(fast, ref, rtol=1e-10, atol=1e-14)
-    v = cc.discrete_volume(cc.laminate_phi(12), 12)
-    assert v == pytest.approx(cc.LAMINATE_F, rel=1e-12)
 
 
 def test_tilted_laminate_composite_first_order_nitsche_exact(cc):
