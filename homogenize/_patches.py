@@ -191,6 +191,16 @@ def _axpy(L, base, y, a, x):
         y[bb] -= L[base + bb] * x
 
 
+@nb.njit(cache=True, inline="always")
+def _neighbour(n, p, s):
+    """The grid node in stencil slot s = (dx+1) + 3 (dy+1) + 9 (dz+1) of node p (periodic)."""
+    i = p % n
+    j = (p // n) % n
+    kk = p // (n * n)
+    return (((i + s % 3 - 1 + n) % n)
+            + n * (((j + (s // 3) % 3 - 1 + n) % n) + n * ((kk + s // 9 - 1 + n) % n)))
+
+
 @nb.njit(cache=True)
 def _patch_residual(n, nodes, stype, S, pin, u, b, r):
     """r[t] = b_p - (K u)_p for the nodes p = nodes[t] of one patch (pinned operator; the pinned
@@ -198,16 +208,12 @@ def _patch_residual(n, nodes, stype, S, pin, u, b, r):
     k = u.shape[2]
     for t in range(nodes.shape[0]):
         p = nodes[t]
-        i = p % n
-        j = (p // n) % n
-        kk = p // (n * n)
         for c in range(3):
             for m in range(k):
                 r[t, c, m] = 0.0
         ty = stype[p]
         for s in range(27):
-            q = (((i + s % 3 - 1 + n) % n)
-                 + n * (((j + (s // 3) % 3 - 1 + n) % n) + n * ((kk + s // 9 - 1 + n) % n)))
+            q = _neighbour(n, p, s)
             if q == pin:
                 continue
             block_acc(S[ty, s], 0, 0, 3, 3, u, q, r, t, k, 1.0)
@@ -229,13 +235,9 @@ def _factorize(n, ptr, nodes, stype, S, pin, fptr, L):
         A = np.zeros((3 * m, 3 * m))
         for t in range(m):
             p = pn[t]
-            i = p % n
-            j = (p // n) % n
-            kk = p // (n * n)
             ty = stype[p]
             for s in range(27):
-                g = (((i + s % 3 - 1 + n) % n)
-                     + n * (((j + (s // 3) % 3 - 1 + n) % n) + n * ((kk + s // 9 - 1 + n) % n)))
+                g = _neighbour(n, p, s)
                 if g == pin:
                     continue
                 loc = np.searchsorted(pn, g)
