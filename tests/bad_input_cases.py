@@ -295,6 +295,8 @@ CASES = [
     C("cell-dilute-study", "--voxels", "8,abc", "--json", "d.json", words=("--voxels",)),
     C("cell-dilute-study", "--voxels", "2", "--json", "d.json", words=("--voxels", "[4, 256]")),
     C("cell-dilute-study", "--voxels", "250", "--json", "d.json", words=("--voxels", "GiB")),
+    C("cell-dilute-study", "--voxels", "8,200", "--method", "cut", "--json", "d.json",
+      words=("--voxels 200", "--method cut", "GiB")),
     C("cell-dilute-study", "--phi", "0.5", "--json", "d.json", words=("--phi",)),
     C("cell-dilute-study", "--particle-E", "0", "--json", "d.json", words=("--particle-E",)),
     C("cell-dilute-study", "--json", "adir", words=("--json", "directory")),
