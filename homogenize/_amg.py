@@ -29,7 +29,14 @@ from scipy.linalg import cho_factor, cho_solve
 from scipy.sparse.linalg import splu
 
 __all__ = ["BSROp", "BlockVCycle", "Deflation", "block_cg", "coupled_block_cg", "grid_colours",
-           "greedy_colours"]
+           "greedy_colours", "SA_SMOOTH"]
+
+#: the prolongation smoother of every pyamg smoothed-aggregation hierarchy of the project: damped
+#: Jacobi weighted by its local (Gershgorin) bound. pyamg's default weighting scales it by a
+#: spectral-radius estimate that starts from ``np.random.rand``: two setups of one matrix then
+#: differ at the solver tolerance, and the setup draws from numpy's global generator
+#: (tests/homogenize/test_cell_solver.py checks both)
+SA_SMOOTH = ("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"})
 
 
 def _bsr(A, blocksize=None):

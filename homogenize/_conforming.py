@@ -237,7 +237,7 @@ def _solve_cg(K, F, xyz, master, basis, phase, centres, free, tol):
     :func:`homogenize_conforming`). xyz (n_free, 3): position of each free DOF's node in the unit
     cell. Returns (W (n_free, 6), iterations per load case)."""
     import pyamg
-    from homogenize._amg import Deflation, block_cg
+    from homogenize._amg import SA_SMOOTH, Deflation, block_cg
     n = K.shape[0]
     comp = np.asarray(free) % 3               # masters are sorted by (position, component)
     # near-null space for smoothed aggregation: the rigid modes about the cell centre
@@ -248,10 +248,7 @@ def _solve_cg(K, F, xyz, master, basis, phase, centres, free, tol):
                                            # pseudo-inverse (measured on the dilute-sphere P2
                                            # meshes: 45 of 63 s at 23k DOF; 118k DOF 18 min /
                                            # 9.3 GB -> 4 min / 3.6 GB, same C to 5e-11)
-                                           coarse_solver="splu",
-                                           # Gershgorin weights: pyamg's default spectral-radius
-                                           # estimate starts from np.random.rand (not repeatable)
-                                           smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}))
+                                           coarse_solver="splu", smooth=SA_SMOOTH)
     pre = ml.aspreconditioner(cycle="V")
     # deflation: the rigid modes of each particle at the DOFs of its elements
     dofs_elem = basis.element_dofs                           # (30, n_tets) unfolded DOFs

@@ -21,6 +21,7 @@ import numpy as np
 import numba as nb
 
 from micro._numba import parallel_and_serial
+from micro.rve import minimum_image
 
 from ._kernels import block_acc
 
@@ -72,8 +73,7 @@ def patch_colours(centers_vox, reach_vox, n: int) -> np.ndarray:
     cut = 2.0 * float(reach.max()) + np.sqrt(3.0) + 1e-9
     pairs = tree.query_pairs(cut, output_type="ndarray")
     if pairs.size:
-        d = c[pairs[:, 0]] - c[pairs[:, 1]]
-        d -= n * np.round(d / n)
+        d = minimum_image(c[pairs[:, 0]] - c[pairs[:, 1]], float(n))
         close = np.linalg.norm(d, axis=1) <= reach[pairs[:, 0]] + reach[pairs[:, 1]] + np.sqrt(3.0) + 1e-9
         pairs = pairs[close]
     nbrs = [[] for _ in range(P)]

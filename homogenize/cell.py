@@ -57,7 +57,7 @@ from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_sht
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
 from .mesh import METHODS, VoxelMesh, voxelize
 from homogenize._amg import BlockVCycle, BSROp, grid_colours
-from homogenize._amg import Deflation, block_cg, coupled_block_cg
+from homogenize._amg import SA_SMOOTH, Deflation, block_cg, coupled_block_cg
 import pyamg
 from scipy.sparse.linalg import splu
 
@@ -232,11 +232,10 @@ class _CellSolver:
             self.M = BlockVCycle(self.ml, fine_colours=grid_colours(self.n))
             self.matvec = BSROp(K)
         else:
-            # pyamg's own hierarchy, but with Gershgorin smoother weights: its default spectral-
-            # radius estimate starts from np.random.rand, so two calls differed at the tolerance
+            # pyamg's own hierarchy, with the project's repeatable smoother weights
             self.ml = pyamg.smoothed_aggregation_solver(
                 K, B=B, symmetry="hermitian", max_coarse=300, coarse_solver="splu",
-                smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}))
+                smooth=SA_SMOOTH)
             pre = self.ml.aspreconditioner(cycle="V")
             self.M = lambda R: np.stack([pre @ R[:, c] for c in range(R.shape[1])], axis=1)
             self.matvec = K.__matmul__
@@ -475,7 +474,7 @@ BLOCK_CG_MODES = ("coupled", "strains", "independent")
 # 'local' (Gershgorin) weighting of the prolongation smoother avoids a power iteration.
 AMG_OPTIONS = dict(symmetry="hermitian", coarse_solver="splu",
                    strength=("symmetric", {"theta": 0.05}), improve_candidates=None,
-                   smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}))
+                   smooth=SA_SMOOTH)
 
 
 def magnetic_tol(tol: float) -> float:
@@ -689,12 +688,15 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     # to magnetic_tol of that): same error as without them at tol (MATFREE_PATCH_TOL_FACTOR)
     patches = getattr(solver.M, "patches", None)
     f_cg = MATFREE_PATCH_TOL_FACTOR if patches is not None else 1.0
-    tol_mag = (float(tol_magnetic) if tol_magnetic is not None
-               else magnetic_tol(tol) if len(cases) == 6 and not keep_fields else tol)
-    tol_mag_cg = (float(tol_magnetic) * f_cg if tol_magnetic is not None
-                  else magnetic_tol(tol * f_cg) if len(cases) == 6 and not keep_fields
-                  else tol * f_cg)
-    tols = [tol * f_cg] * len(cases) + ([tol_mag_cg] if forces_N is not None else [])
+
+    def magnetic_column_tol(factor):
+        if tol_magnetic is not None:
+            return float(tol_magnetic) * factor
+        t = tol * factor
+        return magnetic_tol(t) if len(cases) == 6 and not keep_fields else t
+    tol_mag = magnetic_column_tol(1.0)
+    tols = [tol * f_cg] * len(cases) + ([magnetic_column_tol(f_cg)]
+                                        if forces_N is not None else [])
     W, histories = solver.solve(F, callback=callback, tols=tols, magnetic=forces_N is not None)
     if bar is not None:
         bar.close()

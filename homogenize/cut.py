@@ -58,8 +58,10 @@ import scipy.sparse as sp
 
 from micro._validate import ConvergenceError, InputError, check_range
 from micro.materials import FE, PDMS, ElasticMaterial, elastic
+from micro.rve import minimum_image
 
 from . import _assembly as asm
+from ._amg import SA_SMOOTH
 from ._budget import check_memory
 from .cell import CASES, isotropic_projection, voigt_to_tensor
 from .mesh import _as_geometry
@@ -354,8 +356,7 @@ def sphere_fn(centre, radius):
     callable -- ``phi(x)``, x of shape (..., 3) [box] -> (...) [box]
     """
     def phi(x):
-        d = x - centre
-        return np.linalg.norm(d - np.round(d), axis=-1) - radius
+        return _particles_phi(x, np.reshape(centre, (1, 3)), np.reshape(radius, (1,)))[0]
     return phi
 
 
@@ -414,8 +415,7 @@ def _particles_phi(x, centres, radii):
     phi = np.full(x.shape[:-1], np.inf)
     owner = np.full(x.shape[:-1], -1, dtype=np.int64)
     for i in range(radii.size):
-        d = x - centres[i]
-        p = np.linalg.norm(d - np.round(d), axis=-1) - radii[i]
+        p = np.linalg.norm(minimum_image(x - centres[i], 1.0), axis=-1) - radii[i]
         closer = p < phi
         phi[closer] = p[closer]
         owner[closer] = i
@@ -549,17 +549,11 @@ def nitsche_matrices(phi_c, h, lames, youngs, Es, safety=2.0, q=3):
 # ------------------------------------------------------------------------------------------------
 
 def _amg(K, B):
-    """pyamg smoothed aggregation (rigid-body candidates ``B``, sparse LU on <= 2000 coarse DOF).
-
-    The Jacobi prolongation smoother is weighted by its local (Gershgorin) bound, as
-    :data:`homogenize.cell.AMG_OPTIONS` does, not by pyamg's default spectral-radius estimate,
-    which starts from ``np.random.rand``: unseeded, two calls give preconditioners that differ
-    slightly and C_eff then differs at the solver tolerance (measured 1e-9 relative on two Fe
-    spheres), and seeding would touch numpy's global generator. Deterministic without either.
-    """
+    """pyamg smoothed aggregation (rigid-body candidates ``B``, sparse LU on <= 2000 coarse DOF)
+    with the project's repeatable smoother weights (:data:`homogenize._amg.SA_SMOOTH`; pyamg's
+    default made C_eff differ by 1e-9 between two calls on two Fe spheres)."""
     return pyamg.smoothed_aggregation_solver(
-        K, B=B, symmetry="hermitian", coarse_solver="splu", max_coarse=2000,
-        smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}))
+        K, B=B, symmetry="hermitian", coarse_solver="splu", max_coarse=2000, smooth=SA_SMOOTH)
 
 
 def _wrap_planes(centres, radii, n):

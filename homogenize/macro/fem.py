@@ -26,6 +26,8 @@ from micro.materials import ElasticMaterial
 
 from micro._validate import InputError, check_choice, check_finite, check_positive
 import pyamg
+
+from homogenize._amg import SA_SMOOTH
 from skfem import BilinearForm
 from skfem.helpers import ddot, grad
 
@@ -156,10 +158,7 @@ def _solve_free(K, rhs, fixed, solver, rtol, basis):
     B = rigid_body_modes(basis, I)
     ml = pyamg.smoothed_aggregation_solver(Kc.tocsr(), B=B, symmetry="symmetric",
                                            strength=("symmetric", {"theta": 0.0}),
-                                           max_coarse=500,
-                                           # Gershgorin weights: pyamg's default spectral-radius
-                                           # estimate starts from np.random.rand (not repeatable)
-                                           smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}))
+                                           max_coarse=500, smooth=SA_SMOOTH)
     res = []
     norm_f = np.linalg.norm(fc)
 
