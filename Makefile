@@ -3,13 +3,19 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# the tested set of every package (pip constraints); `make lock` refreshes it
+LOCK   := .ci/constraints.txt
+# newest versions that pyproject.toml allows, without the lock (for `make lock`, `make test-latest`)
+LATEST := .venv-latest
+# pytest workers: both cores (pytest-xdist); PYTEST_WORKERS=0 runs in one process
+PYTEST_WORKERS ?= 2
 
-.PHONY: run test venv bench clean peers
+.PHONY: run test venv bench clean peers lock latest test-latest
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m pip install --quiet -c $(LOCK) --upgrade pip
+	$(BIN)/python -m pip install --quiet -c $(LOCK) -e ".[test]"
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -23,14 +29,38 @@ run: $(STAMP)
 	$(RUNLOG) $(BIN)/mapsim chain --out results/chain
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS)
 
 bench: $(STAMP)
 	$(BIN)/mapsim bench --json results/bench/bench.json
 
-# Third-party solvers the tests use when present (Debian): CalculiX runs the exported decks.
-peers:
+# Third-party solvers the tests use when present (Debian): CalculiX runs the exported decks and
+# its own elements are compared with mapsim's in results/peers/calculix.md (not part of `make run`).
+peers: $(STAMP)
 	apt-get update && apt-get install -y calculix-ccx
+	$(RUNLOG) $(BIN)/mapsim paper-calculix --out results/peers
+
+# The newest versions pyproject.toml allows, in their own environment (the lock is not used).
+$(LATEST)/.installed: pyproject.toml
+	rm -rf $(LATEST)
+	$(PYTHON) -m venv $(LATEST)
+	$(LATEST)/bin/python -m pip install --quiet --upgrade pip
+	$(LATEST)/bin/python -m pip install --quiet -e ".[test]"
+	touch $@
+
+latest: $(LATEST)/.installed
+
+# The suite against the newest allowed versions (what a user without the lock gets today).
+test-latest: $(LATEST)/.installed
+	$(LATEST)/bin/python -m pytest -q -n $(PYTEST_WORKERS)
+
+# Refresh the lock from the newest allowed versions; run `make test-latest` first.
+lock: $(LATEST)/.installed
+	{ sed -n '1,2p' $(LOCK); \
+	  echo "# Resolved on $$(date -u +%Y-%m-%d) with Python $$($(LATEST)/bin/python -c 'import platform; print(platform.python_version())') on $$(uname -m) Linux."; \
+	  echo "pip==$$($(LATEST)/bin/python -m pip --version | cut -d' ' -f2)"; \
+	  $(LATEST)/bin/python -m pip freeze --exclude-editable | grep -v '^-e '; } > $(LOCK).new
+	mv $(LOCK).new $(LOCK)
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) $(LATEST) build *.egg-info

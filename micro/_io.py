@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import hashlib
 import json
+import math
 import os
 import platform
 import re
@@ -18,7 +20,7 @@ import h5py
 import numpy as np
 
 __all__ = ["atomic_path", "clean_stale_temps", "atomic_write_text", "write_json", "manifest", "git_revision",
-           "open_hdf5"]
+           "open_hdf5", "RESULT_DIGITS", "round_floats", "data_digest", "save_png", "hdf5_agree"]
 
 _PACKAGES = ("mapsim", "numpy", "scipy", "numba", "scikit-fem", "h5py", "trimesh", "pyamg",
              "dask", "distributed", "matplotlib", "meshio")
@@ -127,9 +129,91 @@ def _default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
-def write_json(path, obj) -> None:
-    """Write ``obj`` as indented JSON, atomically (numpy arrays become lists)."""
+def write_json(path, obj, *, digits: int | None = None) -> None:
+    """Write ``obj`` as indented JSON, atomically (numpy arrays become lists).
+
+    ``digits``: round every float to that many significant digits first
+    (:func:`round_floats`; committed results use :data:`RESULT_DIGITS`).
+    """
+    if digits is not None:
+        obj = round_floats(obj, digits)
     atomic_write_text(path, json.dumps(obj, indent=2, default=_default, allow_nan=False) + "\n")
+
+
+#: Significant digits of the floats in committed result files. Their numbers come from solvers
+#: stopped at relative tolerances of 1e-6 or looser, and from interval estimates of a few
+#: random RVEs: more digits carry no information, and the last of 16 digits changes with the
+#: CPU's vector units (round-off in BLAS, numpy and numba kernels). A value 1e-12 (relative)
+#: away from a rounding boundary of 6 digits is the only case where another CPU can still
+#: change a written digit: about one number in a million.
+RESULT_DIGITS = 6
+
+
+def _round(x: float, digits: int) -> float:
+    return float(f"{x:.{digits}g}") if math.isfinite(x) else x
+
+
+def round_floats(obj, digits: int = RESULT_DIGITS):
+    """A copy of ``obj`` (dicts, lists, tuples, numpy arrays and scalars, recursively) with every
+    float rounded to ``digits`` significant digits; integers, strings, None unchanged.
+
+    numpy arrays become lists (as in the JSON files), tuples stay tuples.
+    """
+    if isinstance(obj, (bool, np.bool_)) or obj is None:
+        return obj.item() if isinstance(obj, np.bool_) else obj
+    if isinstance(obj, (float, np.floating)):
+        return _round(float(obj), digits)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.ndarray):
+        return round_floats(obj.tolist(), digits)
+    if isinstance(obj, dict):
+        return {k: round_floats(v, digits) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(round_floats(v, digits) for v in obj)
+    return obj
+
+
+def data_digest(obj, *sources) -> str:
+    """SHA-256 of ``obj`` rounded to :data:`RESULT_DIGITS` (canonical JSON) and of the text of
+    the source files ``sources`` (e.g. the module that draws a figure): the same digest means
+    the same rounded numbers drawn by the same code."""
+    h = hashlib.sha256(json.dumps(round_floats(obj), sort_keys=True, default=_default,
+                                  allow_nan=True).encode())
+    for src in sources:
+        h.update(Path(src).read_bytes())
+    return h.hexdigest()
+
+
+#: PNG text key that holds :func:`data_digest` of what a figure shows
+PNG_DIGEST_KEY = "mapsim-data-digest"
+
+
+def _png_digest(path: Path) -> str | None:
+    """The :data:`PNG_DIGEST_KEY` text chunk of the PNG at ``path`` (None if absent)."""
+    try:
+        from PIL import Image            # matplotlib's own dependency
+        with Image.open(path) as im:
+            return im.text.get(PNG_DIGEST_KEY)
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def save_png(fig, path, digest: str, *, dpi: int = 120) -> bool:
+    """Save the matplotlib figure ``fig`` as the PNG ``path`` (atomically), unless the PNG there
+    already shows the same data: its :data:`PNG_DIGEST_KEY` equals ``digest``. Returns whether
+    it was written.
+
+    So a committed figure is redrawn only when its rounded numbers or its drawing code change,
+    not when the last digit of a float moves on another CPU or a newer matplotlib draws an
+    antialiased pixel differently.
+    """
+    path = Path(path)
+    if path.is_file() and _png_digest(path) == digest:
+        return False
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=dpi, metadata={PNG_DIGEST_KEY: digest})
+    return True
 
 
 def git_revision() -> str:
@@ -203,3 +287,61 @@ def manifest(config: dict | None = None, seed=None, **extra) -> dict:
     else:
         out.update(run)
     return out
+
+
+#: attributes that HDF5 dimension scales keep as object references (file addresses): they follow
+#: from the datasets and their order, and are not compared by :func:`hdf5_agree`
+_SCALE_ATTRS = frozenset({"DIMENSION_LIST", "REFERENCE_LIST", "CLASS", "NAME"})
+
+
+def _attrs_equal(a, b) -> bool:
+    ka = {k for k in a.attrs if k not in _SCALE_ATTRS}
+    kb = {k for k in b.attrs if k not in _SCALE_ATTRS}
+    if ka != kb:
+        return False
+    for k in ka:
+        va, vb = a.attrs[k], b.attrs[k]
+        if isinstance(va, np.ndarray) or isinstance(vb, np.ndarray):
+            if not np.array_equal(np.asarray(va), np.asarray(vb)):
+                return False
+        elif va != vb:
+            return False
+    return True
+
+
+def hdf5_agree(path_a, path_b, rtol: float) -> bool:
+    """Whether two HDF5 files hold the same content: the same groups, datasets and attributes,
+    non-float data equal, and every float dataset ``b`` within ``rtol`` of ``a`` relative to the
+    dataset's largest magnitude (NaN where the other has NaN). A file that cannot be read does
+    not agree.
+    """
+    try:
+        with h5py.File(path_a, "r") as fa, h5py.File(path_b, "r") as fb:
+            if not _attrs_equal(fa, fb):
+                return False
+            names_a, names_b = [], []
+            fa.visit(names_a.append)
+            fb.visit(names_b.append)
+            if sorted(names_a) != sorted(names_b):
+                return False
+            for name in names_a:
+                oa, ob = fa[name], fb[name]
+                if isinstance(oa, h5py.Group) != isinstance(ob, h5py.Group) or \
+                        not _attrs_equal(oa, ob):
+                    return False
+                if isinstance(oa, h5py.Group):
+                    continue
+                va, vb = oa[()], ob[()]
+                if oa.dtype != ob.dtype or np.shape(va) != np.shape(vb):
+                    return False
+                if np.issubdtype(oa.dtype, np.floating):
+                    va, vb = np.asarray(va), np.asarray(vb)
+                    finite = np.isfinite(va)
+                    scale = float(np.max(np.abs(va[finite]))) if finite.any() else 0.0
+                    if not np.allclose(vb, va, rtol=rtol, atol=rtol * scale, equal_nan=True):
+                        return False
+                elif not np.array_equal(np.asarray(va), np.asarray(vb)):
+                    return False
+    except (OSError, KeyError, ValueError, TypeError):
+        return False
+    return True

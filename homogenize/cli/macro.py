@@ -16,7 +16,7 @@ from homogenize.cli._common import (check_memory, config_of, float_in, int_in, p
                                     write_snippet)
 from homogenize.cli.tables import (add_beam_table_options, add_export_table_options,
                                    beam_from_table, wrap_export)
-from homogenize.studies.paper import write_paper
+from homogenize.studies.paper import write_calculix_peer, write_paper
 from homogenize.macro.exporters import ExportSpec, export_text, write_deck
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.fem import Material
@@ -48,6 +48,17 @@ def _paper(args) -> int:
           f"{res['force_for_4mm_N_m3']['P1_coarse'] / 1e3:.1f}/"
           f"{res['force_for_4mm_N_m3']['P2_coarse'] / 1e3:.1f}/"
           f"{res['force_for_4mm_N_m3']['converged'] / 1e3:.1f} kN/m^3; results in {args.out}")
+    return 0
+
+
+def _paper_calculix(args) -> int:
+    check_positive("width-m", args.width_m, "m")
+    check_positive("thickness-m", args.thickness_m, "m")
+    rep = write_calculix_peer(args.out, quick=args.quick, quiet=args.quiet,
+                              width_m=args.width_m, thickness_m=args.thickness_m)
+    worst = max((abs(d["relative_difference"]) for d in rep["twins"]), default=float("nan"))
+    print(f"CalculiX against mapsim: {len(rep['twins'])} element/grid pairs, largest tip "
+          f"difference {100 * worst:.3f} %; results in {args.out}")
     return 0
 
 
@@ -311,6 +322,24 @@ def register(sub, formatter) -> None:
                    help="small meshes and sweeps (seconds; for tests, numbers indicative)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_paper, outputs=("json",), output_dirs=("out",))
+
+    p = sub.add_parser(
+        "paper-calculix", formatter_class=formatter,
+        help="CalculiX's own elements against mapsim's on the paper's strip (optional peer)",
+        description="The element study of `mapsim paper` with CalculiX's own elements (C3D8, "
+                    "C3D8R, C3D8I, C3D20, C3D20R, C3D4, C3D10) on the same grids: each against "
+                    "its scikit-fem twin. Needs CalculiX's ccx on the PATH (`make peers` "
+                    "installs it and runs this command). Writes calculix.md, calculix.json and "
+                    "manifest.json to --out.")
+    p.add_argument("--out", default="results/peers", help="output directory")
+    p.add_argument("--width-m", dest="width_m", type=_length("--width-m", 1.0), default=5e-3,
+                   help="assumed strip width [m]")
+    p.add_argument("--thickness-m", dest="thickness_m", type=_length("--thickness-m", 1.0),
+                   default=1e-3, help="assumed strip thickness [m]")
+    p.add_argument("--quick", action="store_true",
+                   help="small meshes and sweeps (for tests, numbers indicative)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_paper_calculix, output_dirs=("out",))
 
     p = sub.add_parser(
         "export", formatter_class=formatter,

@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._io import atomic_path, atomic_write_text, manifest, write_json
+from micro._io import (atomic_write_text, data_digest, manifest, round_floats, save_png,
+                       write_json)
 from micro._validate import InputError, check_positive
 
 from micro.demag import prism_demag_factors
@@ -218,9 +219,14 @@ def run_chain(study=None, out_dir="results/chain", *, workers=None, scheduler=No
            "magnet": MAGNET, "fixed_axes": others, "curves": curves,
            "table": _display_path(table_path),
            "manifest": manifest(study.config(), study.seed)}
+    # every written number (JSON, summary, figures) from the same rounded results, so that the
+    # last-digit round-off of another CPU does not rewrite them; a figure is redrawn only when
+    # its rounded numbers or this drawing code change
+    res = round_floats(res)
     write_json(out_dir / "chain.json", res)
-    _plot(out_dir / "deflection_vs_B.png", res)
-    _plot_magnet(out_dir / "deflection_vs_magnet_gap.png", res)
+    digest = data_digest(res, __file__)
+    _plot(out_dir / "deflection_vs_B.png", res, digest)
+    _plot_magnet(out_dir / "deflection_vs_magnet_gap.png", res, digest)
     atomic_write_text(out_dir / "summary.md", _summary(res, study))
     return res
 
@@ -239,7 +245,7 @@ def _crossing(x, y, level):
     return float(math.exp(lx0 + w * (lx1 - lx0)))
 
 
-def _plot(path: Path, res: dict) -> None:
+def _plot(path: Path, res: dict, digest: str) -> None:
     from matplotlib.figure import Figure      # lazy: 0.3 s import, only for plotting
     fig = Figure(figsize=(7.4, 4.8), layout="constrained")
     ax = fig.add_subplot()
@@ -281,11 +287,10 @@ def _plot(path: Path, res: dict) -> None:
                  fontsize=8)
     ax.legend(fontsize=6.5, loc="upper left")
     ax.grid(True, which="both", alpha=0.3)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
+    save_png(fig, path, digest, dpi=120)
 
 
-def _plot_magnet(path: Path, res: dict) -> None:
+def _plot_magnet(path: Path, res: dict, digest: str) -> None:
     from matplotlib.figure import Figure      # lazy: 0.3 s import, only for plotting
     fig = Figure(figsize=(7.0, 4.4), layout="constrained")
     ax = fig.add_subplot()
@@ -310,8 +315,7 @@ def _plot_magnet(path: Path, res: dict) -> None:
                  f"strip; band: M_eff interval", fontsize=8)
     ax.legend(fontsize=7)
     ax.grid(True, which="both", alpha=0.3)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
+    save_png(fig, path, digest, dpi=120)
 
 
 def _display_path(path) -> str:

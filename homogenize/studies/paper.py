@@ -30,12 +30,13 @@ from homogenize.macro import elements as el
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.channel import ChannelGeometry, solve_channel
 from homogenize.macro.fem import Material
-from micro._io import atomic_path, atomic_write_text, manifest, write_json
-from micro._validate import check_positive, check_range
+from micro._io import (atomic_write_text, data_digest, manifest, round_floats, save_png,
+                       write_json)
+from micro._validate import InputError, check_positive, check_range
 from micro.materials import GRAVITY_M_S2, SEED, SeedParameters
 
 __all__ = ["SeedParameters", "SEED", "seed_body_force", "run_paper", "write_paper",
-           "GRAVITY_M_S2"]
+           "write_calculix_peer", "CALCULIX_REPORT", "GRAVITY_M_S2"]
 
 # SeedParameters, SEED and GRAVITY_M_S2 live in micro.materials (the one source of material
 # constants, PDMS and Fe included); they are re-exported here for code that imported them from
@@ -292,6 +293,8 @@ def _beam_study(sp: SeedParameters, width_m, thickness_m, levels, bar):
 #: mesh families of the element study, half strip: "beam" = the mesh-study family (elements
 #: about 2.7 t/k long and 2.5 t/k wide), "cubic" = elements about t/k in every direction
 MESH_FAMILIES = ("beam", "cubic")
+#: where ``make peers`` (:func:`write_calculix_peer`) puts CalculiX's elements on the same grids
+CALCULIX_REPORT = "results/peers/calculix.md"
 #: the paper's two forces are round numbers: read to the nearest 5 kN/m^3, 50/40 stands for any
 #: ratio between 47.5/42.5 and 52.5/37.5
 PAPER_RATIO_WINDOW = (47.5 / 42.5, 52.5 / 37.5)
@@ -355,8 +358,12 @@ def _element_study(sp: SeedParameters, strip: Strip, p_fit: float, search_levels
             bar.update(1)
 
     have_ccx = ccx is not None and el.ccx_available(ccx)
-    ccx_status = ("ok" if have_ccx else
-                  "not run: ccx not installed" if ccx is not None else "not run: ccx disabled")
+    ccx_status = ("ok" if have_ccx else "not run: ccx not installed" if ccx is not None else
+                  f"not part of this study (CalculiX's elements: {CALCULIX_REPORT})")
+    # CalculiX's own elements only when asked for (write_calculix_peer): the main study's
+    # results must not depend on an optional tool being installed
+    codes = (("scikit-fem", tuple(el.ELEMENTS)),) + (
+        (("CalculiX", el.CCX_ELEMENTS),) if ccx is not None else ())
     converged = {}
     for nu in cfg["nu"]:
         mat = Material(sp.E_Pa, nu, sp.pdms_density_kg_m3)
@@ -379,8 +386,7 @@ def _element_study(sp: SeedParameters, strip: Strip, p_fit: float, search_levels
             n_nodes = (nx + 1) * (2 * ny + 1) * (nz + 1)
             for nu in cfg["nu"]:
                 mat = Material(sp.E_Pa, nu, sp.pdms_density_kg_m3)
-                for code, names in (("scikit-fem", tuple(el.ELEMENTS)),
-                                    ("CalculiX", el.CCX_ELEMENTS)):
+                for code, names in codes:
                     for name in names:
                         row = {"family": family, "layers": k, "divisions_half": list(div),
                                "corner_nodes_full_strip": n_nodes, "nu": nu, "code": code,
@@ -506,14 +512,15 @@ QUICK = {
 
 
 def run_paper(width_m=5e-3, thickness_m=1e-3, *, quick=False, quiet=False,
-              params: SeedParameters | None = None, ccx: str | None = "ccx",
+              params: SeedParameters | None = None, ccx: str | None = None,
               workdir=None) -> dict:
     """Every number of the paper reproduction as a JSON-ready dict (SI units).
 
     ``quick`` uses small meshes and sweeps (for tests); the full run takes a few minutes.
     ``params``: the seed parameters (default :data:`micro.materials.SEED`). ``ccx``: the
-    CalculiX executable for the element-study columns of CalculiX's own elements (None: not
-    run; if it is not installed the columns say so and everything else is unchanged);
+    CalculiX executable for rows of CalculiX's own elements in the element study (None, the
+    default: no such rows; named but not installed: the rows say so, everything else is
+    unchanged);
     ``workdir``: where the CalculiX decks are written and run (None: a temporary directory).
     """
     sp = SEED if params is None else params
@@ -577,10 +584,12 @@ def _figures(res: dict, out) -> list[str]:
 
     names = []
 
+    # a figure is redrawn only when the rounded numbers or this drawing code change
+    digest = data_digest(res, __file__, cf.__file__)
+
     def save(fig, name):
         names.append(name)
-        with atomic_path(out / name) as tmp:
-            fig.savefig(tmp, dpi=120, format="png")
+        save_png(fig, out / name, digest, dpi=120)
 
     beam = res["beam"]
     ms = beam["mesh_study"]
@@ -854,6 +863,19 @@ Figures: {', '.join(figures)}.
 """
 
 
+def _calculix_sentence(es: dict) -> str:
+    if any(r["code"] == "CalculiX" for r in es["rows"]):
+        return (f"CalculiX rows are `ccx`'s own elements on the full-width strip (the same grid "
+                f"mirrored; CalculiX: {es['ccx']}). They check the scikit-fem ones (C3D8 = hex8, "
+                f"C3D20 = hex20, C3D20R = hex20-r to 4 digits; C3D8R's own hourglass control "
+                f"lands close to eps = {es['hourglass_fraction_hex8_r']:g}) and add the "
+                f"incompatible-mode C3D8I.")
+    return (f"CalculiX's own elements (C3D8, C3D8R, C3D8I, C3D20, C3D20R, C3D4, C3D10) on the "
+            f"same grids are an optional cross-check, not part of this study, so that its "
+            f"numbers do not depend on an optional tool: `make peers` installs CalculiX and "
+            f"writes them to `{CALCULIX_REPORT}`.")
+
+
 def _element_section(res: dict) -> str:
     """Markdown of the element-type sensitivity study (tables, pairs, what they show)."""
     es = res["element_sensitivity"]
@@ -862,7 +884,8 @@ def _element_section(res: dict) -> str:
     fams = [f for f in MESH_FAMILIES if any(r["family"] == f for r in rows)]
     layers = sorted({r["layers"] for r in rows})
     nus = sorted({r["nu"] for r in rows}, reverse=True)
-    names = list(el.ELEMENTS) + list(el.CCX_ELEMENTS)
+    present = {r["element"] for r in rows}
+    names = [n for n in list(el.ELEMENTS) + list(el.CCX_ELEMENTS) if n in present]
     resembles = {n: e.resembles for n, e in el.ELEMENTS.items()}
     notes = {}
 
@@ -960,10 +983,7 @@ giving the hourglass modes a fraction eps = {es['hourglass_fraction_hex8_r']:g} 
 integrated deviatoric stiffness (a 1-point hex without it is singular; with one or two layers
 the strip bends mostly through these modes, so there the number scales with eps); `hex20`/
 `hex20-r` serendipity with 3x3x3/2x2x2 Gauss; `hex27` triquadratic Lagrange; `tet4`/`tet10`
-linear/quadratic tetrahedra, six per grid cell. CalculiX rows are `ccx`'s own elements on the
-full-width strip (the same grid mirrored; CalculiX: {es['ccx']}). They check the scikit-fem
-ones (C3D8 = hex8, C3D20 = hex20, C3D20R = hex20-r to 4 digits; C3D8R's own hourglass control
-lands close to eps = {es['hourglass_fraction_hex8_r']:g}) and add the incompatible-mode C3D8I.
+linear/quadratic tetrahedra, six per grid cell. {_calculix_sentence(es)}
 See `element_sensitivity.png`.
 
 {chr(10).join(t + chr(10) for t in tables)}
@@ -1032,16 +1052,22 @@ What the numbers can and cannot single out:
 
 
 def write_paper(out_dir, json_path=None, *, quick=False, quiet=False, width_m=5e-3,
-                thickness_m=1e-3, ccx: str | None = "ccx") -> dict:
+                thickness_m=1e-3, ccx: str | None = None) -> dict:
     """Run :func:`run_paper` and write ``paper.json``, ``summary.md``, figures and manifest.
 
-    ``quick``: small meshes and sweeps (tests, ~30 s); ``ccx``: CalculiX executable for the
-    element study's CalculiX columns (None or not installed: marked "not run").
+    ``quick``: small meshes and sweeps (tests, ~30 s); ``ccx``: CalculiX executable for rows of
+    CalculiX's own elements in the element study (None, the default and ``mapsim paper``: none,
+    so that the files do not depend on an optional tool; see :func:`write_calculix_peer`).
+    Floats are rounded to :data:`micro._io.RESULT_DIGITS` significant digits; a figure whose
+    rounded numbers did not change is not redrawn.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     # CalculiX decks of the element study: a temporary directory inside ``out``, removed after
     res = run_paper(width_m, thickness_m, quick=quick, quiet=quiet, ccx=ccx, workdir=out)
+    # every written number (JSON, summary, figures) from the same rounded results, so that the
+    # last-digit round-off of another CPU does not rewrite them
+    res = round_floats(res)
     figs = _figures(res, out)
     write_json(out / "paper.json", res)
     if json_path is not None and Path(json_path).resolve() != (out / "paper.json").resolve():
@@ -1052,3 +1078,70 @@ def write_paper(out_dir, json_path=None, *, quick=False, quiet=False, width_m=5e
          "parameters": res["parameters"], "ccx": res["element_sensitivity"]["ccx"]}, None,
         outputs=["paper.json", "summary.md", *figs]))
     return res
+
+
+#: each CalculiX element and the scikit-fem element it is (C3D8R and C3D8I have no twin)
+CALCULIX_TWINS = {"C3D8": "hex8", "C3D20": "hex20", "C3D20R": "hex20-r", "C3D10": "tet10",
+                  "C3D4": "tet4", "C3D8R": None, "C3D8I": None}
+
+
+def write_calculix_peer(out_dir, *, quick=False, quiet=False, width_m=5e-3, thickness_m=1e-3,
+                        ccx: str = "ccx") -> dict:
+    """CalculiX's own elements against mapsim's on the element study's grids (``make peers``).
+
+    Runs :func:`run_paper` with the CalculiX rows and writes ``calculix.json`` (every row of the
+    element study, both codes) and ``calculix.md`` (each CalculiX element against its scikit-fem
+    twin on the same grid, C3D8R and C3D8I against the converged force, and the element pairs
+    that reproduce the paper's 50/40 once CalculiX's own elements are candidates) to
+    ``out_dir``. Raises :class:`micro.InputError` before any work if ``ccx`` is not installed.
+    """
+    if not el.ccx_available(ccx):
+        raise InputError(f"CalculiX {ccx!r} is not installed (Debian: apt-get install "
+                         f"calculix-ccx, or `make peers`)")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    res = run_paper(width_m, thickness_m, quick=quick, quiet=quiet, ccx=ccx, workdir=out)
+    es = round_floats(res["element_sensitivity"])
+    index = {(r["family"], r["layers"], r["nu"], r["code"], r["element"]): r
+             for r in es["rows"]}
+    twins, alone = [], []
+    for r in es["rows"]:
+        if r["code"] != "CalculiX" or r["status"] != "ok":
+            continue
+        twin = CALCULIX_TWINS[r["element"]]
+        t = index.get((r["family"], r["layers"], r["nu"], "scikit-fem", twin)) if twin else None
+        if t is not None and t["status"] == "ok":
+            twins.append({**{k: r[k] for k in ("family", "layers", "nu", "element")},
+                          "twin": twin, "ccx_tip_m": r["tip_m"], "mapsim_tip_m": t["tip_m"],
+                          "relative_difference": r["tip_m"] / t["tip_m"] - 1.0})
+        elif twin is None:
+            alone.append({**{k: r[k] for k in ("family", "layers", "nu", "element")},
+                          "force_N_m3": r["force_N_m3"],
+                          "ratio_to_converged": r["ratio_to_converged"]})
+    report = round_floats({"strip_length_m": es["strip_length_m"], "ccx": es["ccx"],
+                           "twins": twins, "without_twin": alone,
+                           "pairs_matching_paper": es["pairs_matching_paper"],
+                           "rows": es["rows"], "quick": bool(quick)})
+    write_json(out / "calculix.json", report)
+    lines = ["# CalculiX's own elements against mapsim's (the seed strip's element study)", "",
+             f"Strip {es['strip_length_m'] * 1e3:.3f} x {width_m * 1e3:g} x "
+             f"{thickness_m * 1e3:g} mm under the seed's 40 kN/m^3; CalculiX runs the full-width "
+             "strip (the half-strip grid mirrored) written by `homogenize.macro.exporters`. "
+             "Made by `make peers` (`mapsim paper-calculix`); the main study "
+             "(`results/paper/summary.md`) does not depend on CalculiX.", "",
+             "| mesh | nu | CalculiX | mapsim | tip CalculiX [mm] | tip mapsim [mm] | "
+             "difference |", "|---|---|---|---|---:|---:|---:|"]
+    lines += [f"| {d['family']} k={d['layers']} | {d['nu']:g} | {d['element']} | {d['twin']} | "
+              f"{d['ccx_tip_m'] * 1e3:.4f} | {d['mapsim_tip_m'] * 1e3:.4f} | "
+              f"{100 * d['relative_difference']:+.3f} % |" for d in twins]
+    lines += ["", "Elements mapsim does not have (force for 4 mm, ratio to converged):", "",
+              "| mesh | nu | element | force [kN/m^3] | / converged |", "|---|---|---|---:|---:|"]
+    lines += [f"| {d['family']} k={d['layers']} | {d['nu']:g} | {d['element']} | "
+              f"{d['force_N_m3'] / 1e3:.1f} | {d['ratio_to_converged']:.3f} |" for d in alone]
+    lines += ["", f"Element pairs reproducing the paper's 50/40 with CalculiX's C3D8R and C3D8I "
+              f"among the candidates: {len(es['pairs_matching_paper'])}.", ""]
+    atomic_write_text(out / "calculix.md", "\n".join(lines))
+    write_json(out / "manifest.json", manifest(
+        {"width_m": width_m, "thickness_m": thickness_m, "quick": quick, "ccx": es["ccx"]},
+        None, outputs=["calculix.json", "calculix.md"]))
+    return report

@@ -184,3 +184,35 @@ def test_failed_realizations_are_reported_and_the_rest_kept(study, client1, tmp_
     assert sorted(p.name.split("_")[0] + p.name.split("_")[1] for p in calls.iterdir()) == \
         ["g1r2", "g4r0"]
     assert out.exists() and not parts_dir_for(out).exists()
+
+
+def test_rewrite_keeps_a_table_equal_to_round_off_and_replaces_a_changed_one(study, tmp_path):
+    """A rerun on another CPU changes the last digits of the results: the table already there is
+    kept byte for byte (so a committed table is not rewritten); a change beyond
+    TABLE_ROUNDOFF_RTOL (1e-8) writes the new table."""
+    from homogenize.tables import (TABLE_ROUNDOFF_RTOL, _part_path, _write_part, aggregate,
+                                   write_table)
+    evaluator = SyntheticEvaluator()
+    parts = tmp_path / "parts"
+    for t in study.tasks():
+        k = t.key(evaluator.id)
+        _write_part(_part_path(parts, t, k), t, k, evaluator(t))
+    data = aggregate(study, parts, evaluator.id)
+    man = {"config": "fixed"}
+    out = tmp_path / "table.h5"
+    write_table(out, study, data, man, evaluator.id)
+    first = out.read_bytes()
+
+    def scaled(factor):
+        return {**data, "values": {q: v * factor for q, v in data["values"].items()},
+                "summaries": {q: {k: v * factor for k, v in s.items()}
+                              for q, s in data["summaries"].items()}}
+
+    write_table(out, study, scaled(1.0 + 1e-13), man, evaluator.id)    # round-off: kept
+    assert out.read_bytes() == first
+    write_table(out, study, scaled(1.0 + 100 * TABLE_ROUNDOFF_RTOL), man, evaluator.id)
+    assert out.read_bytes() != first                                   # a real change
+    q = next(iter(data["values"]))
+    with h5py.File(out) as h:
+        np.testing.assert_allclose(h[q][()].ravel(), (data["values"][q] * (1 + 1e-6)).ravel(),
+                                   rtol=1e-15)
