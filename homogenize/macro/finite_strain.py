@@ -1,0 +1,1004 @@
+"""Finite-strain, nearly incompressible elasticity of an axisymmetric specimen (scikit-fem).
+
+A solid of revolution about the ``z`` axis is meshed in the ``(r, z)`` half plane (scikit-fem
+``MeshTri``; every integral carries the weight ``2 pi r``, the hoop stretch is ``1 + u_r / r``).
+The material is a decoupled neo-Hookean solid (shear modulus ``G``, bulk modulus ``K``, possibly
+infinite) in a mixed displacement-pressure form with Taylor-Hood elements (P2 displacement, P1
+pressure), so that nothing locks as ``nu -> 1/2``. Total Lagrangian, Newton's method on the
+consistent tangent (material, pressure, prescribed stress and follower-load parts), load
+stepping with step cuts and :class:`ConvergenceError` (with the residual history) when Newton
+fails.
+
+* bodies -- :func:`sphere_body`, :func:`spheroid_body`, :func:`cylinder_body`: conforming
+  meshes of the quarter section ``r >= 0, z >= 0`` (symmetry planes ``r = 0`` and ``z = 0``) or,
+  with ``mid_plane=False``, of the whole section ``r >= 0`` (free body);
+* material -- :class:`NeoHookeanSolid` (``G`` and Poisson's ratio, or ``G`` and ``K``);
+* loads -- :class:`Traction` (callable of the current position and current normal, a follower
+  load; or dead, in the reference configuration; or arrays at the facet quadrature points),
+  a body force per reference volume (uniform, callable or array at the element quadrature
+  points) and a uniform prescribed stress added to the elastic one (the RVE's magnetic stress),
+  all in :class:`Loads`;
+* :func:`solve_axisymmetric` -> :class:`AxisymmetricSolution`; observables
+  :func:`length_change_m`, :func:`diameter_change_m`, :func:`mean_strain`, :func:`pole_strain`;
+* closed forms used by the tests: :func:`uniaxial_stretch` (homogeneous uniaxial state of this
+  material law) and :func:`lamb_sphere_strains` (incompressible linear sphere under
+  ``p0 cos^2(theta) n``).
+
+Units: SI throughout (m, Pa, N/m^3 for body forces, Pa for tractions and stresses).
+
+Material law (``J = det F``, ``I1 = tr(F^T F)``)::
+
+    W(F, p) = G/2 (J^(-2/3) I1 - 3) + p (J - 1) - p^2 / (2 K)
+
+stationary in ``p`` at ``p = K (J - 1)``, i.e. ``W = G/2 (J^(-2/3) I1 - 3) + K/2 (J - 1)^2``;
+``p`` is the Cauchy mean stress (positive in tension). Small strain: ``sigma = 2 G dev(eps) +
+K tr(eps) I`` (linear elasticity with ``nu = (3K - 2G) / (6K + 2G)``); ``K = inf``: the
+incompressible neo-Hookean solid, uniaxial nominal stress ``G (lambda - lambda^-2)``.
+
+Coupling with a magnetostatic solve: :func:`element_points` and :func:`facet_points` give the
+quadrature points at which array loads are expected (the same rule on the deformed mesh of
+:meth:`AxisymmetricSolution.deformed_mesh`, which keeps the element and facet numbering), so a
+field solved on the deformed mesh can be handed back point by point.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.optimize import brentq
+from scipy.spatial import Delaunay
+from skfem import CellBasis, ElementTriP1, ElementTriP2, FacetBasis, MeshTri
+
+from micro._validate import ConvergenceError, InputError, check_choice, check_finite, \
+    check_positive, check_range
+from micro.materials import ElasticMaterial
+
+__all__ = ["NeoHookeanSolid", "AxisymmetricBody", "sphere_body", "spheroid_body",
+           "cylinder_body", "Traction", "Loads", "AxisymmetricSolution", "solve_axisymmetric",
+           "element_points", "facet_points", "length_change_m", "diameter_change_m",
+           "mean_strain", "pole_strain", "traction_moment_Pa", "uniaxial_stretch",
+           "lamb_sphere_strains", "ConvergenceError", "INTORDER"]
+
+#: Quadrature degree of the element and facet rules (6 points per triangle, 3 per facet): exact
+#: for the P2 x P2 stiffness times the weight ``r`` of an undeformed body.
+INTORDER = 4
+
+_TWO_PI = 2.0 * math.pi
+
+
+# --------------------------------------------------------------------------------------------
+# material
+
+@dataclass(frozen=True)
+class NeoHookeanSolid:
+    """Decoupled neo-Hookean solid (see the module docstring for the strain energy).
+
+    Parameters
+    ----------
+    G_Pa : float -- shear modulus [Pa], > 0
+    K_Pa : float -- bulk modulus [Pa], > 0; ``math.inf`` for an incompressible solid
+
+    Build it from Poisson's ratio with :meth:`from_poisson`, from the project's
+    :class:`micro.materials.ElasticMaterial` with :meth:`from_material`, or
+    :meth:`incompressible`.
+    """
+
+    G_Pa: float
+    K_Pa: float
+
+    def __post_init__(self):
+        check_positive("G_Pa (shear modulus)", self.G_Pa, "Pa")
+        if not (isinstance(self.K_Pa, (int, float)) and self.K_Pa == math.inf):
+            check_positive("K_Pa (bulk modulus)", self.K_Pa, "Pa")
+
+    @classmethod
+    def from_poisson(cls, G_Pa: float, nu: float) -> "NeoHookeanSolid":
+        """Shear modulus ``G_Pa`` [Pa] and Poisson's ratio ``nu`` in (-1, 0.5)."""
+        G = check_positive("G_Pa (shear modulus)", G_Pa, "Pa")
+        nu = check_range("nu (Poisson's ratio)", nu, -1.0, 0.5, "", lo_open=True,
+                         hi_open=True)
+        return cls(G, 2.0 * G * (1.0 + nu) / (3.0 * (1.0 - 2.0 * nu)))
+
+    @classmethod
+    def from_material(cls, material: ElasticMaterial) -> "NeoHookeanSolid":
+        """The solid with the small-strain constants of ``material`` (E [Pa], nu)."""
+        K, G = material.bulk_shear_Pa
+        return cls(G, K)
+
+    @classmethod
+    def incompressible(cls, G_Pa: float) -> "NeoHookeanSolid":
+        """Incompressible solid of shear modulus ``G_Pa`` [Pa] (``K = inf``)."""
+        return cls(check_positive("G_Pa (shear modulus)", G_Pa, "Pa"), math.inf)
+
+    @property
+    def nu(self) -> float:
+        """Small-strain Poisson's ratio [-] (0.5 if incompressible)."""
+        if self.K_Pa == math.inf:
+            return 0.5
+        K, G = self.K_Pa, self.G_Pa
+        return (3.0 * K - 2.0 * G) / (6.0 * K + 2.0 * G)
+
+    @property
+    def inv_K_per_Pa(self) -> float:
+        """1 / K [1/Pa] (0 if incompressible)."""
+        return 0.0 if self.K_Pa == math.inf else 1.0 / self.K_Pa
+
+
+def _material_pointwise(H, p, G):
+    """First Piola stress and tangent of the mixed neo-Hookean law at quadrature points.
+
+    ``H = Grad u``, shape (..., 3, 3), ``p`` [Pa], shape (...). Returns ``P`` (..., 3, 3),
+    ``A = dP/dF`` at fixed ``p`` (..., 3, 3, 3, 3), ``J - 1`` (...) and ``J F^-T`` (..., 3, 3)
+    (the derivative of ``J`` with respect to ``F``).
+    """
+    F = np.eye(3) + H
+    trH = np.trace(H, axis1=-2, axis2=-1)
+    I2 = 0.5 * (trH ** 2 - np.einsum("...ij,...ji->...", H, H))
+    # J - 1 without cancellation at small strain
+    Jm1 = trH + I2 + np.linalg.det(H)
+    if np.any(Jm1 <= -1.0):
+        raise FloatingPointError("inverted element (J <= 0)")
+    J = 1.0 + Jm1
+    FiT = np.swapaxes(np.linalg.inv(F), -1, -2)
+    I1 = np.einsum("...ij,...ij->...", F, F)
+    a = G * J ** (-2.0 / 3.0)
+    e = (..., None, None)
+    P = a[e] * (F - (I1 / 3.0)[e] * FiT) + (p * J)[e] * FiT
+    e4 = (..., None, None, None, None)
+    eye = np.eye(3)
+    FiT_FiT = np.einsum("...ij,...kl->...ijkl", FiT, FiT)
+    FiT_x = np.einsum("...il,...kj->...ijkl", FiT, FiT)
+    # d/dF of a (F - I1/3 F^-T) and of p J F^-T; both symmetric in (ij) <-> (kl)
+    A = a[e4] * (np.einsum("ik,jl->ijkl", eye, eye)
+                 - (2.0 / 3.0) * (np.einsum("...ij,...kl->...ijkl", F, FiT)
+                                  + np.einsum("...ij,...kl->...ijkl", FiT, F))
+                 + (2.0 / 9.0) * I1[e4] * FiT_FiT + (I1 / 3.0)[e4] * FiT_x) \
+        + (p * J)[e4] * (FiT_FiT - FiT_x)
+    return P, A, Jm1, J[e] * FiT
+
+
+def _prescribed_pointwise(H, S, measure):
+    """Prescribed stress ``S`` (3x3, in the (r, z, theta) frame) as a first Piola stress and its
+    tangent: ``P = S`` ("piola") or ``P = J S F^-T`` ("cauchy", constant in the current body).
+    """
+    if measure == "piola":
+        return np.broadcast_to(S, H.shape), None
+    F = np.eye(3) + H
+    J = np.linalg.det(F)
+    FiT = np.swapaxes(np.linalg.inv(F), -1, -2)
+    SF = J[..., None, None] * np.einsum("ij,...jk->...ik", S, FiT)
+    A = (np.einsum("...ij,...kl->...ijkl", SF, FiT) - np.einsum("...il,...kj->...ijkl", SF, FiT))
+    return SF, A
+
+
+# --------------------------------------------------------------------------------------------
+# bodies and meshes
+
+@dataclass(frozen=True)
+class AxisymmetricBody:
+    """A solid of revolution about ``z`` and its mesh in the ``(r, z)`` half plane.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTri -- coordinates (r, z) [m]; named boundaries ``"axis"`` (r = 0),
+        ``"mid"`` (z = 0, only with ``mid_plane``), ``"surface"`` (the free surface) and, for a
+        cylinder, ``"side"``, ``"end"`` (z = +L/2) and ``"end_bottom"`` (z = -L/2, whole
+        section only)
+    shape : "sphere" | "spheroid" | "cylinder"
+    radius_m : float -- equatorial radius / cylinder radius [m]
+    half_length_m : float -- polar semi-axis / half of the cylinder length [m]
+    mid_plane : bool -- True: the mesh is the quarter ``z >= 0`` with ``u_z = 0`` on ``z = 0``;
+        False: the whole section, a free body (its axial translation is removed by the
+        solver)
+    """
+
+    mesh: MeshTri
+    shape: str
+    radius_m: float
+    half_length_m: float
+    mid_plane: bool
+
+    @property
+    def volume_m3(self) -> float:
+        """Volume of the meshed (polygonal) body of revolution, whole body [m^3]."""
+        p, t = self.mesh.p, self.mesh.t
+        x = p[:, t]
+        area = 0.5 * np.abs((x[0, 1] - x[0, 0]) * (x[1, 2] - x[1, 0])
+                            - (x[0, 2] - x[0, 0]) * (x[1, 1] - x[1, 0]))
+        v = float(np.sum(_TWO_PI * area * x[0].mean(axis=0)))
+        return 2.0 * v if self.mid_plane else v
+
+
+def _tag(mesh, names):
+    """Named boundaries from facet-midpoint predicates, first match wins."""
+    bf = mesh.boundary_facets()
+    mid = mesh.p[:, mesh.facets[:, bf]].mean(axis=1)
+    taken = np.zeros(bf.size, bool)
+    out = {}
+    for name, pred in names:
+        sel = pred(mid) & ~taken
+        taken |= sel
+        out[name] = bf[sel]
+    out["surface"] = bf[~taken]
+    return _with_facets(mesh, out)
+
+
+def _with_facets(mesh, facets: dict):
+    return MeshTri(mesh.p, mesh.t, _boundaries={k: np.asarray(v, dtype=np.int32)
+                                                 for k, v in facets.items()})
+
+
+def _ccw(p, t):
+    x = p[:, t]
+    det = (x[0, 1] - x[0, 0]) * (x[1, 2] - x[1, 0]) - (x[0, 2] - x[0, 0]) * (x[1, 1] - x[1, 0])
+    t = t.copy()
+    flip = det < 0
+    t[1, flip], t[2, flip] = t[2, flip].copy(), t[1, flip].copy()
+    return t, np.abs(det)
+
+
+def _mirror(p, t):
+    """The section mirrored about z = 0 and glued to itself (nodes on z = 0 shared): the
+    whole section of a body whose quarter is ``(p, t)``."""
+    on = np.abs(p[1]) <= 1e-12 * np.abs(p).max()
+    idx = np.full(p.shape[1], -1)
+    new = np.flatnonzero(~on)
+    idx[on] = np.flatnonzero(on)
+    idx[new] = p.shape[1] + np.arange(new.size)
+    pm = p[:, new] * np.array([[1.0], [-1.0]])
+    tm = idx[t][[0, 2, 1]]
+    return np.hstack([p, pm]), np.hstack([t, tm])
+
+
+def spheroid_body(radius_m: float, half_length_m: float, n: int = 8, *, mid_plane: bool = True,
+                  grading: float = 1.0) -> AxisymmetricBody:
+    """Conforming triangle mesh of a spheroid ``(r/a)^2 + (z/c)^2 <= 1``.
+
+    Parameters
+    ----------
+    radius_m : float -- equatorial semi-axis ``a`` [m], > 0
+    half_length_m : float -- polar semi-axis ``c`` [m], > 0
+    n : int -- number of rings from the centre to the surface (element size ~ a / n), >= 1
+    mid_plane : bool -- quarter section ``z >= 0`` (True) or whole section (False)
+    grading : float -- >= 1; ring radii ``1 - (1 - k/n)^grading``: finer near the surface
+
+    Notes
+    -----
+    Nodes on concentric quarter ellipses, ring ``k`` with about ``k pi / 2`` equal angular
+    steps, triangulated by Delaunay in the unit quarter disk and stretched by ``(a, c)``:
+    nearly equilateral triangles in a sphere, every boundary node on the spheroid. The whole
+    section is the quarter and its mirror image (a symmetric mesh: a symmetric load gives the
+    quarter's solution to round-off).
+    """
+    a = check_positive("radius_m", radius_m, "m")
+    c = check_positive("half_length_m", half_length_m, "m")
+    n = int(check_positive("n (rings)", n, ""))
+    grading = check_range("grading", grading, 1.0, 10.0)
+    pts = [np.zeros((2, 1))]
+    for k in range(1, n + 1):
+        rho = 1.0 - (1.0 - k / n) ** grading
+        m = max(1, int(math.ceil(rho * n * 0.5 * math.pi)))
+        psi = np.linspace(0.0, 0.5 * math.pi, m + 1)
+        pts.append(rho * np.vstack([np.sin(psi), np.cos(psi)]))
+    p = np.hstack(pts)
+    t = Delaunay(p.T).simplices.T.astype(np.int64)
+    t, det = _ccw(p, t)
+    t = t[:, det > 1e-10 * det.max()]
+    if not mid_plane:
+        p, t = _mirror(p, t)
+    if np.unique(t).size != p.shape[1]:
+        raise RuntimeError("spheroid mesh: a node was left out of the triangulation")
+    p = p * np.array([[a], [c]])
+    mesh = MeshTri(p, np.ascontiguousarray(t))
+    tol_r, tol_z = 1e-9 * a, 1e-9 * c
+    names = [("axis", lambda x: x[0] < tol_r)]
+    if mid_plane:
+        names.append(("mid", lambda x: np.abs(x[1]) < tol_z))
+    mesh = _tag(mesh, names)
+    shape = "sphere" if a == c else "spheroid"
+    return AxisymmetricBody(mesh, shape, a, c, bool(mid_plane))
+
+
+def sphere_body(radius_m: float, n: int = 8, *, mid_plane: bool = True,
+                grading: float = 1.0) -> AxisymmetricBody:
+    """Conforming triangle mesh of a sphere of radius ``radius_m`` [m] (see
+    :func:`spheroid_body`)."""
+    return spheroid_body(radius_m, radius_m, n, mid_plane=mid_plane, grading=grading)
+
+
+def _graded(n, grading):
+    """n + 1 points in [0, 1], refined towards 1 (``1 - (1 - s)^grading``)."""
+    s = np.linspace(0.0, 1.0, n + 1)
+    return 1.0 - (1.0 - s) ** grading
+
+
+def cylinder_body(radius_m: float, length_m: float, n_r: int = 6, n_z: int | None = None, *,
+                  mid_plane: bool = True, grading: float = 1.5) -> AxisymmetricBody:
+    """Structured triangle mesh of a finite cylinder (radius ``R``, length ``L``, centred on
+    ``z = 0``), graded towards the lateral surface and the end faces (the stress-singular rim).
+
+    Parameters
+    ----------
+    radius_m : float -- R [m], > 0
+    length_m : float -- L [m], > 0 (the end faces at ``z = +-L/2``)
+    n_r : int -- elements along the radius, >= 1
+    n_z : int or None -- elements along the half length (default: the same size as radially)
+    mid_plane : bool -- quarter section ``z >= 0`` (True) or whole section (False)
+    grading : float -- >= 1, exponent of :func:`_graded` (1: uniform)
+    """
+    R = check_positive("radius_m", radius_m, "m")
+    L = check_positive("length_m", length_m, "m")
+    n_r = int(check_positive("n_r", n_r, ""))
+    n_z = max(1, int(round(n_r * 0.5 * L / R))) if n_z is None else \
+        int(check_positive("n_z", n_z, ""))
+    grading = check_range("grading", grading, 1.0, 10.0)
+    r = R * _graded(n_r, grading)
+    z = 0.5 * L * _graded(n_z, grading)
+    if not mid_plane:
+        z = np.concatenate([-z[::-1], z[1:]])
+    mesh = MeshTri.init_tensor(r, z)
+    tol = 1e-9 * min(R, L)
+    names = [("axis", lambda x: x[0] < tol), ("end", lambda x: x[1] > 0.5 * L - tol),
+             ("end_bottom", lambda x: x[1] < -0.5 * L + tol), ("side", lambda x: x[0] > R - tol)]
+    if mid_plane:
+        names.insert(1, ("mid", lambda x: np.abs(x[1]) < tol))
+    mesh = _tag(mesh, names)
+    b = dict(mesh.boundaries)
+    b["surface"] = np.concatenate([b["side"], b["end"], b["end_bottom"]])
+    if mid_plane:
+        del b["end_bottom"]
+    return AxisymmetricBody(_with_facets(mesh, b), "cylinder", R, 0.5 * L, bool(mid_plane))
+
+
+# --------------------------------------------------------------------------------------------
+# loads
+
+@dataclass(frozen=True)
+class Traction:
+    """Surface traction on the facets of one named boundary [Pa].
+
+    Parameters
+    ----------
+    value : callable or array_like
+        * callable ``t(x, n) -> (2, ...)``: the traction (r, z components) [Pa] at positions
+          ``x`` [m], shape (2, ...), with unit outward normals ``n``, shape (2, ...);
+          ``follower=True``: current position and normal, force per current area;
+          ``follower=False``: reference position and normal, force per reference area;
+        * array, shape (2, n_facets, n_qp) at the points of :func:`facet_points` (or (2,), one
+          vector everywhere): per current area (``follower=True``, direction fixed) or per
+          reference area (``follower=False``).
+    boundary : str -- name of the boundary (``"surface"``, ``"end"``, ``"side"``, ...)
+    follower : bool -- see ``value``
+
+    Notes
+    -----
+    The follower load's tangent is exact for the change of area, normal and position; a
+    callable's own dependence on ``x`` and ``n`` is differentiated by central differences
+    (steps ``1e-6`` of the body size and of the normal), so it must be defined for nearby
+    non-unit ``n`` (any formula such as ``p0 n_z^2 n`` is).
+    """
+
+    value: object
+    boundary: str = "surface"
+    follower: bool = True
+
+    def __post_init__(self):
+        if not callable(self.value):
+            check_finite("Traction.value", self.value, "Pa")
+
+
+@dataclass(frozen=True)
+class Loads:
+    """Everything that loads the body, applied together and scaled by the load factor.
+
+    Parameters
+    ----------
+    tractions : tuple of :class:`Traction`
+    body_force_N_m3 : None, array_like (2,), array (2, n_elements, n_qp) at the points of
+        :func:`element_points`, or callable ``f(X) -> (2, ...)`` of the reference position
+        ``X`` [m], shape (2, ...) -- dead body force per reference volume [N/m^3] (a force per
+        current volume ``f_c`` enters as ``J f_c``)
+    prescribed_stress_Pa : None or array_like (3, 3) -- uniform stress added to the elastic
+        one, Cartesian (x, y, z) components [Pa]; it must be axisymmetric,
+        ``diag(s_t, s_t, s_a)``. The body is in equilibrium under the total stress: a free
+        body deforms until its elastic stress cancels the prescribed one (a positive
+        ``s_a`` shortens it).
+    prescribed_measure : "cauchy" (constant true stress in the deformed body) | "piola"
+        (constant first Piola-Kirchhoff stress)
+    """
+
+    tractions: tuple = ()
+    body_force_N_m3: object = None
+    prescribed_stress_Pa: object = None
+    prescribed_measure: str = "cauchy"
+
+    def __post_init__(self):
+        check_choice("prescribed_measure", self.prescribed_measure, ("cauchy", "piola"))
+        for t in self.tractions:
+            if not isinstance(t, Traction):
+                raise InputError(f"Loads.tractions must hold Traction objects, got {t!r}")
+        if self.prescribed_stress_Pa is not None:
+            S = np.asarray(check_finite("prescribed_stress_Pa", self.prescribed_stress_Pa,
+                                        "Pa"), float)
+            if S.shape != (3, 3):
+                raise InputError(f"prescribed_stress_Pa must have shape (3, 3), got {S.shape}")
+            scale = max(np.abs(S).max(), 1e-300)
+            off = S - np.diag(np.diag(S))
+            if np.abs(off).max() > 1e-12 * scale or abs(S[0, 0] - S[1, 1]) > 1e-12 * scale:
+                raise InputError("prescribed_stress_Pa must be axisymmetric about z, "
+                                 f"diag(s_t, s_t, s_a) [Pa]; got {S.tolist()}")
+        if self.body_force_N_m3 is not None and not callable(self.body_force_N_m3):
+            check_finite("body_force_N_m3", self.body_force_N_m3, "N/m^3")
+
+    def _stress_rz_theta(self):
+        """The prescribed stress in the (r, z, theta) frame of the kinematics, or None."""
+        if self.prescribed_stress_Pa is None:
+            return None
+        S = np.asarray(self.prescribed_stress_Pa, float)
+        return np.diag([S[0, 0], S[2, 2], S[1, 1]])
+
+
+def _cell_bases(mesh):
+    ub = CellBasis(mesh, ElementTriP2(), intorder=INTORDER)
+    pb = CellBasis(mesh, ElementTriP1(), intorder=INTORDER)
+    return ub, pb
+
+
+def element_points(body: AxisymmetricBody) -> np.ndarray:
+    """Quadrature points (r, z) [m] of the element rule, shape (2, n_elements, n_qp): where an
+    array body force is expected."""
+    return np.asarray(CellBasis(body.mesh, ElementTriP1(), intorder=INTORDER)
+                      .global_coordinates())
+
+
+def facet_points(body: AxisymmetricBody, boundary: str = "surface"):
+    """Quadrature points (r, z) [m] and unit outward normals of the facets of ``boundary``,
+    each shape (2, n_facets, n_qp): where an array traction is expected."""
+    fb = _facet_basis(body, boundary)
+    return np.asarray(fb.global_coordinates()), np.asarray(fb.normals)
+
+
+def _facet_basis(body, boundary):
+    check_choice("boundary", boundary, tuple(body.mesh.boundaries))
+    return FacetBasis(body.mesh, ElementTriP2(), facets=body.mesh.boundaries[boundary],
+                      intorder=INTORDER)
+
+
+def _eval_field(name, value, points, unit):
+    """A load given as (2,), as an array shaped like ``points`` or as a callable of them."""
+    if callable(value):
+        out = np.asarray(value(points), float)
+    else:
+        out = np.asarray(value, float)
+        if out.shape == (2,):
+            out = np.broadcast_to(out[:, None, None], points.shape)
+    if out.shape != points.shape:
+        raise InputError(f"{name} must have shape (2,) or {points.shape}, got {out.shape}")
+    check_finite(name, out, unit)
+    return out
+
+
+class _FacetLoad:
+    """One :class:`Traction` on its facets: force vector and load stiffness."""
+
+    def __init__(self, body, traction: Traction, length_scale):
+        fb = _facet_basis(body, traction.boundary)
+        self.t = traction
+        self.w = np.asarray(fb.dx)                                  # (nf, nq) reference arc
+        self.X = np.asarray(fb.global_coordinates())          # (2, nf, nq)
+        Nn = np.asarray(fb.normals)
+        self.T = np.stack([-Nn[1], Nn[0]])                          # unit tangent, Rot(T) = N
+        self.N = np.stack([np.asarray(fb.basis[a][0]) for a in range(fb.Nbfun)])
+        self.dNT = np.stack([np.einsum("jfq,jfq->fq", fb.basis[a][0].grad, self.T)
+                             for a in range(fb.Nbfun)])             # (nb, nf, nq)
+        ed = fb.element_dofs                                        # (nb, nf)
+        self.vd = np.stack([2 * ed, 2 * ed + 1], axis=1)            # (nb, 2, nf)
+        self.h = 1e-6 * length_scale
+        if not traction.follower:
+            if callable(traction.value):
+                t0 = self._t(self.X, Nn)
+                check_finite("traction(X, N)", t0, "Pa")
+            else:
+                t0 = _eval_field("traction", traction.value, self.X, "Pa")
+            g = t0 * (_TWO_PI * self.X[0])                          # per reference arc length
+            self.f_dead = self._scatter(np.einsum("afq,fq,ifq->aif", self.N, self.w, g))
+        else:
+            self.f_dead = None
+            if not callable(traction.value):
+                self.t_fixed = _eval_field("traction", traction.value, self.X, "Pa")
+
+    def _scatter(self, fe):
+        return self.vd.ravel(), fe.ravel()
+
+    def _t(self, x, n):
+        out = np.asarray(self.t.value(x, n), float)
+        if out.shape != x.shape:
+            raise InputError(f"the traction callable must return shape {x.shape}, "
+                             f"got {out.shape}")
+        return out
+
+    def follower(self, u_nodal, tangent):
+        """Force (rows, values) and stiffness (rows, cols, values) at displacement ``u``."""
+        ue = u_nodal[self.vd]                                       # (nb, 2, nf)
+        x = self.X + np.einsum("aif,afq->ifq", ue, self.N)
+        m = self.T + np.einsum("aif,afq->ifq", ue, self.dNT)
+        mn = np.sqrt(m[0] ** 2 + m[1] ** 2)
+        n = np.stack([m[1], -m[0]]) / mn
+        r = x[0]
+        if callable(self.t.value):
+            t = self._t(x, n)
+        else:
+            t = self.t_fixed
+        s = _TWO_PI * r * mn
+        g = t * s
+        f = np.einsum("afq,fq,ifq->aif", self.N, self.w, g)
+        if not tangent:
+            return (self.vd.ravel(), f.ravel()), None
+        dg_du = np.zeros((2, 2) + r.shape)                          # [i, k]
+        dg_dm = np.zeros((2, 2) + r.shape)
+        dg_du[:, 0] += t * (_TWO_PI * mn)
+        dg_dm += np.einsum("ifq,kfq->ikfq", t, _TWO_PI * r * m / mn)
+        if callable(self.t.value):
+            Rot = np.array([[0.0, 1.0], [-1.0, 0.0]])
+            dn_dm = (Rot[:, :, None, None] - np.einsum("lfq,kfq->lkfq", n, m / mn)) / mn
+            for k in range(2):
+                e = np.zeros((2, 1, 1))
+                e[k] = 1.0
+                dtx = (self._t(x + self.h * e, n) - self._t(x - self.h * e, n)) / (2 * self.h)
+                dtn = (self._t(x, n + 1e-6 * e) - self._t(x, n - 1e-6 * e)) / 2e-6
+                dg_du[:, k] += dtx * s
+                dg_dm += np.einsum("ifq,kfq->ikfq", dtn * s, dn_dm[k])
+        # K[a i, b k] = sum_q w N_a (dg_i/du_k N_b + dg_i/dm_k dN_b.T)
+        Ke = (np.einsum("afq,fq,ikfq,bfq->aibkf", self.N, self.w, dg_du, self.N)
+              + np.einsum("afq,fq,ikfq,bfq->aibkf", self.N, self.w, dg_dm, self.dNT))
+        nb = self.N.shape[0]
+        rows = np.broadcast_to(self.vd[:, :, None, None, :], (nb, 2, nb, 2, self.vd.shape[2]))
+        cols = np.broadcast_to(self.vd[None, None, :, :, :], rows.shape)
+        return (self.vd.ravel(), f.ravel()), (rows.ravel(), cols.ravel(), Ke.ravel())
+
+
+# --------------------------------------------------------------------------------------------
+# assembly
+
+class _Assembler:
+    """Residual and tangent of the mixed axisymmetric problem, vectorised over elements.
+
+    Unknowns: ``[u (2 N_u, interleaved r, z), p (N_p), mu (0 or 1)]``; ``mu`` is the Lagrange
+    multiplier of ``int u_z dV = 0`` (free body).
+    """
+
+    def __init__(self, body, solid, loads):
+        self.body, self.solid, self.loads = body, solid, loads
+        ub, pb = _cell_bases(body.mesh)
+        self.ub, self.pb = ub, pb
+        X = np.asarray(ub.global_coordinates())               # (2, ne, nq)
+        self.dx = np.asarray(ub.dx) * _TWO_PI * X[0]                # (ne, nq)
+        nb = ub.Nbfun
+        N = np.stack([np.asarray(ub.basis[a][0]) for a in range(nb)], axis=-1)
+        dN = np.stack([np.asarray(ub.basis[a][0].grad) for a in range(nb)], axis=-1)
+        ne, nq = self.dx.shape
+        B = np.zeros((ne, nq, nb, 2, 3, 3))
+        B[..., 0, 0, 0] = dN[0]
+        B[..., 0, 0, 1] = dN[1]
+        B[..., 0, 2, 2] = N / X[0][..., None]
+        B[..., 1, 1, 0] = dN[0]
+        B[..., 1, 1, 1] = dN[1]
+        self.B = B.reshape(ne, nq, 2 * nb, 3, 3)
+        self.Nu = N
+        self.psi = np.stack([np.asarray(pb.basis[s][0]) for s in range(pb.Nbfun)], -1)
+        self.nu_dof = 2 * ub.N
+        self.np_dof = pb.N
+        ed = ub.element_dofs.T
+        self.vd = np.stack([2 * ed, 2 * ed + 1], axis=-1).reshape(ne, 2 * nb)
+        self.pd = self.nu_dof + pb.element_dofs.T
+        self.free_body = not body.mid_plane
+        self.n = self.nu_dof + self.np_dof + int(self.free_body)
+        # c . u = c_scale int u_z dV; c_scale brings the constraint's entries to the size of
+        # the stiffness' (G x length), which keeps the saddle-point system well scaled
+        self.volume = float(self.dx.sum())
+        self.c = np.bincount(self.vd[:, 1::2].ravel(),
+                             np.einsum("eq,eqa->ea", self.dx, N).ravel(), minlength=self.n)
+        size = max(body.radius_m, body.half_length_m)
+        self.c_scale = solid.G_Pa * size / np.abs(self.c).max()
+        self.c *= self.c_scale
+        self.S = loads._stress_rz_theta()
+        # dead loads
+        f = np.zeros(self.n)
+        if loads.body_force_N_m3 is not None:
+            fb = _eval_field("body_force_N_m3", loads.body_force_N_m3, X, "N/m^3")
+            fe = np.einsum("eq,eqa,ieq->eai", self.dx, N, fb).reshape(ne, 2 * nb)
+            f += np.bincount(self.vd.ravel(), fe.ravel(), minlength=self.n)
+        size = max(body.radius_m, body.half_length_m)
+        self.facet_loads = [_FacetLoad(body, t, size) for t in loads.tractions]
+        for fl in self.facet_loads:
+            if fl.f_dead is not None:
+                f += np.bincount(fl.f_dead[0], fl.f_dead[1], minlength=self.n)
+        self.f_dead = f
+        # Dirichlet: u_r = 0 on the axis, u_z = 0 on the mid plane
+        fixed = [2 * ub.get_dofs("axis").all()]
+        if body.mid_plane:
+            fixed.append(2 * ub.get_dofs("mid").all() + 1)
+        self.fixed = np.unique(np.concatenate(fixed))
+        self.free = np.setdiff1d(np.arange(self.n), self.fixed)
+        self.free_u = self.free[self.free < self.nu_dof]
+        self.free_p = self.free[(self.free >= self.nu_dof) & (self.free < self.nu_dof
+                                                             + self.np_dof)]
+
+    def grad_u(self, x):
+        return np.einsum("em,eqmij->eqij", x[self.vd], self.B)
+
+    def residual(self, x, lam, tangent=True):
+        """Residual ``r(x; lam)`` and its Jacobian (CSR) at load factor ``lam``."""
+        G, invK = self.solid.G_Pa, self.solid.inv_K_per_Pa
+        H = self.grad_u(x)
+        p = np.einsum("es,eqs->eq", x[self.pd], self.psi)
+        P, A, Jm1, dJ = _material_pointwise(H, p, G)
+        if self.S is not None:
+            Ps, As = _prescribed_pointwise(H, self.S, self.loads.prescribed_measure)
+            P = P + lam * Ps
+            if As is not None:
+                A = A + lam * As
+        ne = len(self.vd)
+        r = np.zeros(self.n)
+        re = np.einsum("eq,eqij,eqmij->em", self.dx, P, self.B)
+        r += np.bincount(self.vd.ravel(), re.ravel(), minlength=self.n)
+        rp = np.einsum("eq,eqs,eq->es", self.dx, self.psi, Jm1 - p * invK)
+        r += np.bincount(self.pd.ravel(), rp.ravel(), minlength=self.n)
+        r -= lam * self.f_dead
+        rows, cols, vals = [], [], []
+        for fl in self.facet_loads:
+            if fl.f_dead is not None:
+                continue
+            (fr, fv), Kf = fl.follower(x[:self.nu_dof], tangent)
+            r -= lam * np.bincount(fr, fv, minlength=self.n)
+            if tangent:
+                rows.append(Kf[0])
+                cols.append(Kf[1])
+                vals.append(-lam * Kf[2])
+        if self.free_body:
+            mu = x[-1]
+            r[:self.nu_dof] += mu * self.c[:self.nu_dof]
+            r[-1] = self.c[:self.nu_dof] @ x[:self.nu_dof]
+        if not tangent:
+            return r, None
+        nm, ns = self.vd.shape[1], self.pd.shape[1]
+        T = np.einsum("eqijkl,eqnkl->eqijn", A, self.B)
+        Kuu = np.einsum("eq,eqmij,eqijn->emn", self.dx, self.B, T)
+        Kup = np.einsum("eq,eqmij,eqij,eqs->ems", self.dx, self.B, dJ, self.psi)
+        Kpp = -invK * np.einsum("eq,eqs,eqt->est", self.dx, self.psi, self.psi)
+        for blk, rd, cd in ((Kuu, self.vd, self.vd), (Kup, self.vd, self.pd),
+                            (np.swapaxes(Kup, 1, 2), self.pd, self.vd), (Kpp, self.pd, self.pd)):
+            rows.append(np.broadcast_to(rd[:, :, None], blk.shape).ravel())
+            cols.append(np.broadcast_to(cd[:, None, :], blk.shape).ravel())
+            vals.append(blk.ravel())
+        if self.free_body:
+            iu = np.flatnonzero(self.c[:self.nu_dof])
+            rows += [iu, np.full(iu.size, self.n - 1)]
+            cols += [np.full(iu.size, self.n - 1), iu]
+            vals += [self.c[iu], self.c[iu]]
+        del ne, nm, ns
+        K = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(self.n, self.n)).tocsr()
+        return r, K
+
+
+# --------------------------------------------------------------------------------------------
+# solution and driver
+
+@dataclass(frozen=True)
+class AxisymmetricSolution:
+    """Converged state of :func:`solve_axisymmetric`.
+
+    Attributes
+    ----------
+    body : AxisymmetricBody; solid : NeoHookeanSolid; loads : Loads
+    u_m : ndarray, shape (2, N) -- displacement (r, z) [m] at the P2 nodes (``doflocs_m``;
+        the first ``n_vertices`` are the mesh vertices)
+    p_Pa : ndarray, shape (n_vertices,) -- Cauchy mean stress of the material (pressure field,
+        positive in tension) [Pa], without the prescribed stress
+    reaction_N : float -- axial force of the free-body constraint [N] (0 with ``mid_plane``):
+        minus the net axial load, spread as a uniform body force (d'Alembert's force of a
+        freely accelerating body); ~0 for self-equilibrated loads
+    load_factors : tuple -- converged load factors; residuals : tuple -- relative Newton
+        residuals, first to last; newton_iterations : int
+    """
+
+    body: AxisymmetricBody
+    solid: NeoHookeanSolid
+    loads: Loads
+    u_m: np.ndarray
+    p_Pa: np.ndarray
+    reaction_N: float
+    load_factors: tuple
+    residuals: tuple
+    newton_iterations: int
+    basis: object = field(repr=False, compare=False, default=None)
+
+    @property
+    def doflocs_m(self) -> np.ndarray:
+        """Reference positions (r, z) [m] of the P2 nodes, shape (2, N)."""
+        return np.asarray(self.basis.doflocs)
+
+    def displacement_m(self, points_m) -> np.ndarray:
+        """Displacement (r, z) [m] at reference points ``points_m`` [m], shape (2, P) ->
+        (2, P)."""
+        pts = np.asarray(points_m, float).reshape(2, -1)
+        out = np.empty_like(pts)
+        # a point on a node (the pole, the rim) is read off the node: the element finder may
+        # miss boundary points by round-off
+        d = np.linalg.norm(self.doflocs_m[:, None, :] - pts[:, :, None], axis=0)
+        near = np.argmin(d, axis=1)
+        on = d[np.arange(pts.shape[1]), near] <= 1e-9 * max(self.body.radius_m,
+                                                           self.body.half_length_m)
+        out[:, on] = self.u_m[:, near[on]]
+        if np.any(~on):
+            Pm = self.basis.probes(pts[:, ~on])
+            out[:, ~on] = np.vstack([Pm @ self.u_m[0], Pm @ self.u_m[1]])
+        return out
+
+    def deformed_mesh(self) -> MeshTri:
+        """The deformed mesh (straight-sided, vertices moved by ``u``), same element and facet
+        numbering and boundary names: hand it to a magnetostatic solve."""
+        nv = self.body.mesh.p.shape[1]
+        return MeshTri(self.body.mesh.p + self.u_m[:, :nv], self.body.mesh.t,
+                       _boundaries=dict(self.body.mesh.boundaries))
+
+
+def _steps(load_steps):
+    if isinstance(load_steps, (int, np.integer)):
+        n = int(check_positive("load_steps", load_steps, ""))
+        return np.arange(1, n + 1) / n
+    s = np.asarray(check_finite("load_steps", load_steps, ""), float).ravel()
+    if s.size == 0 or np.any(np.diff(s) <= 0) or s[0] <= 0 or abs(s[-1] - 1.0) > 1e-12:
+        raise InputError("load_steps must be a positive int or a strictly increasing sequence "
+                         f"of load factors in (0, 1] ending at 1; got {s.tolist()}")
+    return s
+
+
+def solve_axisymmetric(body: AxisymmetricBody, solid: NeoHookeanSolid, loads: Loads, *,
+                       load_steps=1, tol: float = 1e-10, max_newton: int = 25,
+                       max_cuts: int = 6) -> AxisymmetricSolution:
+    """Finite-strain equilibrium of ``body`` of ``solid`` under ``loads`` (all scaled together).
+
+    Parameters
+    ----------
+    body : AxisymmetricBody -- mesh and symmetry (``u_r = 0`` on the axis always; ``u_z = 0``
+        on ``z = 0`` if ``body.mid_plane``, else the axial translation is removed by
+        ``int u_z dV = 0``)
+    solid : NeoHookeanSolid
+    loads : Loads
+    load_steps : int or sequence -- number of equal load increments, or the strictly increasing
+        load factors in (0, 1] ending at 1
+    tol : float -- Newton stops when the free residual is below ``tol`` times the norm of the
+        load at ``u = 0`` and the volumetric residual below ``tol`` times the volume (or
+        stalls below ``1000 tol``, the round-off floor)
+    max_newton : int -- iterations per increment; max_cuts : int -- halvings of an increment
+        that failed before :class:`ConvergenceError` is raised
+
+    Returns
+    -------
+    AxisymmetricSolution
+
+    Raises
+    ------
+    InputError (ValueError) -- bad ``load_steps`` or loads; ConvergenceError (RuntimeError) --
+    Newton failed after ``max_cuts`` cuts; ``residual_history`` holds the relative residuals.
+    """
+    if not isinstance(body, AxisymmetricBody):
+        raise InputError(f"body must be an AxisymmetricBody, got {type(body).__name__}")
+    if not isinstance(solid, NeoHookeanSolid):
+        raise InputError(f"solid must be a NeoHookeanSolid, got {type(solid).__name__}")
+    targets = list(_steps(load_steps))
+    tol = check_positive("tol", tol, "")
+    asm_ = _Assembler(body, solid, loads)
+    x = np.zeros(asm_.n)
+    free, nu = asm_.free, asm_.nu_dof
+    fu = asm_.free_u
+    fp = asm_.free_p
+    hist, done = [], []
+    lam_done, it_total, cuts = 0.0, 0, 0
+    while targets:
+        target = targets[0]
+        r0, _ = asm_.residual(np.zeros(asm_.n), target, tangent=False)
+        ref = np.linalg.norm(r0[fu]) or 1.0
+        x_try = x.copy()
+        ok, prev = False, np.inf
+        try:
+            for _ in range(max_newton):
+                r, K = asm_.residual(x_try, target)
+                rel = max(np.linalg.norm(r[fu]) / ref,
+                          np.linalg.norm(r[fp]) / asm_.volume)
+                hist.append(float(rel))
+                if rel < tol or (rel < 1e3 * tol and rel > 0.5 * prev):
+                    ok = True
+                    break
+                prev = rel
+                Kf = K[free][:, free].tocsc()
+                dx = spla.spsolve(Kf, -r[free])
+                if not np.all(np.isfinite(dx)):
+                    raise FloatingPointError("singular tangent")
+                x_try[free] += dx
+                it_total += 1
+        except FloatingPointError:
+            ok = False
+        if ok:
+            x, lam_done = x_try, target
+            done.append(float(target))
+            targets.pop(0)
+        else:
+            cuts += 1
+            if cuts > max_cuts:
+                raise ConvergenceError(
+                    f"Newton failed at load factor {target:.4g} (last converged "
+                    f"{lam_done:.4g}) after {max_cuts} step cuts; last relative residual "
+                    f"{hist[-1] if hist else float('nan'):.3g}", hist)
+            targets.insert(0, 0.5 * (lam_done + target))
+    ub = asm_.ub
+    u = np.vstack([x[0:nu:2], x[1:nu:2]])
+    p = x[nu:nu + asm_.np_dof]
+    # the constraint force -mu c is a uniform axial body force mu c_scale per volume
+    reaction = float(-x[-1] * asm_.c_scale * asm_.volume) if asm_.free_body else 0.0
+    return AxisymmetricSolution(body, solid, loads, u, p, reaction, tuple(done), tuple(hist),
+                                it_total, ub)
+
+
+# --------------------------------------------------------------------------------------------
+# observables
+
+def _top_z(body):
+    return body.half_length_m
+
+
+def length_change_m(sol: AxisymmetricSolution) -> tuple[float, float]:
+    """Change of length between the end faces [m]: (on the axis, mean over the end faces).
+
+    On the axis: ``u_z(0, z_top) - u_z(0, z_bottom)``; the face mean is the area mean of
+    ``u_z`` over the end faces (cylinder only; ``nan`` for a sphere or spheroid, whose
+    "end faces" are the poles). With ``mid_plane`` the bottom half is the mirror image.
+    """
+    b = sol.body
+    c = b.half_length_m
+    top = sol.displacement_m([[0.0], [c]])[1, 0]
+    bot = -top if b.mid_plane else sol.displacement_m([[0.0], [-c]])[1, 0]
+    if b.shape != "cylinder":
+        return float(top - bot), float("nan")
+
+    def face_mean(name):
+        fb = _facet_basis(b, name)
+        X = np.asarray(fb.global_coordinates())
+        uz = np.asarray(fb.interpolate(sol.u_m[1]))
+        w = np.asarray(fb.dx) * X[0]
+        return float(np.sum(uz * w) / np.sum(w))
+
+    mt = face_mean("end")
+    mb = -mt if b.mid_plane else face_mean("end_bottom")
+    return float(top - bot), mt - mb
+
+
+def diameter_change_m(sol: AxisymmetricSolution) -> float:
+    """Change of the diameter at mid-height / at the equator (``z = 0``) [m]:
+    ``2 u_r(R, 0)``."""
+    return float(2.0 * sol.displacement_m([[sol.body.radius_m], [0.0]])[0, 0])
+
+
+def pole_strain(sol: AxisymmetricSolution) -> float:
+    """Axial displacement of the upper pole over the polar semi-axis, ``u_z(0, c) / c`` [-]
+    (for a free body, half the change of length over ``c``)."""
+    dl, _ = length_change_m(sol)
+    return float(0.5 * dl / sol.body.half_length_m)
+
+
+def mean_strain(sol: AxisymmetricSolution) -> np.ndarray:
+    """Volume mean of the small-strain tensor over the whole body, Cartesian (x, y, z), shape
+    (3, 3) [-], from the boundary integral ``(1/V) int sym(u x N) dA`` of the reference body.
+
+    It is the symmetric part of the mean displacement gradient (exact at any strain:
+    ``mean(F) = I + (1/V) int u x N dA``). For an axisymmetric field it is
+    ``diag(e_t, e_t, e_a)`` with ``e_t = (1/2V) int u_r N_r dA`` and
+    ``e_a = (1/V) int u_z N_z dA``; with ``mid_plane`` the half body gives the same means.
+    """
+    b = sol.body
+    mesh = b.mesh
+    fb = FacetBasis(mesh, ElementTriP2(), facets=mesh.boundary_facets(), intorder=INTORDER)
+    X = np.asarray(fb.global_coordinates())
+    Nn = np.asarray(fb.normals)
+    w = np.asarray(fb.dx) * _TWO_PI * X[0]
+    ur = np.asarray(fb.interpolate(sol.u_m[0]))
+    uz = np.asarray(fb.interpolate(sol.u_m[1]))
+    V = b.volume_m3 / (2.0 if b.mid_plane else 1.0)
+    et = 0.5 * float(np.sum(ur * Nn[0] * w)) / V
+    ea = float(np.sum(uz * Nn[1] * w)) / V
+    return np.diag([et, et, ea])
+
+
+def traction_moment_Pa(body: AxisymmetricBody, traction, boundary: str = "surface"):
+    """Mean stress of the body from the first moment of a traction on its reference surface,
+    ``(1/V) int X x t dA`` (equilibrium without body force), Cartesian, shape (3, 3) [Pa].
+
+    ``traction`` is a callable ``t(X, N)`` of reference points and normals (as a dead
+    :class:`Traction`). Axisymmetric: ``diag(s_t, s_t, s_a)`` with
+    ``s_t = (1/2V) int r t_r dA``, ``s_a = (1/V) int z t_z dA``.
+    """
+    fb = _facet_basis(body, boundary)
+    X = np.asarray(fb.global_coordinates())
+    t = np.asarray(traction(X, np.asarray(fb.normals)), float)
+    w = np.asarray(fb.dx) * _TWO_PI * X[0]
+    V = body.volume_m3 / (2.0 if body.mid_plane else 1.0)
+    st = 0.5 * float(np.sum(X[0] * t[0] * w)) / V
+    sa = float(np.sum(X[1] * t[1] * w)) / V
+    return np.diag([st, st, sa])
+
+
+# --------------------------------------------------------------------------------------------
+# closed forms
+
+def uniaxial_stretch(solid: NeoHookeanSolid, stress_Pa: float, *, measure: str = "nominal"):
+    """Homogeneous uniaxial state of ``solid`` under an axial stress, lateral faces free.
+
+    Parameters
+    ----------
+    solid : NeoHookeanSolid
+    stress_Pa : float -- axial stress [Pa] (positive in tension), nominal (force per reference
+        area) or Cauchy (per current area) as ``measure`` says
+    measure : "nominal" | "cauchy"
+
+    Returns
+    -------
+    (lambda_axial, lambda_lateral) : the principal stretches [-]
+
+    Notes
+    -----
+    Cauchy stress of the law: ``sigma = G J^(-5/3) dev(b) + K (J - 1) I``; the lateral
+    stretch makes ``sigma_rr = 0`` (bisection), the axial one the requested stress. For
+    ``K = inf``: ``lambda_lat = lambda^-1/2`` and ``P = G (lambda - lambda^-2)``.
+    """
+    check_choice("measure", measure, ("nominal", "cauchy"))
+    s = float(check_finite("stress_Pa", stress_Pa, "Pa"))
+    G, K = solid.G_Pa, solid.K_Pa
+
+    def lateral(la):
+        if K == math.inf:
+            return la ** -0.5
+
+        def f(ll):
+            J = la * ll * ll
+            I1 = la * la + 2 * ll * ll
+            return G * J ** (-5 / 3) * (ll * ll - I1 / 3) + K * (J - 1)
+        return brentq(f, 1e-3, 1e3, xtol=1e-15, rtol=1e-15)
+
+    def axial_stress(la):
+        ll = lateral(la)
+        J = la * ll * ll
+        I1 = la * la + 2 * ll * ll
+        # sigma_zz - sigma_rr: the pressure cancels (exact for K = inf too)
+        sig = G * J ** (-5 / 3) * (la * la - ll * ll)
+        return sig * ll * ll if measure == "nominal" else sig, ll, I1
+
+    la = brentq(lambda a: axial_stress(a)[0] - s, 0.05, 20.0, xtol=1e-15, rtol=1e-15)
+    return float(la), float(lateral(la))
+
+
+def lamb_sphere_strains(p0_Pa: float, G_Pa: float) -> dict:
+    """Incompressible linear elastic sphere under the normal traction ``p0 cos^2(theta) n``.
+
+    The traction is ``(p0/3) n + S P2(cos theta) n`` with ``S = 2 p0 / 3``; the degree-0 part
+    strains nothing (incompressible). Lamb's degree-2 solution (``u = grad Phi +
+    5/(42 G) r^2 grad p - 2/(21 G) x p`` with ``Phi``, ``p`` multiples of ``r^2 P2``), with
+    zero shear traction and the normal traction ``S P2`` at ``r = R``, gives on the surface
+    ``u_r = 5 S R / (19 G) P2(cos theta)``, ``u_theta = 3 S R / (38 G) dP2/dtheta`` and the
+    volume mean strain ``e_zz = S / (5 G)``.
+
+    Returns
+    -------
+    dict -- ``"pole"``: ``u_z(pole)/R = (5/57) 2 p0/G``; ``"equator"``: ``u_r(equator)/R =
+    -(5/114) 2 p0/G``; ``"mean_axial"``: ``(1/15) 2 p0/G``; ``"mean_transverse"``:
+    ``-(1/30) 2 p0/G`` [-]
+    """
+    p0 = float(check_finite("p0_Pa", p0_Pa, "Pa"))
+    G = check_positive("G_Pa", G_Pa, "Pa")
+    q = 2.0 * p0 / G
+    return {"pole": 5.0 / 57.0 * q, "equator": -5.0 / 114.0 * q, "mean_axial": q / 15.0,
+            "mean_transverse": -q / 30.0}
