@@ -43,6 +43,7 @@ field solved on the deformed mesh can be handed back point by point.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,7 +51,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.optimize import brentq
 from scipy.spatial import Delaunay
-from skfem import CellBasis, ElementTriP1, ElementTriP2, FacetBasis, MeshTri
+from skfem import CellBasis, ElementTetP1, ElementTetP2, ElementTriP1, ElementTriP2, \
+    FacetBasis, MeshTet, MeshTri
 
 from micro._validate import ConvergenceError, InputError, check_choice, check_finite, \
     check_positive, check_range
@@ -60,7 +62,8 @@ __all__ = ["NeoHookeanSolid", "AxisymmetricBody", "sphere_body", "spheroid_body"
            "cylinder_body", "Traction", "Loads", "AxisymmetricSolution", "solve_axisymmetric",
            "element_points", "facet_points", "length_change_m", "diameter_change_m",
            "mean_strain", "pole_strain", "traction_moment_Pa", "uniaxial_stretch",
-           "lamb_sphere_strains", "ConvergenceError", "INTORDER"]
+           "lamb_sphere_strains", "ConvergenceError", "INTORDER", "SolidBody", "box_body",
+           "cylinder_body_3d", "Solution3D", "solve_3d"]
 
 #: Quadrature degree of the element and facet rules (6 points per triangle, 3 per facet): exact
 #: for the P2 x P2 stiffness times the weight ``r`` of an undeformed body.
@@ -227,7 +230,7 @@ def _tag(mesh, names):
 
 
 def _with_facets(mesh, facets: dict):
-    return MeshTri(mesh.p, mesh.t, _boundaries={k: np.asarray(v, dtype=np.int32)
+    return type(mesh)(mesh.p, mesh.t, _boundaries={k: np.asarray(v, dtype=np.int32)
                                                  for k, v in facets.items()})
 
 
@@ -240,17 +243,37 @@ def _ccw(p, t):
     return t, np.abs(det)
 
 
-def _mirror(p, t):
-    """The section mirrored about z = 0 and glued to itself (nodes on z = 0 shared): the
-    whole section of a body whose quarter is ``(p, t)``."""
-    on = np.abs(p[1]) <= 1e-12 * np.abs(p).max()
-    idx = np.full(p.shape[1], -1)
+def _mirror(p, t, axis):
+    """The mesh ``(p, t)`` and its mirror image about the plane ``x_axis = 0``, glued along it
+    (nodes on the plane shared): the whole of a body whose half is ``(p, t)``."""
+    on = np.abs(p[axis]) <= 1e-12 * np.abs(p).max()
+    idx = np.empty(p.shape[1], dtype=np.int64)
     new = np.flatnonzero(~on)
     idx[on] = np.flatnonzero(on)
     idx[new] = p.shape[1] + np.arange(new.size)
-    pm = p[:, new] * np.array([[1.0], [-1.0]])
-    tm = idx[t][[0, 2, 1]]
+    pm = p[:, new].copy()
+    pm[axis] *= -1.0
+    tm = idx[t][[0, 2, 1] + list(range(3, t.shape[0]))]
     return np.hstack([p, pm]), np.hstack([t, tm])
+
+
+def _quarter_disk(n, grading):
+    """Triangle mesh of the unit quarter disk ``x, y >= 0``: nodes on ``n`` concentric quarter
+    circles (radii ``1 - (1 - k/n)^grading``), ring ``k`` with about ``k pi / 2`` equal
+    angular steps, Delaunay triangulation (nearly equilateral triangles)."""
+    pts = [np.zeros((2, 1))]
+    for k in range(1, n + 1):
+        rho = 1.0 - (1.0 - k / n) ** grading
+        m = max(1, int(math.ceil(rho * n * 0.5 * math.pi)))
+        psi = np.linspace(0.0, 0.5 * math.pi, m + 1)
+        pts.append(rho * np.vstack([np.sin(psi), np.cos(psi)]))
+    p = np.hstack(pts)
+    t = Delaunay(p.T).simplices.T.astype(np.int64)
+    t, det = _ccw(p, t)
+    t = t[:, det > 1e-10 * det.max()]
+    if np.unique(t).size != p.shape[1]:
+        raise RuntimeError("quarter-disk mesh: a node was left out of the triangulation")
+    return p, t
 
 
 def spheroid_body(radius_m: float, half_length_m: float, n: int = 8, *, mid_plane: bool = True,
@@ -277,20 +300,9 @@ def spheroid_body(radius_m: float, half_length_m: float, n: int = 8, *, mid_plan
     c = check_positive("half_length_m", half_length_m, "m")
     n = int(check_positive("n (rings)", n, ""))
     grading = check_range("grading", grading, 1.0, 10.0)
-    pts = [np.zeros((2, 1))]
-    for k in range(1, n + 1):
-        rho = 1.0 - (1.0 - k / n) ** grading
-        m = max(1, int(math.ceil(rho * n * 0.5 * math.pi)))
-        psi = np.linspace(0.0, 0.5 * math.pi, m + 1)
-        pts.append(rho * np.vstack([np.sin(psi), np.cos(psi)]))
-    p = np.hstack(pts)
-    t = Delaunay(p.T).simplices.T.astype(np.int64)
-    t, det = _ccw(p, t)
-    t = t[:, det > 1e-10 * det.max()]
+    p, t = _quarter_disk(n, grading)
     if not mid_plane:
-        p, t = _mirror(p, t)
-    if np.unique(t).size != p.shape[1]:
-        raise RuntimeError("spheroid mesh: a node was left out of the triangulation")
+        p, t = _mirror(p, t, 1)
     p = p * np.array([[a], [c]])
     mesh = MeshTri(p, np.ascontiguousarray(t))
     tol_r, tol_z = 1e-9 * a, 1e-9 * c
@@ -363,11 +375,12 @@ class Traction:
     Parameters
     ----------
     value : callable or array_like
-        * callable ``t(x, n) -> (2, ...)``: the traction (r, z components) [Pa] at positions
-          ``x`` [m], shape (2, ...), with unit outward normals ``n``, shape (2, ...);
+        * callable ``t(x, n) -> (d, ...)``: the traction [Pa] at positions ``x`` [m], shape
+          (d, ...), with unit outward normals ``n``, shape (d, ...) (``d = 2``: (r, z)
+          components of an axisymmetric body; ``d = 3``: (x, y, z) of a :class:`SolidBody`);
           ``follower=True``: current position and normal, force per current area;
           ``follower=False``: reference position and normal, force per reference area;
-        * array, shape (2, n_facets, n_qp) at the points of :func:`facet_points` (or (2,), one
+        * array, shape (d, n_facets, n_qp) at the points of :func:`facet_points` (or (d,), one
           vector everywhere): per current area (``follower=True``, direction fixed) or per
           reference area (``follower=False``).
     boundary : str -- name of the boundary (``"surface"``, ``"end"``, ``"side"``, ...)
@@ -402,7 +415,7 @@ class Loads:
         ``X`` [m], shape (2, ...) -- dead body force per reference volume [N/m^3] (a force per
         current volume ``f_c`` enters as ``J f_c``)
     prescribed_stress_Pa : None or array_like (3, 3) -- uniform stress added to the elastic
-        one, Cartesian (x, y, z) components [Pa]; it must be axisymmetric,
+        one, Cartesian (x, y, z) components [Pa]; for an axisymmetric body it must be
         ``diag(s_t, s_t, s_a)``. The body is in equilibrium under the total stress: a free
         body deforms until its elastic stress cancels the prescribed one (a positive
         ``s_a`` shortens it).
@@ -425,11 +438,6 @@ class Loads:
                                         "Pa"), float)
             if S.shape != (3, 3):
                 raise InputError(f"prescribed_stress_Pa must have shape (3, 3), got {S.shape}")
-            scale = max(np.abs(S).max(), 1e-300)
-            off = S - np.diag(np.diag(S))
-            if np.abs(off).max() > 1e-12 * scale or abs(S[0, 0] - S[1, 1]) > 1e-12 * scale:
-                raise InputError("prescribed_stress_Pa must be axisymmetric about z, "
-                                 f"diag(s_t, s_t, s_a) [Pa]; got {S.tolist()}")
         if self.body_force_N_m3 is not None and not callable(self.body_force_N_m3):
             check_finite("body_force_N_m3", self.body_force_N_m3, "N/m^3")
 
@@ -438,6 +446,11 @@ class Loads:
         if self.prescribed_stress_Pa is None:
             return None
         S = np.asarray(self.prescribed_stress_Pa, float)
+        scale = max(np.abs(S).max(), 1e-300)
+        off = S - np.diag(np.diag(S))
+        if np.abs(off).max() > 1e-12 * scale or abs(S[0, 0] - S[1, 1]) > 1e-12 * scale:
+            raise InputError("prescribed_stress_Pa of an axisymmetric body must be "
+                             f"axisymmetric about z, diag(s_t, s_t, s_a) [Pa]; got {S.tolist()}")
         return np.diag([S[0, 0], S[2, 2], S[1, 1]])
 
 
@@ -468,15 +481,17 @@ def _facet_basis(body, boundary):
 
 
 def _eval_field(name, value, points, unit):
-    """A load given as (2,), as an array shaped like ``points`` or as a callable of them."""
+    """A load given as (d,), as an array shaped like ``points`` (d, ...) or as a callable of
+    them."""
+    d = points.shape[0]
     if callable(value):
         out = np.asarray(value(points), float)
     else:
         out = np.asarray(value, float)
-        if out.shape == (2,):
-            out = np.broadcast_to(out[:, None, None], points.shape)
+        if out.shape == (d,):
+            out = np.broadcast_to(out.reshape((d,) + (1,) * (points.ndim - 1)), points.shape)
     if out.shape != points.shape:
-        raise InputError(f"{name} must have shape (2,) or {points.shape}, got {out.shape}")
+        raise InputError(f"{name} must have shape ({d},) or {points.shape}, got {out.shape}")
     check_finite(name, out, unit)
     return out
 
@@ -563,69 +578,37 @@ class _FacetLoad:
 # --------------------------------------------------------------------------------------------
 # assembly
 
-class _Assembler:
-    """Residual and tangent of the mixed axisymmetric problem, vectorised over elements.
+class _Mixed:
+    """Residual and tangent of the mixed u-p problem, vectorised over elements, in any
+    dimension: the kinematics enter only through ``B`` (``Grad v`` of each element dof).
 
-    Unknowns: ``[u (2 N_u, interleaved r, z), p (N_p), mu (0 or 1)]``; ``mu`` is the Lagrange
-    multiplier of ``int u_z dV = 0`` (free body).
+    Unknowns ``[u (n_u, interleaved components), p (n_p), mu (n_c)]``; ``mu`` are the Lagrange
+    multipliers of the constraints ``C u = 0`` (rigid-body modes of a free body).
+
+    Parameters (all arrays per element ``e`` and quadrature point ``q``)
+    ----------
+    dx : (ne, nq) volume weights [m^3]; B : (ne, nq, nm, 3, 3) ``Grad v`` of the element's
+    displacement dofs; vd : (ne, nm) their global numbers; psi : (ne, nq, ns) pressure shape
+    functions; pd : (ne, ns) their global numbers (offset by n_u); C : (n_c, n_u) constraint
+    rows; fixed : Dirichlet dofs (u = 0); f_dead : (n_u + n_p + n_c,) dead load at factor 1;
+    facet_loads : objects with ``follower(u, tangent)``; S : prescribed stress in the frame of
+    ``B`` (3, 3) or None
     """
 
-    def __init__(self, body, solid, loads):
-        self.body, self.solid, self.loads = body, solid, loads
-        ub, pb = _cell_bases(body.mesh)
-        self.ub, self.pb = ub, pb
-        X = np.asarray(ub.global_coordinates())               # (2, ne, nq)
-        self.dx = np.asarray(ub.dx) * _TWO_PI * X[0]                # (ne, nq)
-        nb = ub.Nbfun
-        N = np.stack([np.asarray(ub.basis[a][0]) for a in range(nb)], axis=-1)
-        dN = np.stack([np.asarray(ub.basis[a][0].grad) for a in range(nb)], axis=-1)
-        ne, nq = self.dx.shape
-        B = np.zeros((ne, nq, nb, 2, 3, 3))
-        B[..., 0, 0, 0] = dN[0]
-        B[..., 0, 0, 1] = dN[1]
-        B[..., 0, 2, 2] = N / X[0][..., None]
-        B[..., 1, 1, 0] = dN[0]
-        B[..., 1, 1, 1] = dN[1]
-        self.B = B.reshape(ne, nq, 2 * nb, 3, 3)
-        self.Nu = N
-        self.psi = np.stack([np.asarray(pb.basis[s][0]) for s in range(pb.Nbfun)], -1)
-        self.nu_dof = 2 * ub.N
-        self.np_dof = pb.N
-        ed = ub.element_dofs.T
-        self.vd = np.stack([2 * ed, 2 * ed + 1], axis=-1).reshape(ne, 2 * nb)
-        self.pd = self.nu_dof + pb.element_dofs.T
-        self.free_body = not body.mid_plane
-        self.n = self.nu_dof + self.np_dof + int(self.free_body)
-        # c . u = c_scale int u_z dV; c_scale brings the constraint's entries to the size of
-        # the stiffness' (G x length), which keeps the saddle-point system well scaled
-        self.volume = float(self.dx.sum())
-        self.c = np.bincount(self.vd[:, 1::2].ravel(),
-                             np.einsum("eq,eqa->ea", self.dx, N).ravel(), minlength=self.n)
-        size = max(body.radius_m, body.half_length_m)
-        self.c_scale = solid.G_Pa * size / np.abs(self.c).max()
-        self.c *= self.c_scale
-        self.S = loads._stress_rz_theta()
-        # dead loads
-        f = np.zeros(self.n)
-        if loads.body_force_N_m3 is not None:
-            fb = _eval_field("body_force_N_m3", loads.body_force_N_m3, X, "N/m^3")
-            fe = np.einsum("eq,eqa,ieq->eai", self.dx, N, fb).reshape(ne, 2 * nb)
-            f += np.bincount(self.vd.ravel(), fe.ravel(), minlength=self.n)
-        size = max(body.radius_m, body.half_length_m)
-        self.facet_loads = [_FacetLoad(body, t, size) for t in loads.tractions]
-        for fl in self.facet_loads:
-            if fl.f_dead is not None:
-                f += np.bincount(fl.f_dead[0], fl.f_dead[1], minlength=self.n)
-        self.f_dead = f
-        # Dirichlet: u_r = 0 on the axis, u_z = 0 on the mid plane
-        fixed = [2 * ub.get_dofs("axis").all()]
-        if body.mid_plane:
-            fixed.append(2 * ub.get_dofs("mid").all() + 1)
-        self.fixed = np.unique(np.concatenate(fixed))
+    def __init__(self, solid, loads, S, dx, B, vd, psi, pd, n_u, n_p, C, fixed, f_dead,
+                 facet_loads, volume):
+        self.solid, self.loads, self.S = solid, loads, S
+        self.dx, self.B, self.vd, self.psi, self.pd = dx, B, vd, psi, pd
+        self.nu_dof, self.np_dof = n_u, n_p
+        self.C = C
+        self.n = n_u + n_p + C.shape[0]
+        self.f_dead = f_dead
+        self.facet_loads = facet_loads
+        self.volume = volume
+        self.fixed = np.unique(np.asarray(fixed, dtype=np.int64))
         self.free = np.setdiff1d(np.arange(self.n), self.fixed)
-        self.free_u = self.free[self.free < self.nu_dof]
-        self.free_p = self.free[(self.free >= self.nu_dof) & (self.free < self.nu_dof
-                                                             + self.np_dof)]
+        self.free_u = self.free[self.free < n_u]
+        self.free_p = self.free[(self.free >= n_u) & (self.free < n_u + n_p)]
 
     def grad_u(self, x):
         return np.einsum("em,eqmij->eqij", x[self.vd], self.B)
@@ -633,6 +616,7 @@ class _Assembler:
     def residual(self, x, lam, tangent=True):
         """Residual ``r(x; lam)`` and its Jacobian (CSR) at load factor ``lam``."""
         G, invK = self.solid.G_Pa, self.solid.inv_K_per_Pa
+        n_u, n_p = self.nu_dof, self.np_dof
         H = self.grad_u(x)
         p = np.einsum("es,eqs->eq", x[self.pd], self.psi)
         P, A, Jm1, dJ = _material_pointwise(H, p, G)
@@ -641,7 +625,6 @@ class _Assembler:
             P = P + lam * Ps
             if As is not None:
                 A = A + lam * As
-        ne = len(self.vd)
         r = np.zeros(self.n)
         re = np.einsum("eq,eqij,eqmij->em", self.dx, P, self.B)
         r += np.bincount(self.vd.ravel(), re.ravel(), minlength=self.n)
@@ -652,19 +635,19 @@ class _Assembler:
         for fl in self.facet_loads:
             if fl.f_dead is not None:
                 continue
-            (fr, fv), Kf = fl.follower(x[:self.nu_dof], tangent)
+            (fr, fv), Kf = fl.follower(x[:n_u], tangent)
             r -= lam * np.bincount(fr, fv, minlength=self.n)
             if tangent:
                 rows.append(Kf[0])
                 cols.append(Kf[1])
                 vals.append(-lam * Kf[2])
-        if self.free_body:
-            mu = x[-1]
-            r[:self.nu_dof] += mu * self.c[:self.nu_dof]
-            r[-1] = self.c[:self.nu_dof] @ x[:self.nu_dof]
+        nc = self.C.shape[0]
+        if nc:
+            mu = x[n_u + n_p:]
+            r[:n_u] += self.C.T @ mu
+            r[n_u + n_p:] = self.C @ x[:n_u]
         if not tangent:
             return r, None
-        nm, ns = self.vd.shape[1], self.pd.shape[1]
         T = np.einsum("eqijkl,eqnkl->eqijn", A, self.B)
         Kuu = np.einsum("eq,eqmij,eqijn->emn", self.dx, self.B, T)
         Kup = np.einsum("eq,eqmij,eqij,eqs->ems", self.dx, self.B, dJ, self.psi)
@@ -674,15 +657,128 @@ class _Assembler:
             rows.append(np.broadcast_to(rd[:, :, None], blk.shape).ravel())
             cols.append(np.broadcast_to(cd[:, None, :], blk.shape).ravel())
             vals.append(blk.ravel())
-        if self.free_body:
-            iu = np.flatnonzero(self.c[:self.nu_dof])
-            rows += [iu, np.full(iu.size, self.n - 1)]
-            cols += [np.full(iu.size, self.n - 1), iu]
-            vals += [self.c[iu], self.c[iu]]
-        del ne, nm, ns
+        for j in range(nc):
+            iu = np.flatnonzero(self.C[j])
+            mj = np.full(iu.size, n_u + n_p + j)
+            rows += [iu, mj]
+            cols += [mj, iu]
+            vals += [self.C[j, iu], self.C[j, iu]]
         K = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                           shape=(self.n, self.n)).tocsr()
         return r, K
+
+    def constraint_force(self, x):
+        """Nodal forces [N] the constraints exert on the body, shape (n_u,)."""
+        if not self.C.shape[0]:
+            return np.zeros(self.nu_dof)
+        return -self.C.T @ x[self.nu_dof + self.np_dof:]
+
+
+def _scaled(C, G, size):
+    """Constraint rows scaled to the size of the stiffness' entries (G x length): keeps the
+    saddle-point system well conditioned; the multipliers' scale is irrelevant."""
+    if not C.shape[0]:
+        return C
+    return C * (G * size / np.abs(C).max(axis=1, keepdims=True))
+
+
+def _axi_assembler(body, solid, loads):
+    """The axisymmetric problem of ``body``: kinematics (r, z, theta), weight 2 pi r."""
+    ub, pb = _cell_bases(body.mesh)
+    X = np.asarray(ub.global_coordinates())                         # (2, ne, nq)
+    dx = np.asarray(ub.dx) * _TWO_PI * X[0]                         # (ne, nq)
+    nb = ub.Nbfun
+    N = np.stack([np.asarray(ub.basis[a][0]) for a in range(nb)], axis=-1)
+    dN = np.stack([np.asarray(ub.basis[a][0].grad) for a in range(nb)], axis=-1)
+    ne, nq = dx.shape
+    B = np.zeros((ne, nq, nb, 2, 3, 3))
+    B[..., 0, 0, 0] = dN[0]
+    B[..., 0, 0, 1] = dN[1]
+    B[..., 0, 2, 2] = N / X[0][..., None]                             # hoop: u_r / r
+    B[..., 1, 1, 0] = dN[0]
+    B[..., 1, 1, 1] = dN[1]
+    psi = np.stack([np.asarray(pb.basis[s][0]) for s in range(pb.Nbfun)], -1)
+    n_u, n_p = 2 * ub.N, pb.N
+    ed = ub.element_dofs.T
+    vd = np.stack([2 * ed, 2 * ed + 1], axis=-1).reshape(ne, 2 * nb)
+    pd = n_u + pb.element_dofs.T
+    size = max(body.radius_m, body.half_length_m)
+    # free body: int u_z dV = 0 removes the only rigid mode (u_r = const is no rigid motion)
+    C = np.zeros((0 if body.mid_plane else 1, n_u))
+    if not body.mid_plane:
+        C[0] = np.bincount(vd[:, 1::2].ravel(), np.einsum("eq,eqa->ea", dx, N).ravel(),
+                           minlength=n_u)
+    C = _scaled(C, solid.G_Pa, size)
+    n = n_u + n_p + C.shape[0]
+    f = np.zeros(n)
+    if loads.body_force_N_m3 is not None:
+        fb = _eval_field("body_force_N_m3", loads.body_force_N_m3, X, "N/m^3")
+        fe = np.einsum("eq,eqa,ieq->eai", dx, N, fb).reshape(ne, 2 * nb)
+        f += np.bincount(vd.ravel(), fe.ravel(), minlength=n)
+    facet_loads = [_FacetLoad(body, t, size) for t in loads.tractions]
+    for fl in facet_loads:
+        if fl.f_dead is not None:
+            f += np.bincount(fl.f_dead[0], fl.f_dead[1], minlength=n)
+    fixed = [2 * ub.get_dofs("axis").all()]                          # u_r = 0 on the axis
+    if body.mid_plane:
+        fixed.append(2 * ub.get_dofs("mid").all() + 1)                # u_z = 0 on z = 0
+    asm_ = _Mixed(solid, loads, loads._stress_rz_theta(), dx, B.reshape(ne, nq, 2 * nb, 3, 3),
+                  vd, psi, pd, n_u, n_p, C, np.concatenate(fixed), f, facet_loads,
+                  float(dx.sum()))
+    asm_.ub = ub
+    return asm_
+
+
+def _newton(asm_, load_steps, tol, max_newton, max_cuts):
+    """Load stepping with Newton's method; returns (x, residuals, load factors, iterations)."""
+    targets = list(_steps(load_steps))
+    tol = check_positive("tol", tol, "")
+    x = np.zeros(asm_.n)
+    free, fu, fp = asm_.free, asm_.free_u, asm_.free_p
+    hist, done = [], []
+    lam_done, it_total, cuts = 0.0, 0, 0
+    while targets:
+        target = targets[0]
+        r0, _ = asm_.residual(np.zeros(asm_.n), target, tangent=False)
+        ref = np.linalg.norm(r0[fu]) or 1.0
+        x_try = x.copy()
+        ok, prev = False, np.inf
+        try:
+            with warnings.catch_warnings():
+                # a singular tangent (e.g. past a limit point) is a failed step, not a warning
+                warnings.simplefilter("error", spla.MatrixRankWarning)
+                warnings.simplefilter("error", RuntimeWarning)
+                for _ in range(max_newton):
+                    r, K = asm_.residual(x_try, target)
+                    rel = max(np.linalg.norm(r[fu]) / ref,
+                              np.linalg.norm(r[fp]) / asm_.volume)
+                    hist.append(float(rel))
+                    # converged, or stalled at the round-off floor
+                    if rel < tol or (rel < 1e3 * tol and rel > 0.5 * prev):
+                        ok = True
+                        break
+                    prev = rel
+                    dx = spla.spsolve(K[free][:, free].tocsc(), -r[free])
+                    if not np.all(np.isfinite(dx)):
+                        raise FloatingPointError("singular tangent")
+                    x_try[free] += dx
+                    it_total += 1
+        except (FloatingPointError, spla.MatrixRankWarning, RuntimeWarning,
+                np.linalg.LinAlgError):
+            ok = False
+        if ok:
+            x, lam_done = x_try, target
+            done.append(float(target))
+            targets.pop(0)
+        else:
+            cuts += 1
+            if cuts > max_cuts:
+                raise ConvergenceError(
+                    f"Newton failed at load factor {target:.4g} (last converged "
+                    f"{lam_done:.4g}) after {max_cuts} step cuts; last relative residual "
+                    f"{hist[-1] if hist else float('nan'):.3g}", hist)
+            targets.insert(0, 0.5 * (lam_done + target))
+    return x, tuple(hist), tuple(done), it_total
 
 
 # --------------------------------------------------------------------------------------------
@@ -723,9 +819,10 @@ class AxisymmetricSolution:
         return np.asarray(self.basis.doflocs)
 
     def displacement_m(self, points_m) -> np.ndarray:
-        """Displacement (r, z) [m] at reference points ``points_m`` [m], shape (2, P) ->
-        (2, P)."""
-        pts = np.asarray(points_m, float).reshape(2, -1)
+        """Displacement [m] at reference points ``points_m`` [m], shape (d, P) -> (d, P)
+        (``d = 2``: (r, z); ``d = 3``: (x, y, z))."""
+        d_ = self.u_m.shape[0]
+        pts = np.asarray(points_m, float).reshape(d_, -1)
         out = np.empty_like(pts)
         # a point on a node (the pole, the rim) is read off the node: the element finder may
         # miss boundary points by round-off
@@ -736,7 +833,7 @@ class AxisymmetricSolution:
         out[:, on] = self.u_m[:, near[on]]
         if np.any(~on):
             Pm = self.basis.probes(pts[:, ~on])
-            out[:, ~on] = np.vstack([Pm @ self.u_m[0], Pm @ self.u_m[1]])
+            out[:, ~on] = np.vstack([Pm @ self.u_m[i] for i in range(d_)])
         return out
 
     def deformed_mesh(self) -> MeshTri:
@@ -791,126 +888,415 @@ def solve_axisymmetric(body: AxisymmetricBody, solid: NeoHookeanSolid, loads: Lo
         raise InputError(f"body must be an AxisymmetricBody, got {type(body).__name__}")
     if not isinstance(solid, NeoHookeanSolid):
         raise InputError(f"solid must be a NeoHookeanSolid, got {type(solid).__name__}")
-    targets = list(_steps(load_steps))
-    tol = check_positive("tol", tol, "")
-    asm_ = _Assembler(body, solid, loads)
-    x = np.zeros(asm_.n)
-    free, nu = asm_.free, asm_.nu_dof
-    fu = asm_.free_u
-    fp = asm_.free_p
-    hist, done = [], []
-    lam_done, it_total, cuts = 0.0, 0, 0
-    while targets:
-        target = targets[0]
-        r0, _ = asm_.residual(np.zeros(asm_.n), target, tangent=False)
-        ref = np.linalg.norm(r0[fu]) or 1.0
-        x_try = x.copy()
-        ok, prev = False, np.inf
-        try:
-            for _ in range(max_newton):
-                r, K = asm_.residual(x_try, target)
-                rel = max(np.linalg.norm(r[fu]) / ref,
-                          np.linalg.norm(r[fp]) / asm_.volume)
-                hist.append(float(rel))
-                if rel < tol or (rel < 1e3 * tol and rel > 0.5 * prev):
-                    ok = True
-                    break
-                prev = rel
-                Kf = K[free][:, free].tocsc()
-                dx = spla.spsolve(Kf, -r[free])
-                if not np.all(np.isfinite(dx)):
-                    raise FloatingPointError("singular tangent")
-                x_try[free] += dx
-                it_total += 1
-        except FloatingPointError:
-            ok = False
-        if ok:
-            x, lam_done = x_try, target
-            done.append(float(target))
-            targets.pop(0)
-        else:
-            cuts += 1
-            if cuts > max_cuts:
-                raise ConvergenceError(
-                    f"Newton failed at load factor {target:.4g} (last converged "
-                    f"{lam_done:.4g}) after {max_cuts} step cuts; last relative residual "
-                    f"{hist[-1] if hist else float('nan'):.3g}", hist)
-            targets.insert(0, 0.5 * (lam_done + target))
-    ub = asm_.ub
+    asm_ = _axi_assembler(body, solid, loads)
+    x, hist, done, its = _newton(asm_, load_steps, tol, max_newton, max_cuts)
+    nu = asm_.nu_dof
     u = np.vstack([x[0:nu:2], x[1:nu:2]])
     p = x[nu:nu + asm_.np_dof]
-    # the constraint force -mu c is a uniform axial body force mu c_scale per volume
-    reaction = float(-x[-1] * asm_.c_scale * asm_.volume) if asm_.free_body else 0.0
-    return AxisymmetricSolution(body, solid, loads, u, p, reaction, tuple(done), tuple(hist),
-                                it_total, ub)
+    reaction = float(asm_.constraint_force(x)[1::2].sum())
+    return AxisymmetricSolution(body, solid, loads, u, p, reaction, done, hist, its, asm_.ub)
+
+
+# --------------------------------------------------------------------------------------------
+# three dimensions: the same material, loads and driver on tetrahedra
+
+@dataclass(frozen=True)
+class SolidBody:
+    """A three-dimensional body and its tetrahedral mesh.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTet -- coordinates (x, y, z) [m]; named boundaries ``"sym_x"``,
+        ``"sym_y"``, ``"sym_z"`` (the symmetry planes ``x = 0`` ... present), ``"end"``
+        (z = +c), ``"end_bottom"`` (z = -c, whole body only), ``"side"`` and ``"surface"`` (all
+        but the symmetry planes)
+    shape : "box" | "cylinder"
+    half_extent_m : tuple (a, b, c) -- half sizes along x, y, z [m] (cylinder: (R, R, L/2))
+    symmetry : tuple of 3 bool -- ``u_i = 0`` on the plane ``x_i = 0`` (the mesh is the part
+        ``x_i >= 0``); rigid-body modes not removed by them are removed by constraints
+    """
+
+    mesh: MeshTet
+    shape: str
+    half_extent_m: tuple
+    symmetry: tuple
+
+    @property
+    def radius_m(self) -> float:
+        return float(self.half_extent_m[0])
+
+    @property
+    def half_length_m(self) -> float:
+        return float(self.half_extent_m[2])
+
+    @property
+    def volume_m3(self) -> float:
+        """Volume of the whole (mirrored) body [m^3]."""
+        p, t = self.mesh.p, self.mesh.t
+        x = p[:, t]
+        v = np.abs(np.einsum("ie,ie->e", x[:, 1] - x[:, 0],
+                             np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 0], axis=0))).sum() / 6
+        return float(v * 2 ** sum(self.symmetry))
+
+
+def _tag3(mesh, half, symmetric):
+    tol = 1e-9 * max(half)
+    names = []
+    if symmetric:
+        names += [("sym_x", lambda x: np.abs(x[0]) < tol), ("sym_y", lambda x: np.abs(x[1]) < tol),
+                  ("sym_z", lambda x: np.abs(x[2]) < tol)]
+    names += [("end", lambda x: x[2] > half[2] - tol),
+              ("end_bottom", lambda x: x[2] < -half[2] + tol)]
+    mesh = _tag(mesh, names)
+    b = dict(mesh.boundaries)
+    b["side"] = b.pop("surface")
+    b["surface"] = np.concatenate([b["side"], b["end"], b["end_bottom"]])
+    if symmetric:
+        del b["end_bottom"]
+    return _with_facets(mesh, b)
+
+
+def box_body(size_m, n=(2, 2, 2), *, symmetric: bool = True, grading: float = 1.0
+             ) -> SolidBody:
+    """Structured tetrahedral mesh of a box ``size_m = (Lx, Ly, Lz)`` [m] centred on the origin
+    (``symmetric``: the octant ``x, y, z >= 0`` with three symmetry planes, ``n`` elements per
+    half side; else the whole box, ``2 n`` per side), graded towards the faces."""
+    size = np.asarray(check_finite("size_m", size_m, "m"), float).reshape(3)
+    for k in range(3):
+        check_positive(f"size_m[{k}]", size[k], "m")
+    n = np.broadcast_to(np.asarray(n, int), (3,))
+    grading = check_range("grading", grading, 1.0, 10.0)
+    axes = []
+    for k in range(3):
+        h = 0.5 * size[k] * _graded(int(check_positive(f"n[{k}]", n[k], "")), grading)
+        axes.append(h if symmetric else np.concatenate([-h[::-1], h[1:]]))
+    mesh = MeshTet.init_tensor(*axes)
+    half = tuple(0.5 * size)
+    return SolidBody(_tag3(mesh, half, symmetric), "box", tuple(float(h) for h in half),
+                     (bool(symmetric),) * 3)
+
+
+def cylinder_body_3d(radius_m: float, length_m: float, n_r: int = 3, n_z: int | None = None,
+                     *, symmetric: bool = True, grading: float = 1.5) -> SolidBody:
+    """Tetrahedral mesh of a finite cylinder (radius ``R``, length ``L``, axis ``z``, centred
+    on the origin): the quarter disk of :func:`spheroid_body` extruded in layers graded
+    towards the end faces, each prism split in three tetrahedra by the global node order
+    (conforming). ``symmetric``: the part ``x, y, z >= 0`` with three symmetry planes."""
+    R = check_positive("radius_m", radius_m, "m")
+    L = check_positive("length_m", length_m, "m")
+    n_r = int(check_positive("n_r", n_r, ""))
+    n_z = max(1, int(round(n_r * 0.5 * L / R))) if n_z is None else \
+        int(check_positive("n_z", n_z, ""))
+    grading = check_range("grading", grading, 1.0, 10.0)
+    p2, t2 = _quarter_disk(n_r, 1.0)
+    if not symmetric:
+        p2, t2 = _mirror(p2, t2, 0)
+        p2, t2 = _mirror(p2, t2, 1)
+    p2 = R * p2
+    z = 0.5 * L * _graded(n_z, grading)
+    if not symmetric:
+        z = np.concatenate([-z[::-1], z[1:]])
+    nv = p2.shape[1]
+    p = np.vstack([np.tile(p2, z.size), np.repeat(z, nv)])
+    a, b, c = np.sort(t2, axis=0)
+    tets = []
+    for k in range(z.size - 1):
+        lo, hi = k * nv, (k + 1) * nv
+        tets += [[a + lo, b + lo, c + lo, c + hi], [a + lo, b + lo, b + hi, c + hi],
+                 [a + lo, a + hi, b + hi, c + hi]]
+    t = np.hstack([np.array(q) for q in tets])
+    mesh = MeshTet(p, np.ascontiguousarray(t))
+    return SolidBody(_tag3(mesh, (R, R, 0.5 * L), symmetric), "cylinder", (R, R, 0.5 * L),
+                     (bool(symmetric),) * 3)
+
+
+_EPS3 = np.zeros((3, 3, 3))
+_EPS3[0, 1, 2] = _EPS3[1, 2, 0] = _EPS3[2, 0, 1] = 1.0
+_EPS3[0, 2, 1] = _EPS3[2, 1, 0] = _EPS3[1, 0, 2] = -1.0
+
+
+class _FacetLoad3D:
+    """One :class:`Traction` on triangular facets of a tetrahedral mesh (3 components)."""
+
+    def __init__(self, body, traction: Traction, length_scale):
+        check_choice("boundary", traction.boundary, tuple(body.mesh.boundaries))
+        fb = FacetBasis(body.mesh, ElementTetP2(), facets=body.mesh.boundaries[traction.boundary],
+                        intorder=INTORDER)
+        self.t = traction
+        self.w = np.asarray(fb.dx)
+        self.X = np.asarray(fb.global_coordinates())
+        Nn = np.asarray(fb.normals)
+        # orthonormal tangents with T1 x T2 = N
+        e = np.zeros_like(Nn)
+        k = np.argmin(np.abs(Nn), axis=0)
+        np.put_along_axis(e, k[None], 1.0, axis=0)
+        T1 = np.cross(Nn, e, axis=0)
+        T1 /= np.linalg.norm(T1, axis=0)
+        self.T = (T1, np.cross(Nn, T1, axis=0))
+        self.N = np.stack([np.asarray(fb.basis[a][0]) for a in range(fb.Nbfun)])
+        self.dNT = [np.stack([np.einsum("jfq,jfq->fq", fb.basis[a][0].grad, T)
+                              for a in range(fb.Nbfun)]) for T in self.T]
+        ed = fb.element_dofs
+        self.vd = np.stack([3 * ed, 3 * ed + 1, 3 * ed + 2], axis=1)    # (nb, 3, nf)
+        self.h = 1e-6 * length_scale
+        if not traction.follower:
+            if callable(traction.value):
+                t0 = _FacetLoad._t(self, self.X, Nn)
+                check_finite("traction(X, N)", t0, "Pa")
+            else:
+                t0 = _eval_field("traction", traction.value, self.X, "Pa")
+            self.f_dead = (self.vd.ravel(),
+                           np.einsum("afq,fq,ifq->aif", self.N, self.w, t0).ravel())
+        else:
+            self.f_dead = None
+            if not callable(traction.value):
+                self.t_fixed = _eval_field("traction", traction.value, self.X, "Pa")
+
+    _t = _FacetLoad._t
+
+    def follower(self, u, tangent):
+        ue = u[self.vd]                                             # (nb, 3, nf)
+        x = self.X + np.einsum("aif,afq->ifq", ue, self.N)
+        m1, m2 = (T + np.einsum("aif,afq->ifq", ue, d) for T, d in zip(self.T, self.dNT))
+        a = np.cross(m1, m2, axis=0)                                # J F^-T N per ref. area
+        an = np.linalg.norm(a, axis=0)
+        n = a / an
+        t = self._t(x, n) if callable(self.t.value) else self.t_fixed
+        f = np.einsum("afq,fq,ifq->aif", self.N, self.w, t * an)
+        if not tangent:
+            return (self.vd.ravel(), f.ravel()), None
+        dg_dx = np.zeros((3, 3) + an.shape)
+        dg_da = np.einsum("ifq,lfq->ilfq", t, n)
+        if callable(self.t.value):
+            proj = np.eye(3)[:, :, None, None] - np.einsum("mfq,lfq->mlfq", n, n)
+            for k in range(3):
+                e = np.zeros((3, 1, 1))
+                e[k] = 1.0
+                dtx = (self._t(x + self.h * e, n) - self._t(x - self.h * e, n)) / (2 * self.h)
+                dtn = (self._t(x, n + 1e-6 * e) - self._t(x, n - 1e-6 * e)) / 2e-6
+                dg_dx[:, k] = dtx * an
+                dg_da += np.einsum("ifq,lfq->ilfq", dtn, proj[k])
+        da_dm1 = np.einsum("lkj,jfq->lkfq", _EPS3, m2)
+        da_dm2 = np.einsum("ljk,jfq->lkfq", _EPS3, m1)
+        Ke = np.einsum("afq,fq,ikfq,bfq->aibkf", self.N, self.w, dg_dx, self.N)
+        for da, dN in ((da_dm1, self.dNT[0]), (da_dm2, self.dNT[1])):
+            dg_dm = np.einsum("ilfq,lkfq->ikfq", dg_da, da)
+            Ke += np.einsum("afq,fq,ikfq,bfq->aibkf", self.N, self.w, dg_dm, dN)
+        nb = self.N.shape[0]
+        rows = np.broadcast_to(self.vd[:, :, None, None, :], (nb, 3, nb, 3, self.vd.shape[2]))
+        cols = np.broadcast_to(self.vd[None, None, :, :, :], rows.shape)
+        return (self.vd.ravel(), f.ravel()), (rows.ravel(), cols.ravel(), Ke.ravel())
+
+
+def _tet_assembler(body, solid, loads):
+    """The problem of a :class:`SolidBody`: P2/P1 tetrahedra, Cartesian kinematics."""
+    mesh = body.mesh
+    ub = CellBasis(mesh, ElementTetP2(), intorder=INTORDER)
+    pb = CellBasis(mesh, ElementTetP1(), intorder=INTORDER)
+    X = np.asarray(ub.global_coordinates())                         # (3, ne, nq)
+    dx = np.asarray(ub.dx)
+    nb = ub.Nbfun
+    N = np.stack([np.asarray(ub.basis[a][0]) for a in range(nb)], axis=-1)
+    dN = np.stack([np.asarray(ub.basis[a][0].grad) for a in range(nb)], axis=-1)
+    ne, nq = dx.shape
+    B = np.zeros((ne, nq, nb, 3, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            B[..., i, i, j] = dN[j]
+    psi = np.stack([np.asarray(pb.basis[s][0]) for s in range(pb.Nbfun)], -1)
+    n_u, n_p = 3 * ub.N, pb.N
+    ed = ub.element_dofs.T
+    vd = np.stack([3 * ed, 3 * ed + 1, 3 * ed + 2], axis=-1).reshape(ne, 3 * nb)
+    pd = n_u + pb.element_dofs.T
+    fixed = [3 * ub.get_dofs(f"sym_{c}").all() + k
+             for k, c in enumerate("xyz") if body.symmetry[k]]
+    fixed = np.concatenate(fixed) if fixed else np.zeros(0, np.int64)
+    # rigid-body modes e_k and e_k x (X - Xc) not already excluded by the symmetry planes,
+    # removed by int mode . u dV = 0
+    Xc = np.einsum("eq,ieq->i", dx, X) / dx.sum()
+    loc = np.asarray(ub.doflocs) - Xc[:, None]
+    rows = []
+    for k in range(6):
+        e = np.eye(3)[k % 3]
+        mode_q = (np.broadcast_to(e[:, None, None], X.shape) if k < 3
+                  else np.cross(e[:, None, None], X - Xc[:, None, None], axis=0))
+        mode_n = (np.broadcast_to(e[:, None], loc.shape) if k < 3
+                  else np.cross(e[:, None], loc, axis=0))
+        vals = np.ravel(mode_n.T)                                    # interleaved dofs
+        if np.abs(vals[fixed]).max(initial=0.0) > 1e-9 * max(body.half_extent_m):
+            continue                                                 # excluded by symmetry
+        ce = np.einsum("eq,eqa,ieq->eai", dx, N, mode_q).reshape(ne, 3 * nb)
+        rows.append(np.bincount(vd.ravel(), ce.ravel(), minlength=n_u))
+    C = _scaled(np.array(rows).reshape(len(rows), n_u), solid.G_Pa, max(body.half_extent_m))
+    n = n_u + n_p + C.shape[0]
+    f = np.zeros(n)
+    if loads.body_force_N_m3 is not None:
+        fbv = _eval_field("body_force_N_m3", loads.body_force_N_m3, X, "N/m^3")
+        fe = np.einsum("eq,eqa,ieq->eai", dx, N, fbv).reshape(ne, 3 * nb)
+        f += np.bincount(vd.ravel(), fe.ravel(), minlength=n)
+    facet_loads = [_FacetLoad3D(body, t, max(body.half_extent_m)) for t in loads.tractions]
+    for fl in facet_loads:
+        if fl.f_dead is not None:
+            f += np.bincount(fl.f_dead[0], fl.f_dead[1], minlength=n)
+    S = None if loads.prescribed_stress_Pa is None else np.asarray(loads.prescribed_stress_Pa,
+                                                                   float)
+    asm_ = _Mixed(solid, loads, S, dx, B.reshape(ne, nq, 3 * nb, 3, 3), vd, psi, pd, n_u, n_p,
+                  C, fixed, f, facet_loads, float(dx.sum()))
+    asm_.ub = ub
+    return asm_
+
+
+@dataclass(frozen=True)
+class Solution3D:
+    """Converged state of :func:`solve_3d`.
+
+    Attributes
+    ----------
+    body : SolidBody; solid : NeoHookeanSolid; loads : Loads
+    u_m : ndarray, shape (3, N) -- displacement [m] at the P2 nodes (``doflocs_m``)
+    p_Pa : ndarray, shape (n_vertices,) -- Cauchy mean stress of the material [Pa]
+    reaction_force_N, reaction_moment_N_m : ndarray (3,) -- resultant force [N] and moment about
+        the origin [N m] of the rigid-mode constraints (minus the net load; ~0 when
+        self-equilibrated)
+    load_factors, residuals : tuple; newton_iterations : int
+    """
+
+    body: SolidBody
+    solid: NeoHookeanSolid
+    loads: Loads
+    u_m: np.ndarray
+    p_Pa: np.ndarray
+    reaction_force_N: np.ndarray
+    reaction_moment_N_m: np.ndarray
+    load_factors: tuple
+    residuals: tuple
+    newton_iterations: int
+    basis: object = field(repr=False, compare=False, default=None)
+
+    @property
+    def doflocs_m(self) -> np.ndarray:
+        """Reference positions [m] of the P2 nodes, shape (3, N)."""
+        return np.asarray(self.basis.doflocs)
+
+    displacement_m = AxisymmetricSolution.displacement_m
+
+    def deformed_mesh(self) -> MeshTet:
+        """The deformed mesh (vertices moved by ``u``), same numbering and boundary names."""
+        nv = self.body.mesh.p.shape[1]
+        return MeshTet(self.body.mesh.p + self.u_m[:, :nv], self.body.mesh.t,
+                       _boundaries=dict(self.body.mesh.boundaries))
+
+
+def solve_3d(body: SolidBody, solid: NeoHookeanSolid, loads: Loads, *, load_steps=1,
+             tol: float = 1e-10, max_newton: int = 25, max_cuts: int = 6) -> Solution3D:
+    """Finite-strain equilibrium of a three-dimensional ``body`` (see
+    :func:`solve_axisymmetric`; same material law, loads, load stepping and errors).
+
+    Tractions and body forces have three components (x, y, z); ``prescribed_stress_Pa`` may be
+    any uniform (3, 3) stress. Symmetry planes of ``body`` carry ``u_i = 0``; the rigid-body
+    modes they leave free are removed by ``int mode . u dV = 0``.
+    """
+    if not isinstance(body, SolidBody):
+        raise InputError(f"body must be a SolidBody, got {type(body).__name__}")
+    if not isinstance(solid, NeoHookeanSolid):
+        raise InputError(f"solid must be a NeoHookeanSolid, got {type(solid).__name__}")
+    asm_ = _tet_assembler(body, solid, loads)
+    x, hist, done, its = _newton(asm_, load_steps, tol, max_newton, max_cuts)
+    nu = asm_.nu_dof
+    u = np.vstack([x[i:nu:3] for i in range(3)])
+    fc = asm_.constraint_force(x).reshape(-1, 3).T                   # (3, N) nodal forces
+    # X = sum_a N_a X_a exactly (affine elements): the moment is sum_a X_a x f_a
+    moment = np.cross(np.asarray(asm_.ub.doflocs), fc, axis=0).sum(axis=1)
+    return Solution3D(body, solid, loads, u, x[nu:nu + asm_.np_dof], fc.sum(axis=1), moment,
+                      done, hist, its, asm_.ub)
 
 
 # --------------------------------------------------------------------------------------------
 # observables
 
-def _top_z(body):
-    return body.half_length_m
+def _is3(sol):
+    return isinstance(sol, Solution3D)
 
 
-def length_change_m(sol: AxisymmetricSolution) -> tuple[float, float]:
+def _facet_mean(sol, name, comp):
+    """Area mean of displacement component ``comp`` over the reference facets ``name``."""
+    mesh = sol.body.mesh
+    elem = ElementTetP2() if _is3(sol) else ElementTriP2()
+    fb = FacetBasis(mesh, elem, facets=mesh.boundaries[name], intorder=INTORDER)
+    u = np.asarray(fb.interpolate(sol.u_m[comp]))
+    w = np.asarray(fb.dx) * (1.0 if _is3(sol) else np.asarray(fb.global_coordinates())[0])
+    return float(np.sum(u * w) / np.sum(w))
+
+
+def length_change_m(sol) -> tuple[float, float]:
     """Change of length between the end faces [m]: (on the axis, mean over the end faces).
 
-    On the axis: ``u_z(0, z_top) - u_z(0, z_bottom)``; the face mean is the area mean of
-    ``u_z`` over the end faces (cylinder only; ``nan`` for a sphere or spheroid, whose
-    "end faces" are the poles). With ``mid_plane`` the bottom half is the mirror image.
+    ``sol`` : :class:`AxisymmetricSolution` or :class:`Solution3D`. On the axis:
+    ``u_z(axis, z_top) - u_z(axis, z_bottom)``; the face mean is the area mean of ``u_z`` over
+    the end faces (cylinder and box; ``nan`` for a sphere or spheroid, whose "end faces" are
+    the poles). With a mid-plane symmetry the bottom half is the mirror image.
     """
     b = sol.body
     c = b.half_length_m
-    top = sol.displacement_m([[0.0], [c]])[1, 0]
-    bot = -top if b.mid_plane else sol.displacement_m([[0.0], [-c]])[1, 0]
-    if b.shape != "cylinder":
+    if _is3(sol):
+        zsym = b.symmetry[2]
+        top = sol.displacement_m([[0.0], [0.0], [c]])[2, 0]
+        bot = -top if zsym else sol.displacement_m([[0.0], [0.0], [-c]])[2, 0]
+        comp = 2
+    else:
+        zsym = b.mid_plane
+        top = sol.displacement_m([[0.0], [c]])[1, 0]
+        bot = -top if zsym else sol.displacement_m([[0.0], [-c]])[1, 0]
+        comp = 1
+    if b.shape not in ("cylinder", "box"):
         return float(top - bot), float("nan")
-
-    def face_mean(name):
-        fb = _facet_basis(b, name)
-        X = np.asarray(fb.global_coordinates())
-        uz = np.asarray(fb.interpolate(sol.u_m[1]))
-        w = np.asarray(fb.dx) * X[0]
-        return float(np.sum(uz * w) / np.sum(w))
-
-    mt = face_mean("end")
-    mb = -mt if b.mid_plane else face_mean("end_bottom")
+    mt = _facet_mean(sol, "end", comp)
+    mb = -mt if zsym else _facet_mean(sol, "end_bottom", comp)
     return float(top - bot), mt - mb
 
 
-def diameter_change_m(sol: AxisymmetricSolution) -> float:
-    """Change of the diameter at mid-height / at the equator (``z = 0``) [m]:
-    ``2 u_r(R, 0)``."""
+def diameter_change_m(sol) -> float:
+    """Change of the diameter at mid-height / at the equator (``z = 0``) [m]: ``2 u_r(R, 0)``
+    (three dimensions: ``2 u_x(a, 0, 0)``, the width along x of a box)."""
+    if _is3(sol):
+        return float(2.0 * sol.displacement_m([[sol.body.radius_m], [0.0], [0.0]])[0, 0])
     return float(2.0 * sol.displacement_m([[sol.body.radius_m], [0.0]])[0, 0])
 
 
-def pole_strain(sol: AxisymmetricSolution) -> float:
+def pole_strain(sol) -> float:
     """Axial displacement of the upper pole over the polar semi-axis, ``u_z(0, c) / c`` [-]
     (for a free body, half the change of length over ``c``)."""
     dl, _ = length_change_m(sol)
     return float(0.5 * dl / sol.body.half_length_m)
 
 
-def mean_strain(sol: AxisymmetricSolution) -> np.ndarray:
+def mean_strain(sol) -> np.ndarray:
     """Volume mean of the small-strain tensor over the whole body, Cartesian (x, y, z), shape
     (3, 3) [-], from the boundary integral ``(1/V) int sym(u x N) dA`` of the reference body.
 
     It is the symmetric part of the mean displacement gradient (exact at any strain:
     ``mean(F) = I + (1/V) int u x N dA``). For an axisymmetric field it is
     ``diag(e_t, e_t, e_a)`` with ``e_t = (1/2V) int u_r N_r dA`` and
-    ``e_a = (1/V) int u_z N_z dA``; with ``mid_plane`` the half body gives the same means.
+    ``e_a = (1/V) int u_z N_z dA``; with symmetry planes the meshed part gives the same
+    diagonal means, and the off-diagonal ones of the whole body vanish by symmetry.
     """
     b = sol.body
     mesh = b.mesh
-    fb = FacetBasis(mesh, ElementTriP2(), facets=mesh.boundary_facets(), intorder=INTORDER)
+    elem = ElementTetP2() if _is3(sol) else ElementTriP2()
+    fb = FacetBasis(mesh, elem, facets=mesh.boundary_facets(), intorder=INTORDER)
     X = np.asarray(fb.global_coordinates())
     Nn = np.asarray(fb.normals)
+    u = np.stack([np.asarray(fb.interpolate(ui)) for ui in sol.u_m])
+    if _is3(sol):
+        nsym = sum(b.symmetry)
+        V = b.volume_m3 / 2 ** nsym
+        g = np.einsum("ifq,jfq,fq->ij", u, Nn, np.asarray(fb.dx)) / V
+        e = 0.5 * (g + g.T)
+        return np.diag(np.diag(e)) if nsym else e
     w = np.asarray(fb.dx) * _TWO_PI * X[0]
-    ur = np.asarray(fb.interpolate(sol.u_m[0]))
-    uz = np.asarray(fb.interpolate(sol.u_m[1]))
     V = b.volume_m3 / (2.0 if b.mid_plane else 1.0)
-    et = 0.5 * float(np.sum(ur * Nn[0] * w)) / V
-    ea = float(np.sum(uz * Nn[1] * w)) / V
+    et = 0.5 * float(np.sum(u[0] * Nn[0] * w)) / V
+    ea = float(np.sum(u[1] * Nn[1] * w)) / V
     return np.diag([et, et, ea])
 
 
