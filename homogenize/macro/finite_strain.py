@@ -1,4 +1,4 @@
-"""Finite-strain, nearly incompressible elasticity of an axisymmetric specimen (scikit-fem).
+"""Finite-strain, nearly incompressible elasticity of a specimen: axisymmetric and 3D (scikit-fem).
 
 A solid of revolution about the ``z`` axis is meshed in the ``(r, z)`` half plane (scikit-fem
 ``MeshTri``; every integral carries the weight ``2 pi r``, the hoop stretch is ``1 + u_r / r``).
@@ -22,7 +22,11 @@ fails.
   :func:`length_change_m`, :func:`diameter_change_m`, :func:`mean_strain`, :func:`pole_strain`;
 * closed forms used by the tests: :func:`uniaxial_stretch` (homogeneous uniaxial state of this
   material law) and :func:`lamb_sphere_strains` (incompressible linear sphere under
-  ``p0 cos^2(theta) n``).
+  ``p0 cos^2(theta) n``);
+* three dimensions, same law, loads and driver on P2/P1 tetrahedra (direct solver: modest
+  meshes): :func:`box_body`, :func:`cylinder_body_3d` -> :class:`SolidBody`,
+  :func:`solve_3d` -> :class:`Solution3D` (symmetry planes ``x, y, z = 0``, the remaining
+  rigid-body modes removed by constraints); the observables take either solution.
 
 Units: SI throughout (m, Pa, N/m^3 for body forces, Pa for tractions and stresses).
 
@@ -36,9 +40,11 @@ K tr(eps) I`` (linear elasticity with ``nu = (3K - 2G) / (6K + 2G)``); ``K = inf
 incompressible neo-Hookean solid, uniaxial nominal stress ``G (lambda - lambda^-2)``.
 
 Coupling with a magnetostatic solve: :func:`element_points` and :func:`facet_points` give the
-quadrature points at which array loads are expected (the same rule on the deformed mesh of
-:meth:`AxisymmetricSolution.deformed_mesh`, which keeps the element and facet numbering), so a
-field solved on the deformed mesh can be handed back point by point.
+reference quadrature points at which array loads are expected, :func:`current_facet_points`
+where they sit in a solved state; :meth:`AxisymmetricSolution.deformed_mesh` keeps the element
+and facet numbering and the boundary names, so a field solved on the deformed mesh with the
+same rule (``INTORDER``) can be handed back point by point (a body force per current volume
+``f_c`` as ``J f_c`` per reference volume).
 """
 from __future__ import annotations
 
@@ -63,7 +69,7 @@ __all__ = ["NeoHookeanSolid", "AxisymmetricBody", "sphere_body", "spheroid_body"
            "element_points", "facet_points", "length_change_m", "diameter_change_m",
            "mean_strain", "pole_strain", "traction_moment_Pa", "uniaxial_stretch",
            "lamb_sphere_strains", "ConvergenceError", "INTORDER", "SolidBody", "box_body",
-           "cylinder_body_3d", "Solution3D", "solve_3d"]
+           "cylinder_body_3d", "Solution3D", "solve_3d", "current_facet_points"]
 
 #: Quadrature degree of the element and facet rules (6 points per triangle, 3 per facet): exact
 #: for the P2 x P2 stiffness times the weight ``r`` of an undeformed body.
@@ -460,23 +466,47 @@ def _cell_bases(mesh):
     return ub, pb
 
 
-def element_points(body: AxisymmetricBody) -> np.ndarray:
-    """Quadrature points (r, z) [m] of the element rule, shape (2, n_elements, n_qp): where an
-    array body force is expected."""
-    return np.asarray(CellBasis(body.mesh, ElementTriP1(), intorder=INTORDER)
-                      .global_coordinates())
+def _p2(mesh):
+    return ElementTetP2() if isinstance(mesh, MeshTet) else ElementTriP2()
 
 
-def facet_points(body: AxisymmetricBody, boundary: str = "surface"):
-    """Quadrature points (r, z) [m] and unit outward normals of the facets of ``boundary``,
-    each shape (2, n_facets, n_qp): where an array traction is expected."""
+def element_points(body) -> np.ndarray:
+    """Quadrature points [m] of the element rule, shape (d, n_elements, n_qp) (``d = 2``:
+    (r, z) of an :class:`AxisymmetricBody`; 3: (x, y, z) of a :class:`SolidBody`): where an
+    array body force is expected. The same on the deformed mesh (same element order)."""
+    elem = ElementTetP1() if isinstance(body.mesh, MeshTet) else ElementTriP1()
+    return np.asarray(CellBasis(body.mesh, elem, intorder=INTORDER).global_coordinates())
+
+
+def facet_points(body, boundary: str = "surface"):
+    """Reference quadrature points [m] and unit outward normals of the facets of
+    ``boundary``, each shape (d, n_facets, n_qp): where an array traction is expected (facets
+    in the order of ``body.mesh.boundaries[boundary]``)."""
     fb = _facet_basis(body, boundary)
     return np.asarray(fb.global_coordinates()), np.asarray(fb.normals)
 
 
+def current_facet_points(sol, boundary: str = "surface"):
+    """Current positions ``x = X + u(X)`` [m] and current unit outward normals of the facet
+    quadrature points of ``boundary`` in the solved state ``sol``, each shape
+    (d, n_facets, n_qp): where a follower traction is evaluated (the points of
+    :func:`facet_points`, moved). Evaluate a field solved on the deformed body there and hand
+    it back as an array :class:`Traction` (``follower=True``: per current area)."""
+    fb = _facet_basis(sol.body, boundary)
+    X, Nn = np.asarray(fb.global_coordinates()), np.asarray(fb.normals)
+    u = np.stack([np.asarray(fb.interpolate(ui)) for ui in sol.u_m])
+    grads = [np.asarray(fb.interpolate(ui).grad) for ui in sol.u_m]   # each (d, nf, nq)
+    H = np.stack(grads)                                                # (i, j, nf, nq)
+    F = np.eye(X.shape[0])[:, :, None, None] + H
+    # Nanson: n da = J F^-T N dA
+    Fm = np.moveaxis(F, (0, 1), (-2, -1))
+    a = np.einsum("...ji,j...->i...", np.linalg.inv(Fm), Nn)
+    return X + u, a / np.linalg.norm(a, axis=0)
+
+
 def _facet_basis(body, boundary):
     check_choice("boundary", boundary, tuple(body.mesh.boundaries))
-    return FacetBasis(body.mesh, ElementTriP2(), facets=body.mesh.boundaries[boundary],
+    return FacetBasis(body.mesh, _p2(body.mesh), facets=body.mesh.boundaries[boundary],
                       intorder=INTORDER)
 
 
