@@ -374,7 +374,7 @@ def cylinder_body(radius_m: float, length_m: float, n_r: int = 6, n_z: int | Non
 # --------------------------------------------------------------------------------------------
 # loads
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Traction:
     """Surface traction on the facets of one named boundary [Pa].
 
@@ -409,7 +409,7 @@ class Traction:
             check_finite("Traction.value", self.value, "Pa")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Loads:
     """Everything that loads the body, applied together and scaled by the load factor.
 
@@ -1387,13 +1387,11 @@ def uniaxial_stretch(solid: NeoHookeanSolid, stress_Pa: float, *, measure: str =
 
     def axial_stress(la):
         ll = lateral(la)
-        J = la * ll * ll
-        I1 = la * la + 2 * ll * ll
-        # sigma_zz - sigma_rr: the pressure cancels (exact for K = inf too)
-        sig = G * J ** (-5 / 3) * (la * la - ll * ll)
-        return sig * ll * ll if measure == "nominal" else sig, ll, I1
+        # sigma_zz = sigma_zz - sigma_rr: the pressure cancels (exact for K = inf too)
+        sig = G * (la * ll * ll) ** (-5 / 3) * (la * la - ll * ll)
+        return sig * ll * ll if measure == "nominal" else sig
 
-    la = brentq(lambda a: axial_stress(a)[0] - s, 0.05, 20.0, xtol=1e-15, rtol=1e-15)
+    la = brentq(lambda a: axial_stress(a) - s, 0.05, 20.0, xtol=1e-15, rtol=1e-15)
     return float(la), float(lateral(la))
 
 
