@@ -170,15 +170,15 @@ def _material_pointwise(H, p, G):
 
 
 def _prescribed_pointwise(H, S, measure):
-    """Prescribed stress ``S`` (3x3, in the (r, z, theta) frame) as a first Piola stress and its
-    tangent: ``P = S`` ("piola") or ``P = J S F^-T`` ("cauchy", constant in the current body).
+    """Prescribed stress ``S`` ((3, 3) or shaped like ``H``, in the frame of the kinematics) as
+    a first Piola stress and its tangent: ``P = S`` ("piola") or ``P = J S F^-T`` ("cauchy").
     """
     if measure == "piola":
         return np.broadcast_to(S, H.shape), None
     F = np.eye(3) + H
     J = np.linalg.det(F)
     FiT = np.swapaxes(np.linalg.inv(F), -1, -2)
-    SF = J[..., None, None] * np.einsum("ij,...jk->...ik", S, FiT)
+    SF = J[..., None, None] * np.matmul(S, FiT)
     A = (np.einsum("...ij,...kl->...ijkl", SF, FiT) - np.einsum("...il,...kj->...ijkl", SF, FiT))
     return SF, A
 
@@ -420,13 +420,15 @@ class Loads:
         :func:`element_points`, or callable ``f(X) -> (2, ...)`` of the reference position
         ``X`` [m], shape (2, ...) -- dead body force per reference volume [N/m^3] (a force per
         current volume ``f_c`` enters as ``J f_c``)
-    prescribed_stress_Pa : None or array_like (3, 3) -- uniform stress added to the elastic
-        one, Cartesian (x, y, z) components [Pa]; for an axisymmetric body it must be
-        ``diag(s_t, s_t, s_a)``. The body is in equilibrium under the total stress: a free
-        body deforms until its elastic stress cancels the prescribed one (a positive
-        ``s_a`` shortens it).
-    prescribed_measure : "cauchy" (constant true stress in the deformed body) | "piola"
-        (constant first Piola-Kirchhoff stress)
+    prescribed_stress_Pa : None, array_like (3, 3) or array (n_elements, n_qp, 3, 3) -- stress
+        added to the elastic one [Pa], Cartesian (x, y, z) components: uniform (3, 3) (for an
+        axisymmetric body ``diag(s_t, s_t, s_a)``), or per element quadrature point
+        (:func:`element_points`; for an axisymmetric body the components at the point of the
+        meridian plane ``y = 0``, where x is r and y is theta: no (x, y), (y, z) shear). The
+        body is in equilibrium under the total stress: a free body deforms until its elastic
+        stress cancels the prescribed one (a positive ``s_a`` shortens it).
+    prescribed_measure : "cauchy" (the true stress in the deformed body, attached to the
+        material point) | "piola" (the first Piola-Kirchhoff stress)
     """
 
     tractions: tuple = ()
@@ -442,8 +444,9 @@ class Loads:
         if self.prescribed_stress_Pa is not None:
             S = np.asarray(check_finite("prescribed_stress_Pa", self.prescribed_stress_Pa,
                                         "Pa"), float)
-            if S.shape != (3, 3):
-                raise InputError(f"prescribed_stress_Pa must have shape (3, 3), got {S.shape}")
+            if S.shape[-2:] != (3, 3) or S.ndim not in (2, 4):
+                raise InputError("prescribed_stress_Pa must have shape (3, 3) or (n_elements, "
+                                 f"n_qp, 3, 3), got {S.shape}")
         if self.body_force_N_m3 is not None and not callable(self.body_force_N_m3):
             check_finite("body_force_N_m3", self.body_force_N_m3, "N/m^3")
 
@@ -453,11 +456,17 @@ class Loads:
             return None
         S = np.asarray(self.prescribed_stress_Pa, float)
         scale = max(np.abs(S).max(), 1e-300)
-        off = S - np.diag(np.diag(S))
-        if np.abs(off).max() > 1e-12 * scale or abs(S[0, 0] - S[1, 1]) > 1e-12 * scale:
-            raise InputError("prescribed_stress_Pa of an axisymmetric body must be "
-                             f"axisymmetric about z, diag(s_t, s_t, s_a) [Pa]; got {S.tolist()}")
-        return np.diag([S[0, 0], S[2, 2], S[1, 1]])
+        if S.ndim == 2:
+            off = S - np.diag(np.diag(S))
+            if np.abs(off).max() > 1e-12 * scale or abs(S[0, 0] - S[1, 1]) > 1e-12 * scale:
+                raise InputError("prescribed_stress_Pa of an axisymmetric body must be "
+                                 "axisymmetric about z, diag(s_t, s_t, s_a) [Pa]; got "
+                                 f"{S.tolist()}")
+        elif np.abs(S[..., [0, 1, 1, 2], [1, 0, 2, 1]]).max() > 1e-12 * scale:
+            raise InputError("prescribed_stress_Pa at the quadrature points of an axisymmetric "
+                             "body must have no (x, y) and (y, z) components (torsion)")
+        # (x, y, z) in the meridian plane y = 0 is (r, theta, z): reorder to (r, z, theta)
+        return S[..., [0, 2, 1], :][..., :, [0, 2, 1]]
 
 
 def _cell_bases(mesh):
@@ -712,6 +721,13 @@ def _scaled(C, G, size):
     return C * (G * size / np.abs(C).max(axis=1, keepdims=True))
 
 
+def _check_stress(S, ne, nq):
+    if S is not None and S.ndim == 4 and S.shape != (ne, nq, 3, 3):
+        raise InputError(f"prescribed_stress_Pa per quadrature point must have shape "
+                         f"({ne}, {nq}, 3, 3) (element_points), got {S.shape}")
+    return S
+
+
 def _axi_assembler(body, solid, loads):
     """The axisymmetric problem of ``body``: kinematics (r, z, theta), weight 2 pi r."""
     ub, pb = _cell_bases(body.mesh)
@@ -752,7 +768,8 @@ def _axi_assembler(body, solid, loads):
     fixed = [2 * ub.get_dofs("axis").all()]                          # u_r = 0 on the axis
     if body.mid_plane:
         fixed.append(2 * ub.get_dofs("mid").all() + 1)                # u_z = 0 on z = 0
-    asm_ = _Mixed(solid, loads, loads._stress_rz_theta(), dx, B.reshape(ne, nq, 2 * nb, 3, 3),
+    asm_ = _Mixed(solid, loads, _check_stress(loads._stress_rz_theta(), ne, nq), dx,
+                  B.reshape(ne, nq, 2 * nb, 3, 3),
                   vd, psi, pd, n_u, n_p, C, np.concatenate(fixed), f, facet_loads,
                   float(dx.sum()))
     asm_.ub = ub
@@ -1168,8 +1185,8 @@ def _tet_assembler(body, solid, loads):
     for fl in facet_loads:
         if fl.f_dead is not None:
             f += np.bincount(fl.f_dead[0], fl.f_dead[1], minlength=n)
-    S = None if loads.prescribed_stress_Pa is None else np.asarray(loads.prescribed_stress_Pa,
-                                                                   float)
+    S = None if loads.prescribed_stress_Pa is None else _check_stress(
+        np.asarray(loads.prescribed_stress_Pa, float), ne, nq)
     asm_ = _Mixed(solid, loads, S, dx, B.reshape(ne, nq, 3 * nb, 3, 3), vd, psi, pd, n_u, n_p,
                   C, fixed, f, facet_loads, float(dx.sum()))
     asm_.ub = ub

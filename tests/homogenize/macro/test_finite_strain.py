@@ -189,6 +189,34 @@ def test_piola_prestress_equals_dead_traction_minus_P0_N():
     np.testing.assert_allclose(a.u_m, b.u_m, rtol=0, atol=1e-10 * np.abs(b.u_m).max())
 
 
+def test_varying_piola_prestress_equals_its_divergence_and_boundary_traction():
+    # int P0 : Grad v dV = -int div(P0) . v dV + int (P0 N) . v dA: a prescribed stress field
+    # given at the quadrature points, P0 = s1 (z/c) e_z e_z + s2 (r/R) (e_r e_r + e_t e_t), is
+    # the body force div P0 and the dead traction -P0 N. In cylindrical components
+    # div P0 = ((1/r) d(r P_rr)/dr - P_tt / r, dP_zz/dz) = (2 s2/R - s2/R, s1/c)
+    s1, s2 = 0.2 * G, 0.1 * G
+    body = cylinder_body(R, 3 * R, 3)
+    c = body.half_length_m
+    Xe = fs.element_points(body)
+    P0 = np.zeros(Xe.shape[1:] + (3, 3))
+    P0[..., 2, 2] = s1 * Xe[1] / c
+    P0[..., 0, 0] = P0[..., 1, 1] = s2 * Xe[0] / R      # (x, y) = (r, theta) at y = 0
+    solid = NeoHookeanSolid.from_poisson(G, 0.45)
+    a = solve_axisymmetric(body, solid, Loads(prescribed_stress_Pa=P0,
+                                              prescribed_measure="piola"), load_steps=2)
+
+    def t(X, N):
+        return -np.stack([s2 * X[0] / R * N[0], s1 * X[1] / c * N[1]])
+
+    b = solve_axisymmetric(body, solid, Loads(
+        (Traction(t, follower=False),),
+        body_force_N_m3=np.array([s2 / R, s1 / c])), load_steps=2)
+    # two routes through different code, both exact for these polynomial fields (quadrature
+    # degree 4): equal to the Newton tolerance
+    np.testing.assert_allclose(a.u_m, b.u_m, rtol=0, atol=1e-9 * np.abs(b.u_m).max())
+    assert np.abs(a.u_m).max() > 0.01 * R                       # finite strain
+
+
 def test_small_strain_compressible_cylinder_equals_linear_elasticity():
     mat = ElasticMaterial(E_Pa=3e6, nu=0.3)
     solid = NeoHookeanSolid.from_material(mat)
