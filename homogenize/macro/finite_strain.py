@@ -644,6 +644,7 @@ class _Mixed:
         self.f_dead = f_dead
         self.facet_loads = facet_loads
         self.volume = volume
+        self.displacement_only = psi.shape[-1] == 0
         self.fixed = np.unique(np.asarray(fixed, dtype=np.int64))
         self.free = np.setdiff1d(np.arange(self.n), self.fixed)
         self.free_u = self.free[self.free < n_u]
@@ -657,8 +658,16 @@ class _Mixed:
         G, invK = self.solid.G_Pa, self.solid.inv_K_per_Pa
         n_u, n_p = self.nu_dof, self.np_dof
         H = self.grad_u(x)
-        p = np.einsum("es,eqs->eq", x[self.pd], self.psi)
-        P, A, Jm1, dJ = _material_pointwise(H, p, G)
+        if self.displacement_only:
+            # p = K (J - 1) at the quadrature points: the plain displacement formulation, which
+            # locks as nu -> 1/2 (kept as the foil of the locking test)
+            F = np.eye(3) + H
+            p = self.solid.K_Pa * (np.linalg.det(F) - 1.0)
+            P, A, Jm1, dJ = _material_pointwise(H, p, G)
+            A = A + self.solid.K_Pa * np.einsum("...ij,...kl->...ijkl", dJ, dJ)
+        else:
+            p = np.einsum("es,eqs->eq", x[self.pd], self.psi)
+            P, A, Jm1, dJ = _material_pointwise(H, p, G)
         if self.S is not None:
             Ps, As = _prescribed_pointwise(H, self.S, self.loads.prescribed_measure)
             P = P + lam * Ps
@@ -728,8 +737,9 @@ def _check_stress(S, ne, nq):
     return S
 
 
-def _axi_assembler(body, solid, loads):
-    """The axisymmetric problem of ``body``: kinematics (r, z, theta), weight 2 pi r."""
+def _axi_assembler(body, solid, loads, displacement_only=False):
+    """The axisymmetric problem of ``body``: kinematics (r, z, theta), weight 2 pi r
+    (``displacement_only``: no pressure unknowns, the locking foil of the tests)."""
     ub, pb = _cell_bases(body.mesh)
     X = np.asarray(ub.global_coordinates())                         # (2, ne, nq)
     dx = np.asarray(ub.dx) * _TWO_PI * X[0]                         # (ne, nq)
@@ -748,6 +758,10 @@ def _axi_assembler(body, solid, loads):
     ed = ub.element_dofs.T
     vd = np.stack([2 * ed, 2 * ed + 1], axis=-1).reshape(ne, 2 * nb)
     pd = n_u + pb.element_dofs.T
+    if displacement_only:
+        if solid.K_Pa == math.inf:
+            raise InputError("the displacement formulation needs a finite bulk modulus")
+        psi, pd, n_p = psi[..., :0], pd[:, :0], 0
     size = max(body.radius_m, body.half_length_m)
     # free body: int u_z dV = 0 removes the only rigid mode (u_r = const is no rigid motion)
     C = np.zeros((0 if body.mid_plane else 1, n_u))
@@ -772,7 +786,7 @@ def _axi_assembler(body, solid, loads):
                   B.reshape(ne, nq, 2 * nb, 3, 3),
                   vd, psi, pd, n_u, n_p, C, np.concatenate(fixed), f, facet_loads,
                   float(dx.sum()))
-    asm_.ub = ub
+    asm_.ub, asm_.body = ub, body
     return asm_
 
 
@@ -1189,7 +1203,7 @@ def _tet_assembler(body, solid, loads):
         np.asarray(loads.prescribed_stress_Pa, float), ne, nq)
     asm_ = _Mixed(solid, loads, S, dx, B.reshape(ne, nq, 3 * nb, 3, 3), vd, psi, pd, n_u, n_p,
                   C, fixed, f, facet_loads, float(dx.sum()))
-    asm_.ub = ub
+    asm_.ub, asm_.body = ub, body
     return asm_
 
 
