@@ -69,7 +69,8 @@ __all__ = ["NeoHookeanSolid", "AxisymmetricBody", "sphere_body", "spheroid_body"
            "element_points", "facet_points", "length_change_m", "diameter_change_m",
            "mean_strain", "pole_strain", "traction_moment_Pa", "uniaxial_stretch",
            "lamb_sphere_strains", "ConvergenceError", "INTORDER", "SolidBody", "box_body",
-           "cylinder_body_3d", "Solution3D", "solve_3d", "current_facet_points"]
+           "cylinder_body_3d", "Solution3D", "solve_3d", "current_facet_points",
+           "deformation_gradient"]
 
 #: Quadrature degree of the element and facet rules (6 points per triangle, 3 per facet): exact
 #: for the P2 x P2 stiffness times the weight ``r`` of an undeformed body.
@@ -1359,6 +1360,22 @@ def mean_strain(sol) -> np.ndarray:
     et = 0.5 * float(np.sum(u[0] * Nn[0] * w)) / V
     ea = float(np.sum(u[1] * Nn[1] * w)) / V
     return np.diag([et, et, ea])
+
+
+def deformation_gradient(sol) -> np.ndarray:
+    """Deformation gradient ``F`` [-] at the element quadrature points (:func:`element_points`),
+    shape (n_elements, n_qp, 3, 3): components (r, z, theta) of an axisymmetric solution
+    (``F_tt = 1 + u_r / r``), (x, y, z) of a 3D one. ``det F = J`` turns a force per current
+    volume into one per reference volume; ``F`` pushes the RVE's fields forward."""
+    b = sol.basis
+    d = sol.u_m.shape[0]
+    grads = np.stack([np.asarray(b.interpolate(ui).grad) for ui in sol.u_m])   # (i, j, e, q)
+    H = np.zeros(grads.shape[2:] + (3, 3))
+    H[..., :d, :d] = np.moveaxis(grads, (0, 1), (-2, -1))
+    if d == 2:
+        X = np.asarray(b.global_coordinates())
+        H[..., 2, 2] = np.asarray(b.interpolate(sol.u_m[0])) / X[0]
+    return np.eye(3) + H
 
 
 def traction_moment_Pa(body: AxisymmetricBody, traction, boundary: str = "surface"):

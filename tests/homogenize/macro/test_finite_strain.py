@@ -129,6 +129,9 @@ def test_uniaxial_incompressible_cylinder_is_exact(stretch):
     dm = sol.deformed_mesh()
     dbody = AxisymmetricBody(dm, "cylinder", R * lat, L * stretch / 2, True)
     assert dbody.volume_m3 == pytest.approx(body.volume_m3, rel=1e-10)
+    F = fs.deformation_gradient(sol)
+    np.testing.assert_allclose(F, np.broadcast_to(np.diag([lat, stretch, lat]), F.shape),
+                               atol=1e-9)
     # where a follower load (or a field from the deformed body) is evaluated: the moved
     # quadrature points and the current normals (Nanson), exact for a homogeneous map
     X, N = fs.facet_points(body, "surface")
@@ -391,6 +394,12 @@ def test_free_body_equals_symmetric_quarter_and_needs_no_reaction():
     assert diameter_change_m(f) == pytest.approx(diameter_change_m(q), rel=1e-8)
     # self-equilibrated load: the constraint force is round-off next to the load p0 R^2
     assert abs(f.reaction_N) < 1e-9 * p0 * R * R
+    # incompressible: int (J - 1) q dV = 0 for every P1 q, so the volume is kept exactly
+    # (Newton tolerance) although J - 1 ~ 1e-3 pointwise is not zero at finite strain
+    J = np.linalg.det(fs.deformation_gradient(f))
+    dV = np.asarray(f.basis.dx) * 2 * math.pi * fs.element_points(f.body)[0]
+    assert abs(np.sum((J - 1) * dV)) < 1e-10 * np.sum(dV)
+    assert np.abs(J - 1).max() > 1e-5
 
 
 def test_translated_free_body_has_the_same_displacement():
@@ -513,6 +522,7 @@ def test_3d_box_uniaxial_exact_with_dead_and_follower_end_traction():
                                rtol=1e-9)
     dm = fs.SolidBody(sol.deformed_mesh(), "box", (R, R, 2 * R), (True,) * 3)
     assert dm.volume_m3 == pytest.approx(octant.volume_m3, rel=1e-10)   # J = 1 exactly
+    np.testing.assert_allclose(np.linalg.det(fs.deformation_gradient(sol)), 1.0, atol=1e-10)
     # compressible, Cauchy stress through a follower traction (current area and normal)
     solid = NeoHookeanSolid.from_poisson(G, 0.45)
     sigma = 0.5 * G
