@@ -1,9 +1,12 @@
-"""Finite-strain, nearly incompressible axisymmetric elasticity (homogenize.macro.finite_strain).
+"""Finite-strain, nearly incompressible elasticity, axisymmetric and 3D
+(homogenize.macro.finite_strain).
 
 References: the exact homogeneous uniaxial state of the material law, linear elasticity,
 Lamb's incompressible sphere under p0 cos^2(theta) n (derived in ``lamb_sphere_strains``), the
 first moment of the traction (mean stress, a conservation law), finite differences of the
-energy and of the residual, mirror symmetry and d'Alembert's free body.
+energy and of the residual, mirror symmetry, translation, rotation and scaling, d'Alembert's
+free body, the displacement formulation as the locking foil, and the axisymmetric solver as the
+reference of the 3D one.
 """
 import math
 
@@ -17,7 +20,7 @@ from homogenize.macro.finite_strain import (AxisymmetricBody, ConvergenceError, 
                                             pole_strain, solve_axisymmetric, sphere_body)
 from micro.materials import ElasticMaterial
 
-G = 1.0e6                         # shear modulus [Pa] (PDMS-like, 1 MPa)
+G = 1.0e6                         # shear modulus [Pa] (a soft silicone)
 R = 2.0e-3                        # specimen radius [m]
 INC = NeoHookeanSolid.incompressible(G)
 
@@ -400,6 +403,21 @@ def test_free_body_equals_symmetric_quarter_and_needs_no_reaction():
     dV = np.asarray(f.basis.dx) * 2 * math.pi * fs.element_points(f.body)[0]
     assert abs(np.sum((J - 1) * dV)) < 1e-10 * np.sum(dV)
     assert np.abs(J - 1).max() > 1e-5
+
+
+def test_scaling_of_lengths_and_moduli():
+    # the problem has no length or stress scale of its own: lengths x 10 scale u by 10, moduli
+    # and loads x 3 leave u unchanged (finite strain ~ 2e-3, to the Newton tolerance)
+    p0 = 1e-2 * G
+    base = solve_axisymmetric(sphere_body(R, 4), INC, Loads((Traction(_lamb(p0)),)))
+    big = solve_axisymmetric(sphere_body(10 * R, 4), INC, Loads((Traction(_lamb(p0)),)))
+    stiff = solve_axisymmetric(sphere_body(R, 4), NeoHookeanSolid.incompressible(3 * G),
+                               Loads((Traction(_lamb(3 * p0)),)))
+    np.testing.assert_allclose(big.u_m, 10 * base.u_m, rtol=0,
+                               atol=1e-9 * np.abs(10 * base.u_m).max())
+    np.testing.assert_allclose(stiff.u_m, base.u_m, rtol=0, atol=1e-9 * np.abs(base.u_m).max())
+    np.testing.assert_allclose(stiff.p_Pa, 3 * base.p_Pa, rtol=0,
+                               atol=1e-9 * np.abs(3 * base.p_Pa).max())
 
 
 def test_translated_free_body_has_the_same_displacement():
