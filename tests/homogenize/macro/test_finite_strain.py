@@ -77,12 +77,18 @@ def test_stress_is_energy_derivative_tangent_consistent_and_objective():
     np.testing.assert_allclose(PQ, Q @ P, rtol=1e-10, atol=1e-9 * G)
 
 
-def test_assembled_tangent_equals_finite_differences_of_the_residual():
+@pytest.mark.parametrize("kind", ["callable", "array"])
+def test_assembled_tangent_equals_finite_differences_of_the_residual(kind):
     # the worst case: free body (multiplier), compressible, a position- and normal-dependent
-    # follower traction, a dead body force and a prescribed Cauchy stress, at a deformed state
+    # follower traction (or a fixed vector per current area given at the facet points), a
+    # dead body force and a prescribed Cauchy stress, at a deformed state
     body = sphere_body(R, 2, mid_plane=False)
     solid = NeoHookeanSolid.from_poisson(G, 0.45)
-    trac = Traction(lambda x, n: 0.2 * G * (n[1] ** 2 + x[1] / R) * n)
+    if kind == "callable":
+        trac = Traction(lambda x, n: 0.2 * G * (n[1] ** 2 + x[1] / R) * n)
+    else:
+        X, N = fs.facet_points(body)
+        trac = Traction(0.2 * G * (N[1] ** 2 + X[1] / R) * N)
     loads = Loads((trac,), body_force_N_m3=lambda X: np.stack([0 * X[0], 1e8 * X[0] / R]),
                   prescribed_stress_Pa=np.diag([0.1, 0.1, -0.2]) * G)
     asm_ = fs._axi_assembler(body, solid, loads)
