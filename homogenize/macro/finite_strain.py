@@ -985,10 +985,12 @@ class SolidBody:
 
     @property
     def radius_m(self) -> float:
+        """Half size along x [m] (the radius of a cylinder)."""
         return float(self.half_extent_m[0])
 
     @property
     def half_length_m(self) -> float:
+        """Half size along z [m] (the end faces at ``z = +-c``)."""
         return float(self.half_extent_m[2])
 
     @property
@@ -1255,8 +1257,11 @@ def solve_3d(body: SolidBody, solid: NeoHookeanSolid, loads: Loads, *, load_step
     :func:`solve_axisymmetric`; same material law, loads, load stepping and errors).
 
     Tractions and body forces have three components (x, y, z); ``prescribed_stress_Pa`` may be
-    any uniform (3, 3) stress. Symmetry planes of ``body`` carry ``u_i = 0``; the rigid-body
-    modes they leave free are removed by ``int mode . u dV = 0``.
+    any (3, 3) stress, uniform or per quadrature point. Symmetry planes of ``body`` carry
+    ``u_i = 0``; the rigid-body modes they leave free are removed by ``int mode . u dV = 0``
+    (a net load is balanced by the constraint forces, reported in ``reaction_force_N`` and
+    ``reaction_moment_N_m``). Direct sparse solver (SuperLU): meant for meshes of up to a
+    few thousand tetrahedra (the constraint rows are dense).
     """
     if not isinstance(body, SolidBody):
         raise InputError(f"body must be a SolidBody, got {type(body).__name__}")
