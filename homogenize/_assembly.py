@@ -24,8 +24,7 @@ from skfem.helpers import ddot, sym_grad, trace
 from homogenize import _kernels as kn
 
 __all__ = ["CORNERS", "OFFSETS", "reference_matrices", "node_coefficients", "assemble_bsr",
-           "affine_load", "body_force_load", "element_mean_strain",
-           "rigid_body_modes"]
+           "affine_load", "body_force_load", "element_mean_strain"]
 
 # local corner a -> (ax, ay, az)
 CORNERS = np.array([[a & 1, (a >> 1) & 1, (a >> 2) & 1] for a in range(8)], dtype=np.int64)
@@ -252,24 +251,6 @@ def element_stress(lam: np.ndarray, mu: np.ndarray, eps: np.ndarray) -> np.ndarr
     for c in range(3):
         sig[..., c, c] += lam * tr
     return sig
-
-
-def rigid_body_modes(n: int, h: float) -> np.ndarray:
-    """Near-nullspace of elasticity at the nodes: 3 translations, 3 rotations, shape (3 N, 6).
-
-    Rotations use coordinates centred in the cell and scaled by the cell size so all six columns
-    have comparable magnitude (AMG orthonormalises them per aggregate anyway).
-    """
-    k, j, i = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
-    x = (np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1) - 0.5 * (n - 1)) / n
-    B = np.zeros((n ** 3, 3, 6))
-    for c in range(3):
-        B[:, c, c] = 1.0
-    # rotation about x: (0, -z, y); about y: (z, 0, -x); about z: (-y, x, 0)
-    B[:, 1, 3], B[:, 2, 3] = -x[:, 2], x[:, 1]
-    B[:, 0, 4], B[:, 2, 4] = x[:, 2], -x[:, 0]
-    B[:, 0, 5], B[:, 1, 5] = -x[:, 1], x[:, 0]
-    return B.reshape(3 * n ** 3, 6)
 
 
 # ------------------------------------------------------------------------------------------------

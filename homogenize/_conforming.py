@@ -16,6 +16,8 @@ from micro._validate import InputError
 from micro.materials import FE, PDMS
 from homogenize._effective_media import lame
 from homogenize.cell import voigt_to_tensor
+from homogenize.solvers import (AMGOptions, Deflation, block_cg, rigid_body_modes,
+                                smoothed_aggregation)
 from scipy.sparse.linalg import splu
 from dataclasses import replace
 
@@ -130,7 +132,7 @@ def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDM
     isoparametric P2 elements on curved sphere surfaces).
 
     ``solver="direct"``: sparse LU (its fill-in limits it to ~1e5 DOF on this machine);
-    ``"cg"``: the six load cases in one deflated block CG (:func:`homogenize._amg.block_cg`),
+    ``"cg"``: the six load cases in one deflated block CG (:func:`homogenize.solvers.block_cg`),
     preconditioned by pyamg smoothed aggregation with the six rigid-body modes as near-null
     space, the particles' rigid modes deflated (as the voxel solver), relative residual ``tol``;
     memory grows like the matrix, so larger meshes fit."""
@@ -220,35 +222,22 @@ def homogenize_conforming(box_m, centers_m, radii_m, mesh_size_m, *, matrix=(PDM
             "iterations": iterations}
 
 
-def _rigid_modes(comp, r):
-    """(m, 6) translations and rotations (u_a = -r_b, u_b = r_a about each axis) at DOFs of
-    component ``comp`` (m,) and position ``r`` (m, 3) relative to the rotation centre."""
-    out = np.zeros((comp.size, 6))
-    for c in range(3):
-        out[comp == c, c] = 1.0
-    for col, (a, b) in zip((3, 4, 5), ((1, 2), (2, 0), (0, 1))):
-        out[comp == a, col] = -r[comp == a, b]
-        out[comp == b, col] = r[comp == b, a]
-    return out
+#: smoothed aggregation of the periodic P2 system: strength threshold 0.05 (as the voxel
+#: solver), pyamg's default candidate smoothing, and the sparse LU of the coarsest level, not
+#: pyamg's dense pseudo-inverse (measured on the dilute-sphere P2 meshes: 45 of 63 s at 23k DOF;
+#: 118k DOF 18 min / 9.3 GB -> 4 min / 3.6 GB, same C to 5e-11)
+_AMG = AMGOptions(strength_theta=0.05, improve_candidates=True, coarse_solver="splu",
+                  max_coarse=2000)
 
 
 def _solve_cg(K, F, xyz, master, basis, phase, centres, free, tol):
     """Deflated block CG for the free DOFs of the periodic P2 system (see
     :func:`homogenize_conforming`). xyz (n_free, 3): position of each free DOF's node in the unit
     cell. Returns (W (n_free, 6), iterations per load case)."""
-    import pyamg
-    from homogenize._amg import SA_SMOOTH, Deflation, block_cg
     n = K.shape[0]
     comp = np.asarray(free) % 3               # masters are sorted by (position, component)
     # near-null space for smoothed aggregation: the rigid modes about the cell centre
-    ml = pyamg.smoothed_aggregation_solver(K, B=_rigid_modes(comp, xyz - 0.5),
-                                           symmetry="hermitian", max_coarse=2000,
-                                           strength=("symmetric", {"theta": 0.05}),
-                                           # sparse LU of the coarsest level, not pyamg's dense
-                                           # pseudo-inverse (measured on the dilute-sphere P2
-                                           # meshes: 45 of 63 s at 23k DOF; 118k DOF 18 min /
-                                           # 9.3 GB -> 4 min / 3.6 GB, same C to 5e-11)
-                                           coarse_solver="splu", smooth=SA_SMOOTH)
+    ml = smoothed_aggregation(K, rigid_body_modes(xyz - 0.5, components=comp), _AMG)
     pre = ml.aspreconditioner(cycle="V")
     # deflation: the rigid modes of each particle at the DOFs of its elements
     dofs_elem = basis.element_dofs                           # (30, n_tets) unfolded DOFs
@@ -262,7 +251,7 @@ def _solve_cg(K, F, xyz, master, basis, phase, centres, free, tol):
         for p in np.unique(owner):
             d = np.unique(free_of[master[dofs_elem[:, part[owner == p]].ravel()]])
             d = d[d >= 0]
-            modes = _rigid_modes(comp[d], xyz[d] - centres[p])
+            modes = rigid_body_modes(xyz[d] - centres[p], components=comp[d])
             nz = np.nonzero(modes)
             rows.append(d[nz[0]]); cols.append(6 * p + nz[1]); vals.append(modes[nz])
     defl = None

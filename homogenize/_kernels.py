@@ -214,7 +214,7 @@ def _coldot(A, B, out):
             out[j] += A[i, j] * B[i, j]
 
 
-# coupled block CG (homogenize._amg.coupled_block_cg): (n, k) blocks, k x k coefficients. The
+# coupled block CG (homogenize.solvers.coupled_block_cg): (n, k) blocks, k x k coefficients. The
 # reductions sum each chunk of ``chunk`` rows sequentially into its own slot; the caller adds the
 # slots in order, so the result does not depend on the number of threads.
 

@@ -17,7 +17,7 @@ is built element by element: a coarse voxel's matrix is ``sum_c P_c^T K_child(c)
 children ``c`` with ``P_c`` fixed per child position, so a coarse voxel whose children all share
 one type gets a shared coarse type, and the fine matrix is never assembled. The coarsest
 geometric level is assembled as 3x3 BSR and handed to pyamg smoothed aggregation
-(:class:`homogenize._amg.BlockVCycle`). Every matrix-free level is smoothed by 8-colour block
+(:class:`homogenize.solvers.BlockVCycle`). Every matrix-free level is smoothed by 8-colour block
 Gauss-Seidel (forward before, backward after the coarse correction: a symmetric V-cycle).
 
 Rigid translations: one node is pinned (its row and column replaced by ``scale * I``), the same
@@ -330,7 +330,7 @@ class MatFreeOperator:
     @property
     def dinv(self) -> np.ndarray:
         if self._dinv is None:
-            from ._amg import _block_inverse
+            from .solvers.amg import _block_inverse
             self._dinv = np.ascontiguousarray(_block_inverse(self.diag))
         return self._dinv
 
@@ -523,7 +523,7 @@ def coarsen(field: ElementField, chunk: int = 4096) -> ElementField:
 
 
 def grid_colours(n: int) -> list[np.ndarray]:
-    from ._amg import grid_colours as gc
+    from .solvers.amg import grid_colours as gc
     return gc(n)
 
 
@@ -557,10 +557,11 @@ class GeometricVCycle:
     """Symmetric V-cycle: matrix-free levels (8-colour block Gauss-Seidel, trilinear transfer)
     down to a grid of at most ``assembled_max`` voxels per edge (at least one matrix-free level:
     the fine one), then the assembled Galerkin matrix of that grid with a pyamg smoothed-
-    aggregation V-cycle (:class:`homogenize._amg.BlockVCycle`).
+    aggregation V-cycle (:class:`homogenize.solvers.BlockVCycle`).
 
     field : fine ElementField; pin : pinned fine node (even coordinates on every matrix-free
-    level); pin_scale : its diagonal; amg_options : pyamg options for the coarse hierarchy;
+    level); pin_scale : its diagonal; amg_options : :class:`homogenize.solvers.AMGOptions` of
+    the coarse hierarchy (``max_coarse`` None: up to 600 blocks, below);
     coarse : "amg" (default) or "lu": the assembled grid solved exactly by a sparse LU (small
     grids only: it tells whether the geometric levels or the AMG below them limit convergence);
     sweeps : Gauss-Seidel sweeps per side over all nodes; interface_sweeps : further sweeps per
@@ -575,17 +576,17 @@ class GeometricVCycle:
     """
 
     def __init__(self, field: ElementField, *, pin: int, pin_scale: float, h: float,
-                 amg_options: dict, assembled_max: int = 64, fine_op: MatFreeOperator | None = None,
+                 amg_options, assembled_max: int = 64, fine_op: MatFreeOperator | None = None,
                  sweeps: int = 1, coarse: str = "amg", interface_sweeps: int = 0,
                  interface_halo: int = 1, patches=None):
-        import pyamg
-        from ._amg import BlockVCycle
+        from .solvers.amg import (BlockVCycle, grid_node_coordinates, rigid_body_modes,
+                                  smoothed_aggregation)
         if coarse not in ("amg", "lu"):
             raise ValueError(f"coarse must be 'amg' or 'lu', got {coarse!r}")
         self.levels = []
         self.sweeps = int(sweeps)
         self.patches = patches
-        f, p, hh = field, pin, h
+        f, p = field, pin
         op = fine_op if fine_op is not None else MatFreeOperator(f, p, pin_scale)
         self.interface_sweeps = int(interface_sweeps)
         geo = dict(interface_sweeps=self.interface_sweeps, interface_halo=int(interface_halo))
@@ -600,7 +601,6 @@ class GeometricVCycle:
             pc = ii // 2 + nc * (jj // 2 + nc * (kk // 2))
             f = coarsen(f)
             self.field_bytes.append(f.nbytes)
-            hh *= 2.0
             p = pc
             if nc <= assembled_max or nc % 2 or nc < 8:
                 break
@@ -615,13 +615,15 @@ class GeometricVCycle:
             self.coarse = lambda B: lu.solve(np.asarray(B))
             self.ml = None
         else:
-            B = asm.rigid_body_modes(f.n, hh)
+            B = rigid_body_modes(grid_node_coordinates(f.n))
             # pyamg counts max_coarse in blocks, and its coarse levels have 6 unknowns per
             # aggregate (the rigid modes): at most 600 blocks (3600 unknowns) on the coarsest AMG
             # level, which BlockVCycle then factorizes densely (the sparse LU of a 7188-unknown,
             # nearly dense coarsest matrix took 10 s to set up at 32^3)
-            opts = dict(amg_options, max_coarse=max(50, min(600, Ac.shape[0] // 120)))
-            ml = pyamg.smoothed_aggregation_solver(Ac, B=B, **opts)
+            opts = amg_options
+            if opts.max_coarse is None:
+                opts = opts.replace(max_coarse=max(50, min(600, Ac.shape[0] // 120)))
+            ml = smoothed_aggregation(Ac, B, opts)
             del B
             self.coarse = BlockVCycle(ml, fine_colours=grid_colours(f.n))
             # its finest level is this geometric grid: smoothed and residuals taken matrix-free

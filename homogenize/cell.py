@@ -23,22 +23,24 @@ fixed by pinning one matrix node (the loads are balanced, so the pin carries no 
   is variational in the strain and magnetic solutions (error = the product of their errors),
   so the magnetic column stops at :func:`magnetic_tol` (sqrt(tol)) unless its field is kept.
 
-Solver (``solver="fast"``): all load cases in one block (:mod:`homogenize._amg`): lock-step CG preconditioned by a
-block V-cycle on a pyamg smoothed-aggregation hierarchy (rigid-body near-nullspace, built once),
+Solver (``solver="fast"``): all load cases in one block (:mod:`homogenize.solvers`): lock-step CG
+preconditioned by a block V-cycle on a pyamg smoothed-aggregation hierarchy (rigid-body near-nullspace, built once),
 DEFLATED by the six rigid-body modes of every stiff particle. Plain AMG-CG needs ~4x more
 iterations at Fe/PDMS contrast (1e5) than at contrast 1, because each stiff particle adds six
 near-zero modes (its rigid motions in the soft matrix); deflation removes exactly those (Vuik,
 Segal & Meijerink 1999). ``solver="matrix-free"`` replaces the assembled fine matrix and its AMG
 by the matrix-free operator and geometric multigrid of :mod:`homogenize._matfree`, and couples
-the six strain cases in one deflated block CG (:data:`MATFREE_BLOCK_CG`): every strain column
+the six strain cases in one deflated block CG (:attr:`SolverOptions.block_cg`): every strain column
 steps in the span of all their search directions; the magnetic column keeps its own recursion.
 On RVEs of many or small particles (:func:`use_patches`) its V-cycle also solves every particle
-with a shell of matrix exactly in the fine level (:data:`MATFREE_PATCH_SHELL`,
-:mod:`homogenize._patches`).
+with a shell of matrix exactly in the fine level (:attr:`SolverOptions.patch_shell_voxels`,
+:mod:`homogenize._patches`). Every solver setting is a field of the frozen
+:class:`homogenize.solvers.SolverOptions` passed as ``options=``.
 """
 from __future__ import annotations
 
 import time
+import types
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,9 +58,9 @@ from ._patches import ParticlePatches
 from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
 from .mesh import METHODS, VoxelMesh, voxelize
-from homogenize._amg import BlockVCycle, BSROp, grid_colours
-from homogenize._amg import SA_SMOOTH, Deflation, block_cg, coupled_block_cg
-import pyamg
+from .solvers import (AMGOptions, BlockVCycle, BSROp, Deflation, SolverOptions, block_cg,
+                      coupled_block_cg, grid_colours, grid_node_coordinates, rigid_body_modes,
+                      smoothed_aggregation)
 from scipy.sparse.linalg import splu
 
 __all__ = ["Material", "CellConfig", "homogenize", "CellResult", "homogenize_rve", "homogenize_mesh", "magnetic_tol", "isotropic_projection",
@@ -184,15 +186,17 @@ class _CellSolver:
     """Stiffness matrix, AMG hierarchy and particle deflation space of one voxel mesh.
 
     ``solver="fast"``: numba assembly; pyamg smoothed aggregation with a strength threshold (see
-    :data:`AMG_OPTIONS`) and our block V-cycle (multicolour Gauss-Seidel on every level, all
-    load cases in one block). ``solver="reference"``: the independent path -- BLAS assembly,
+    :class:`homogenize.solvers.AMGOptions`) and our block V-cycle (multicolour Gauss-Seidel on
+    every level, all load cases in one block). ``solver="reference"``: the independent path -- BLAS assembly,
     pyamg's default hierarchy and its own V-cycle, scipy products, one load case after another.
     """
 
     def __init__(self, mesh: VoxelMesh, lam, mu, *, deflate: bool, stiff_mask, tol: float,
-                 maxiter: int, solver: str = "fast", composite: _Composite | None = None):
+                 maxiter: int, solver: str = "fast", composite: _Composite | None = None,
+                 options: SolverOptions | None = None):
         if solver not in SOLVERS:
             raise InputError(f"solver must be one of {SOLVERS}, got {solver!r}")
+        self.options = _options(options)
         self.mesh, self.lam, self.mu = mesh, lam, mu
         self.n, self.h = mesh.n, mesh.h_m
         self.tol, self.maxiter = tol, maxiter
@@ -222,20 +226,20 @@ class _CellSolver:
         K.data[row[ind[row] == self.pin][0]] = diag_scale * np.eye(3)
         self.K = K
         t0 = time.perf_counter()
-        B = asm.rigid_body_modes(self.n, self.h)
+        B = rigid_body_modes(grid_node_coordinates(self.n))
         if fast:
             # coarsest level: up to 4000 unknowns on large grids (solved exactly, a dense
             # Cholesky; measured at 64^3: 17-18 CG iterations against 26-29 with 500), few
             # enough on small grids that the V-cycle stays a multigrid cycle
-            opts = dict(AMG_OPTIONS, max_coarse=max(300, min(4000, K.shape[0] // 20)))
-            self.ml = pyamg.smoothed_aggregation_solver(K, B=B, **opts)
+            opts = self.options.amg
+            if opts.max_coarse is None:
+                opts = opts.replace(max_coarse=max(300, min(4000, K.shape[0] // 20)))
+            self.ml = smoothed_aggregation(K, B, opts)
             self.M = BlockVCycle(self.ml, fine_colours=grid_colours(self.n))
             self.matvec = BSROp(K)
         else:
             # pyamg's own hierarchy, with the project's repeatable smoother weights
-            self.ml = pyamg.smoothed_aggregation_solver(
-                K, B=B, symmetry="hermitian", max_coarse=300, coarse_solver="splu",
-                smooth=SA_SMOOTH)
+            self.ml = smoothed_aggregation(K, B, _REFERENCE_AMG)
             pre = self.ml.aspreconditioner(cycle="V")
             self.M = lambda R: np.stack([pre @ R[:, c] for c in range(R.shape[1])], axis=1)
             self.matvec = K.__matmul__
@@ -259,9 +263,10 @@ class _CellSolver:
         t["assembly"] = time.perf_counter() - t0
         # the pin: a node surrounded by matrix voxels only, at coordinates divisible by the
         # coarsening factor of every matrix-free level (so it is a node of each coarse grid)
+        o = self.options
         levels = 1
         nc = n // 2
-        while nc > MATFREE_ASSEMBLED_MAX and nc % 2 == 0 and nc >= 16:
+        while nc > o.matfree_assembled_max and nc % 2 == 0 and nc >= 16:
             levels, nc = levels + 1, nc // 2
         step = 2 ** levels
         soft = (mu <= mu.min() * (1.0 + 1e-12))
@@ -277,20 +282,20 @@ class _CellSolver:
         t0 = time.perf_counter()
         op = mf.MatFreeOperator(field, self.pin)
         self.M = mf.GeometricVCycle(field, pin=self.pin, pin_scale=op.pin_scale, h=self.h,
-                                    amg_options=AMG_OPTIONS, fine_op=op,
-                                    assembled_max=MATFREE_ASSEMBLED_MAX, coarse=MATFREE_COARSE,
-                                    sweeps=MATFREE_SWEEPS,
-                                    interface_sweeps=MATFREE_INTERFACE_SWEEPS,
-                                    interface_halo=MATFREE_INTERFACE_HALO)
+                                    amg_options=o.amg, fine_op=op,
+                                    assembled_max=o.matfree_assembled_max,
+                                    coarse=o.matfree_coarse, sweeps=o.matfree_sweeps,
+                                    interface_sweeps=o.matfree_interface_sweeps,
+                                    interface_halo=o.matfree_interface_halo)
         self.ml = self.M.ml
         self.matvec = op
         self.K = None
         t["amg_setup"] = time.perf_counter() - t0
-        if use_patches(self.mesh.n_particles, self.mesh.radii_m / self.h):
+        if use_patches(self.mesh.n_particles, self.mesh.radii_m / self.h, o):
             # after the hierarchy: its setup's temporaries are gone before the factors come
             t0 = time.perf_counter()
             self.M.patches = ParticlePatches(op, self.mesh.centers_m / self.h,
-                                             self.mesh.radii_m / self.h, MATFREE_PATCH_SHELL)
+                                             self.mesh.radii_m / self.h, o.patch_shell_voxels)
             t["patch_setup"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         self.Z = self._deflation_space(stiff_mask) if stiff_mask is not None else None
@@ -298,10 +303,14 @@ class _CellSolver:
             mf.stiffness_times_sparse(field, self.Z, pin=self.pin) if self.Z is not None else None)
         t["deflation_setup"] = time.perf_counter() - t0
         self.timings = t
+        if o.preconditioner is not None:      # an experiment's own preconditioner
+            self.M = o.preconditioner(types.SimpleNamespace(
+                vcycle=self.M, operator=op, field=field, pin=self.pin, h=self.h, mesh=self.mesh,
+                deflation_space=self._deflation_space))
 
     def _deflation(self, KZ):
-        """The deflated CG's coarse space (:class:`homogenize._amg.Deflation`) from ``self.Z`` and
-        ``KZ = K Z`` (None without deflation)."""
+        """The deflated CG's coarse space (:class:`homogenize.solvers.Deflation`) from ``self.Z``
+        and ``KZ = K Z`` (None without deflation)."""
         if self.Z is None:
             return None
         KZ = sp.csc_matrix(KZ)
@@ -341,13 +350,10 @@ class _CellSolver:
         d /= mesh.radii_m[pids][:, None]
         pc = np.array([col_of[p] for p in pids], dtype=np.int64) if pids.size else pids
         base = 6 * pc
-        for comp in range(3):                                  # translations
-            rows.append(3 * flat + comp); cols.append(base + comp); vals.append(np.ones(flat.size))
-        rot = ((1, 2, 3, -1), (2, 1, 3, +1),                   # about x: (0, -z, y)
-               (0, 2, 4, +1), (2, 0, 4, -1),                   # about y: (z, 0, -x)
-               (0, 1, 5, -1), (1, 0, 5, +1))                   # about z: (-y, x, 0)
-        for comp, coord, col, sign in rot:
-            rows.append(3 * flat + comp); cols.append(base + col); vals.append(sign * d[:, coord])
+        B = rigid_body_modes(d).reshape(-1, 3, 6)
+        # the nonzero (component, mode) pairs: translations, then the rotations about x, y, z
+        for comp, col in ((0, 0), (1, 1), (2, 2), (1, 3), (2, 3), (0, 4), (2, 4), (0, 5), (1, 5)):
+            rows.append(3 * flat + comp); cols.append(base + col); vals.append(B[:, comp, col])
         Z = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                           shape=(3 * n ** 3, 6 * parts.size))
         return Z
@@ -359,7 +365,7 @@ class _CellSolver:
         Returns (W, histories): zero-mean periodic fluctuations and the relative residual history
         of every column. The fast path solves all columns in one block; the reference path one
         after another. ``magnetic``: the last column is the magnetic load (its own group of the
-        block CG with MATFREE_BLOCK_CG = "strains").
+        block CG with ``SolverOptions.block_cg = "strains"``).
         """
         # the pinned node's rows are zeroed in F itself for the solve and restored after it (no
         # copy of the load block: one block of memory less at 128^3)
@@ -378,10 +384,7 @@ class _CellSolver:
                 W = np.concatenate([c[0] for c in cols], axis=1)
                 hist = [c[1][0] for c in cols]
             else:
-                mode = MATFREE_BLOCK_CG if self.kind == "matrix-free" else "independent"
-                if mode not in BLOCK_CG_MODES:
-                    raise ValueError(f"MATFREE_BLOCK_CG must be one of {BLOCK_CG_MODES}, "
-                                     f"got {mode!r}")
+                mode = self.options.block_cg if self.kind == "matrix-free" else "independent"
                 self.block_cg = mode
                 kw = dict(tol=tols, maxiter=self.maxiter, deflation=self.deflation,
                           callback=callback)
@@ -391,7 +394,8 @@ class _CellSolver:
                     k = F.shape[1]
                     groups = ([0] * (k - 1) + [1] if mode == "strains" and magnetic
                               else [0] * k)
-                    W, hist = coupled_block_cg(self.matvec, self.M, F, groups=groups, **kw)
+                    krylov = self.options.krylov or coupled_block_cg
+                    W, hist = krylov(self.matvec, self.M, F, groups=groups, **kw)
         finally:
             F[rows] = pinned
         if self.kind == "matrix-free":
@@ -414,67 +418,18 @@ class _CellSolver:
 
 
 SOLVERS = ("fast", "reference", "matrix-free")
-#: solver="matrix-free": matrix-free geometric levels down to this many voxels per edge, the
-#: Galerkin matrix of that grid assembled for pyamg (128^3 -> 64^3; 64^3 -> 32^3)
-MATFREE_ASSEMBLED_MAX = 64
-#: solver="matrix-free": the assembled grid's solver, "amg" (pyamg smoothed aggregation) or "lu"
-#: (exact; a diagnostic for small grids, results/cell/multigrid_robustness.py)
-MATFREE_COARSE = "amg"
-#: solver="matrix-free": block Gauss-Seidel sweeps per side on every matrix-free level. Two
-#: were measured in session 10 (6 strains + the magnetic column at magnetic_tol, bench RVEs,
-#: idle machine): 19.6 s against 22.0 s at 64^3 (strain / magnetic iterations 26 / 36 against
-#: 42 / 45) but 679 s against 604 s at 128^3 (108 / 189 against 127 / 221): the iterations fall
-#: by 0.6-0.85x while an iteration costs ~1.35x, so one stays (results/cell/README.md)
-MATFREE_SWEEPS = 1
-#: solver="matrix-free": further Gauss-Seidel sweeps per side over the interface nodes only (own
-#: stencil row: next to a cut voxel or a phase boundary, grown by MATFREE_INTERFACE_HALO nodes;
-#: ~24 % of the nodes of the 64^3 bench RVE). Measured in session 11 (results/cell/README.md,
-#: "Local sweeps at the interfaces"): they take the iterations where two full sweeps take them
-#: at a fraction of the cost
-MATFREE_INTERFACE_SWEEPS = 1
-MATFREE_INTERFACE_HALO = 1
-#: solver="matrix-free": particle patches (homogenize._patches): the fine nodes within r + this
-#: many voxels of each particle's centre solved exactly in the fine level of the V-cycle (None:
-#: never), built when :func:`use_patches` says so. A 1-voxel shell took 188 s but 6.1 GB at 128^3
-#: (18 / 35 iterations), half a voxel 213-219 s and 5.8 GB (35 / 36)
-MATFREE_PATCH_SHELL = 0.5
-#: the patches are built for RVEs of at least this many particles, or whose particles' mean radius
-#: is below MATFREE_PATCH_SMALL_RADIUS_VOXELS. Measured (results/cell/README.md "Particle patches
-#: in the solver", sessions 14-15; tol 1e-6, whole homogenize_rve, one process each): the bench
-#: RVEs of ~2.5-voxel particles, patches against none: 13 particles at 32^3 1.8 / 1.6 s,
-#: 42 at 48^3 9.5 / 9.1 s, 100 at 64^3 22-23 / 18-19 s (the multigrid alone needs only 23 / 37
-#: iterations there), 338 at 96^3 81 / 99 s, 801 at 128^3 219 / 584 s; particles of ~1.25 voxels:
-#: 100 at 32^3 ~1.2x faster, 801 at 64^3 ~2x faster with the patches
-MATFREE_PATCH_MIN_PARTICLES = 200
-MATFREE_PATCH_SMALL_RADIUS_VOXELS = 2.0
-#: with particle patches the CG's relative residual is tol * MATFREE_PATCH_TOL_FACTOR: their exact
-#: local solves leave little residual where much error is left, so at the same residual the
-#: error energy is up to ~1000x the default solver's; at tol / 100 it is at most the default's at
-#: tol in every column of three RVEs (results/cell/patch_stopping.json; results/cell/README.md
-#: "Particle patches in the solver")
-MATFREE_PATCH_TOL_FACTOR = 1e-2
-#: solver="matrix-free": how the load cases' CGs share their search directions
-#: (homogenize._amg.coupled_block_cg): "coupled" -- one block CG, every column steps in the span
-#: of all the block's directions (the outlying eigenvalues the geometric V-cycle leaves are found
-#: by the whole block); "strains" -- the six strains coupled, the magnetic column on its own;
-#: "independent" -- lock-step single-column CGs (homogenize._amg.block_cg). Measured in session
-#: 12 (results/cell/block_cg_modes.py, results/cell/README.md "Coupled block CG"): at 128^3 the
-#: magnetic column converges more slowly once the strains have left a coupled block (220 against
-#: 190 iterations): 591 s "strains", 662 s "coupled", 634 s "independent"; on mid-size RVEs
-#: "coupled" was as fast or faster (timings vary by 20 % between runs). solver="fast" keeps
-#: independent columns: its smoothed aggregation leaves no such outliers (the same iterations
-#: coupled, 64^3 bench RVE).
-MATFREE_BLOCK_CG = "strains"
-BLOCK_CG_MODES = ("coupled", "strains", "independent")
-# smoothed aggregation for the voxel stiffness with stiff particles. strength threshold 0.05:
-# a matrix-particle coupling |a_ij| ~ E_matrix against sqrt(a_ii a_jj) ~ sqrt(E_m E_p) is weak
-# at any contrast above ~400, so aggregates do not straddle a particle surface and the coarse
-# space carries every particle's rigid motions (CG iterations at Fe/PDMS contrast halve against
-# theta = 0). The rigid-body near-nullspace is exact on the fine level: no candidate smoothing;
-# 'local' (Gershgorin) weighting of the prolongation smoother avoids a power iteration.
-AMG_OPTIONS = dict(symmetry="hermitian", coarse_solver="splu",
-                   strength=("symmetric", {"theta": 0.05}), improve_candidates=None,
-                   smooth=SA_SMOOTH)
+#: the smoothed aggregation of ``solver="reference"``: pyamg's own hierarchy (default strength
+#: and candidate smoothing), the project's repeatable smoother, sparse LU on <= 300 unknowns
+_REFERENCE_AMG = AMGOptions(strength_theta=None, improve_candidates=True, coarse_solver="splu",
+                            max_coarse=300)
+
+
+def _options(options) -> SolverOptions:
+    if options is None:
+        return SolverOptions()
+    if not isinstance(options, SolverOptions):
+        raise InputError(f"options must be a homogenize.solvers.SolverOptions, got {options!r}")
+    return options
 
 
 def magnetic_tol(tol: float) -> float:
@@ -490,14 +445,16 @@ def magnetic_tol(tol: float) -> float:
     return float(min(np.sqrt(tol), 1e-2))
 
 
-def use_patches(n_particles: int, radii_voxels) -> bool:
+def use_patches(n_particles: int, radii_voxels, options: SolverOptions | None = None) -> bool:
     """Whether the matrix-free solver builds particle patches for an RVE of ``n_particles``
-    particles of radii ``radii_voxels`` [voxels] (:data:`MATFREE_PATCH_SHELL`,
-    :data:`MATFREE_PATCH_MIN_PARTICLES`, :data:`MATFREE_PATCH_SMALL_RADIUS_VOXELS`)."""
-    if MATFREE_PATCH_SHELL is None or n_particles == 0:
+    particles of radii ``radii_voxels`` [voxels] (``options``, default
+    :class:`homogenize.solvers.SolverOptions`: ``patch_shell_voxels``, ``patch_min_particles``,
+    ``patch_small_radius_voxels``)."""
+    o = _options(options)
+    if o.patch_shell_voxels is None or n_particles == 0:
         return False
-    return (n_particles >= MATFREE_PATCH_MIN_PARTICLES
-            or float(np.mean(radii_voxels)) < MATFREE_PATCH_SMALL_RADIUS_VOXELS)
+    return (n_particles >= o.patch_min_particles
+            or float(np.mean(radii_voxels)) < o.patch_small_radius_voxels)
 
 
 def _choose_solver(solver: str, voxels: int, n_cases: int) -> str:
@@ -622,7 +579,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                     rigid: bool = False, deflate: bool = True, tol: float = 1e-6,
                     maxiter: int = 2000, keep_fields: bool = False, cases=CASES,
                     progress: bool = False, solver: str = "fast",
-                    tol_magnetic: float | None = None) -> CellResult:
+                    tol_magnetic: float | None = None,
+                    options: SolverOptions | None = None) -> CellResult:
     """Solve the periodic cell problems on a prepared voxel mesh. See :func:`homogenize_rve`.
 
     ``tol_magnetic``: relative residual of the magnetic column, in (0, 1e-2]; default
@@ -633,6 +591,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     if tol_magnetic is not None:
         check_range("tol_magnetic", tol_magnetic, 0.0, 1e-2,
                     "(relative residual of the magnetic column)", lo_open=True)
+    options = _options(options)
     solver = _choose_solver(solver, mesh.n, len(cases) + (forces_N is not None))
     t_start = time.perf_counter()
     if rigid:
@@ -648,7 +607,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     stiff = particle.E_Pa > 10.0 * matrix.E_Pa
     solver = _CellSolver(mesh, lam, mu, deflate=deflate and stiff,
                          stiff_mask=mesh.fraction >= 0.5, tol=tol, maxiter=maxiter,
-                         solver=solver, composite=composite)
+                         solver=solver, composite=composite, options=options)
     iters, resid, hist, fields = {}, {}, {}, {}
     t_solve = time.perf_counter()
     L = mesh.box_m
@@ -684,10 +643,10 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                                 refresh=True)
     # the magnetic column stops at magnetic_tol(tol) when only its variational mean stress is
     # used (all six strain solutions at hand, no fields kept); otherwise at tol like the strains
-    # with particle patches the CG runs to tol * MATFREE_PATCH_TOL_FACTOR (and the magnetic column
-    # to magnetic_tol of that): same error as without them at tol (MATFREE_PATCH_TOL_FACTOR)
+    # with particle patches the CG runs to tol * patch_tol_factor (and the magnetic column to
+    # magnetic_tol of that): same error as without them at tol (SolverOptions.patch_tol_factor)
     patches = getattr(solver.M, "patches", None)
-    f_cg = MATFREE_PATCH_TOL_FACTOR if patches is not None else 1.0
+    f_cg = options.patch_tol_factor if patches is not None else 1.0
 
     def magnetic_column_tol(factor):
         if tol_magnetic is not None:
@@ -796,7 +755,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 "tol_magnetic_cg": tols[-1] if forces_N is not None else None,
                 "method": mesh.method,
                 "solver": solver.kind,
-                # no AMG below the geometric levels with MATFREE_COARSE = "lu" (a diagnostic)
+                # no AMG below the geometric levels with matfree_coarse = "lu" (a diagnostic)
                 "amg_levels": len(solver.ml.levels) if solver.ml is not None else 0,
                 "amg_operator_complexity": (float(solver.ml.operator_complexity())
                                             if solver.ml is not None else None),
@@ -805,7 +764,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 # local Gauss-Seidel sweeps per side over the interface nodes (matrix-free)
                 "interface_sweeps": (solver.M.interface_sweeps if solver.kind == "matrix-free"
                                      else 0),
-                # the load cases' CG (MATFREE_BLOCK_CG for the matrix-free solver): "coupled",
+                # the load cases' CG (options.block_cg for the matrix-free solver): "coupled",
                 # "strains" or "independent" (lock-step single-column CGs)
                 "block_cg": getattr(solver, "block_cg", "independent"),
                 # particle patches (matrix-free): the matrix shell around each particle [voxels],
@@ -833,7 +792,8 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
                    rigid: bool = False,
                    method: str = "composite", deflate: bool = True, tol: float = 1e-6,
                    maxiter: int = 2000, keep_fields: bool = False, progress: bool = False,
-                   solver: str = "fast", tol_magnetic: float | None = None) -> CellResult:
+                   solver: str = "fast", tol_magnetic: float | None = None,
+                   options: SolverOptions | None = None) -> CellResult:
     """Effective stiffness, body force and magnetic stress of an RVE by periodic voxel FEM.
 
     Parameters
@@ -869,7 +829,7 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         the error of the formula linear in the magnetic solution, was 16-8300 x larger than it
         where measured: results/cell/magnetic_tolerance.json). ``tol_magnetic`` sets it
         explicitly, in (0, 1e-2]. With particle patches (matrix-free solver) the CG runs to
-        :data:`MATFREE_PATCH_TOL_FACTOR` x these (``settings["tol_cg"]``), which gives the error
+        ``options.patch_tol_factor`` x these (``settings["tol_cg"]``), which gives the error
         of the solver without patches at ``tol``.
     keep_fields : bool -- keep the displacement fields (for VTU/PNG output)
     solver : {"fast", "reference", "matrix-free"} -- "fast" (default): numba assembly, all load
@@ -886,6 +846,8 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         needs 2-4x more iterations with many or small particles
         (results/cell/multigrid_robustness.json; the cause, its first coarse space:
         results/cell/coarse_space_experiments.json).
+    options : :class:`homogenize.solvers.SolverOptions`, optional -- the solver's settings
+        (AMG, matrix-free multigrid, particle patches, block CG); default ``SolverOptions()``
 
     Returns
     -------
@@ -898,7 +860,7 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
     return homogenize_mesh(mesh, forces_N=forces_N, virial_stress_Pa=virial_stress_Pa,
                            matrix=matrix, particle=particle, rigid=rigid, deflate=deflate,
                            tol=tol, maxiter=maxiter, keep_fields=keep_fields, progress=progress,
-                           solver=solver, tol_magnetic=tol_magnetic)
+                           solver=solver, tol_magnetic=tol_magnetic, options=options)
 
 
 # ------------------------------------------------------------------------------------------

@@ -53,7 +53,6 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-import pyamg
 import scipy.sparse as sp
 
 from micro._validate import ConvergenceError, InputError, check_range
@@ -61,7 +60,7 @@ from micro.materials import FE, PDMS, ElasticMaterial, elastic
 from micro.rve import minimum_image
 
 from . import _assembly as asm
-from ._amg import SA_SMOOTH
+from .solvers import AMGOptions, grid_node_coordinates, rigid_body_modes, smoothed_aggregation
 from ._budget import check_memory
 from .cell import CASES, isotropic_projection, voigt_to_tensor
 from .mesh import _as_geometry
@@ -548,12 +547,12 @@ def nitsche_matrices(phi_c, h, lames, youngs, Es, safety=2.0, q=3):
 # the periodic cell problem with cut voxels
 # ------------------------------------------------------------------------------------------------
 
-def _amg(K, B):
-    """pyamg smoothed aggregation (rigid-body candidates ``B``, sparse LU on <= 2000 coarse DOF)
-    with the project's repeatable smoother weights (:data:`homogenize._amg.SA_SMOOTH`; pyamg's
-    default made C_eff differ by 1e-9 between two calls on two Fe spheres)."""
-    return pyamg.smoothed_aggregation_solver(
-        K, B=B, symmetry="hermitian", coarse_solver="splu", max_coarse=2000, smooth=SA_SMOOTH)
+#: pyamg smoothed aggregation of the cut-voxel system (rigid-body candidates, pyamg's default
+#: strength and candidate smoothing, sparse LU on <= 2000 coarse DOF), with the project's
+#: repeatable smoother weights (:data:`homogenize.solvers.SA_SMOOTH`; pyamg's default made C_eff
+#: differ by 1e-9 between two calls on two Fe spheres)
+_AMG = AMGOptions(strength_theta=None, improve_candidates=True, coarse_solver="splu",
+                  max_coarse=2000)
 
 
 def _wrap_planes(centres, radii, n):
@@ -638,13 +637,12 @@ def _cut_cell_problem(phi, nodes, n, lames, cases, tol, cut_matrices, two_copies
     keep[:3] = False                  # pin node 0 (the loads are balanced)
     Kr = K[keep][:, keep].tocsr()
     B = np.zeros((ndof, 6))
-    rb = asm.rigid_body_modes(n, h)
-    if any(wrap):     # node i gets the modes of node i - wrap: its coordinates wrap at the layer
-        rb = np.roll(rb.reshape(n, n, n, 18), shift=wrap[::-1], axis=(0, 1, 2)).reshape(-1, 6)
+    # node i gets the modes of node i - wrap: its coordinates wrap at the layer
+    rb = rigid_body_modes(grid_node_coordinates(n, wrap))
     B[:nstd] = rb
     if two_copies:                    # both copies move with a rigid motion of the cell
         B[nstd:] = rb.reshape(n ** 3, 3, 6)[xnodes].reshape(-1, 6)
-    ml = _amg(Kr, B[keep])
+    ml = smoothed_aggregation(Kr, B[keep], _AMG)
     W, its = [], []
     fmax = max(np.linalg.norm(f) for f in F)
     for f in F:

@@ -189,7 +189,7 @@ def _matfree_records(sizes) -> list[dict]:
     magnetic, tol 1e-6), each run in its own process: seconds, peak RSS, iterations, E_eff
     agreement, and the growth of time and memory with the grid. Above
     :data:`ASSEMBLED_MAX_VOXELS`, where the assembled matrix does not fit, the reference is the
-    matrix-free solver without particle patches (``homogenize.cell.MATFREE_PATCH_SHELL = None``,
+    matrix-free solver without particle patches (``SolverOptions(patch_shell_voxels=None)``,
     the solver of session 13), which the patches are built for there."""
     out, prev = [], None
     for n in sizes:
@@ -291,14 +291,15 @@ def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
     extra = {}
     if tool.startswith("solver-"):               # 6 strains + magnetic load, given solver
         solver = tool[7:]
+        options = None
         if solver == "matrix-free-nopatch":      # the matrix-free solver of session 13
-            import homogenize.cell as cell_module
-            cell_module.MATFREE_PATCH_SHELL = None
+            from homogenize.solvers import SolverOptions
+            options = SolverOptions(patch_shell_voxels=None)
             solver = "matrix-free"
         rve = _rve(voxels, seed)
         forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
         t0 = time.perf_counter()
-        r = homogenize_rve(rve, voxels, forces_N=forces, solver=solver)
+        r = homogenize_rve(rve, voxels, forces_N=forces, solver=solver, options=options)
         C = r.C_eff_Pa
         extra = {"iterations": r.iterations, "E_eff_Pa": r.E_eff_Pa, "timings_s": r.timings_s,
                  "n_particles": r.n_particles, "solver": r.settings["solver"],

@@ -25,9 +25,8 @@ from skfem.models.elasticity import linear_elasticity
 from micro.materials import ElasticMaterial
 
 from micro._validate import InputError, check_choice, check_finite, check_positive
-import pyamg
 
-from homogenize._amg import SA_SMOOTH
+from homogenize import solvers
 from skfem import BilinearForm
 from skfem.helpers import ddot, grad
 
@@ -132,16 +131,15 @@ def rigid_body_modes(basis, dofs=None) -> np.ndarray:
     """The six rigid-body displacement modes (3 translations, 3 rotations), shape (n, 6)."""
     x = basis.doflocs  # (3, n_dof): location of each dof
     n = x.shape[1]
-    comp = np.arange(n) % 3
-    B = np.zeros((n, 6))
-    for i in range(3):
-        B[comp == i, i] = 1.0
     c = x - x.mean(axis=1, keepdims=True)
-    # rotation about axis k: u = e_k x r
-    for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):
-        B[comp == i, 3 + k] = -c[j, comp == i]
-        B[comp == j, 3 + k] = c[i, comp == j]
+    B = solvers.rigid_body_modes(c.T, components=np.arange(n) % 3)
     return B if dofs is None else B[dofs]
+
+
+#: smoothed aggregation of the condensed P1/P2 stiffness: strength threshold 0 (no stiff
+#: inclusions), pyamg's default candidate smoothing and coarsest-level solver, <= 500 unknowns
+_AMG = solvers.AMGOptions(symmetry="symmetric", strength_theta=0.0, improve_candidates=True,
+                          coarse_solver=None, max_coarse=500)
 
 
 def _solve_free(K, rhs, fixed, solver, rtol, basis):
@@ -156,9 +154,7 @@ def _solve_free(K, rhs, fixed, solver, rtol, basis):
         u[I] = spla.spsolve(Kc.tocsc(), fc)
         return u, "direct", 0, ()
     B = rigid_body_modes(basis, I)
-    ml = pyamg.smoothed_aggregation_solver(Kc.tocsr(), B=B, symmetry="symmetric",
-                                           strength=("symmetric", {"theta": 0.0}),
-                                           max_coarse=500, smooth=SA_SMOOTH)
+    ml = solvers.smoothed_aggregation(Kc.tocsr(), B, _AMG)
     res = []
     norm_f = np.linalg.norm(fc)
 

@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from homogenize._amg import BlockVCycle, Deflation, block_cg, coupled_block_cg, grid_colours
+from homogenize.solvers import (AMGOptions, BlockVCycle, Deflation, block_cg, coupled_block_cg,
+                                grid_colours, grid_node_coordinates, rigid_body_modes,
+                                smoothed_aggregation)
 from homogenize.cell import homogenize_rve, magnetic_tol
 
 L = 1e-6
@@ -120,15 +122,15 @@ def test_coupled_block_cg_with_deflation_solves_the_system():
 
 def test_block_vcycle_is_symmetric_positive_definite():
     """CG needs a symmetric preconditioner: forward colours before, backward after."""
-    import pyamg
     from homogenize import _assembly as asm
     n = 6
     rng = np.random.default_rng(2)
     ph = rng.random((n, n, n)) < 0.2
     K = asm.assemble_bsr(np.where(ph, 1e5, 9.0), np.where(ph, 1e5, 1.0), 1.0)
     K = (K + 1e-2 * sp.identity(K.shape[0])).tobsr(blocksize=(3, 3))
-    ml = pyamg.smoothed_aggregation_solver(K, B=asm.rigid_body_modes(n, 1.0), max_coarse=40,
-                                           symmetry="hermitian")
+    ml = smoothed_aggregation(K, rigid_body_modes(grid_node_coordinates(n)),
+                              AMGOptions(strength_theta=None, improve_candidates=True,
+                                         coarse_solver=None, max_coarse=40))
     assert len(ml.levels) >= 2
     M = BlockVCycle(ml, fine_colours=grid_colours(n))
     U = rng.normal(size=(K.shape[0], 2))

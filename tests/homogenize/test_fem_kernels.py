@@ -6,7 +6,7 @@ import scipy.sparse as sp
 
 from homogenize import _assembly as A
 from homogenize import _kernels as K
-from homogenize._amg import BSROp, greedy_colours, grid_colours
+from homogenize.solvers import BSROp, greedy_colours, grid_colours
 
 
 def _random_bsr(rows, cols, R, C, seed):

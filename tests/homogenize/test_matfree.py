@@ -21,7 +21,8 @@ from homogenize import _assembly as asm
 from homogenize import _budget
 from homogenize import _matfree as mf
 from homogenize import cell as C
-from homogenize._amg import _Level, grid_colours
+from homogenize.solvers import AMGOptions, SolverOptions, grid_colours
+from homogenize.solvers.amg import _Level
 from homogenize.mesh import voxelize
 from micro._validate import InputError
 
@@ -228,15 +229,15 @@ def test_amg_level_smoothed_matrix_free_equals_assembled():
     """The assembled grid under the geometric levels keeps its smoothed-aggregation transfer
     but smooths and takes residuals with the matrix-free operator (``_Level.use_operator``):
     the same V-cycle as with the assembled blocks, to round-off."""
-    import pyamg
-    from homogenize._amg import BlockVCycle
+    from homogenize.solvers import (BlockVCycle, grid_node_coordinates, rigid_body_modes,
+                                    smoothed_aggregation)
     n = 12
     mesh, lam, mu, comp = _fields(n)
     field = mf.element_field(lam, mu, mesh.h_m, comp)
     op = mf.MatFreeOperator(field, 0)
     A = mf.typed_bsr(field, pin=0, pin_scale=op.pin_scale)
-    ml = pyamg.smoothed_aggregation_solver(A, B=asm.rigid_body_modes(n, mesh.h_m),
-                                           **dict(C.AMG_OPTIONS, max_coarse=50))
+    ml = smoothed_aggregation(A, rigid_body_modes(grid_node_coordinates(n)),
+                              AMGOptions(max_coarse=50))
     assert len(ml.levels) >= 2
     assembled = BlockVCycle(ml, fine_colours=grid_colours(n))
     free = BlockVCycle(ml, fine_colours=grid_colours(n))
@@ -286,7 +287,7 @@ def test_vcycle_symmetric_positive_definite(coarse, interface_sweeps):
     field = mf.element_field(lam, mu, mesh.h_m, comp)
     op = mf.MatFreeOperator(field, 0)
     M = mf.GeometricVCycle(field, pin=0, pin_scale=op.pin_scale, h=mesh.h_m,
-                           amg_options=C.AMG_OPTIONS, fine_op=op, assembled_max=4,
+                           amg_options=AMGOptions(), fine_op=op, assembled_max=4,
                            coarse=coarse, interface_sweeps=interface_sweeps)
     assert len(M.levels) == 2 and M.coarse_n == 4       # two matrix-free levels, then AMG / LU
     for L in M.levels:
@@ -327,7 +328,7 @@ def test_c_eff_equals_assembled_solver(n):
     a = _c_eff(n, "fast", forces, geom)
     b = _c_eff(n, "matrix-free", forces, geom)
     assert b.settings["solver"] == "matrix-free" and b.settings["geometric_levels"] == 1
-    assert b.settings["interface_sweeps"] == C.MATFREE_INTERFACE_SWEEPS == 1
+    assert b.settings["interface_sweeps"] == SolverOptions().matfree_interface_sweeps == 1
     assert a.settings["interface_sweeps"] == 0
     assert max(v for k, v in b.residuals.items() if k != "magnetic") <= 1e-8
     assert b.residuals["magnetic"] <= C.magnetic_tol(1e-8) == 1e-4
@@ -341,19 +342,19 @@ def test_c_eff_equals_assembled_solver(n):
     assert b.E_eff_Pa > C.PDMS.E_Pa
 
 
-def test_interface_sweeps_cut_iterations(monkeypatch):
-    """The local sweeps over the interface nodes (the default, MATFREE_INTERFACE_SWEEPS = 1)
+def test_interface_sweeps_cut_iterations():
+    """The local sweeps over the interface nodes (the default, matfree_interface_sweeps = 1)
     against none on the 32^3 bench RVE: fewer CG iterations in every load case that needs more
     than a handful, the same C_eff to the solver tolerance (results/cell/multigrid_robustness.json
     holds the bigger RVEs)."""
     from homogenize.bench.cell import _rve
-    monkeypatch.setattr(C, "MATFREE_PATCH_SHELL", None)       # the sweeps alone
+    opts = SolverOptions(patch_shell_voxels=None)       # the sweeps alone
     rve = _rve(32)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     out = {}
     for sweeps in (0, 1):
-        monkeypatch.setattr(C, "MATFREE_INTERFACE_SWEEPS", sweeps)
-        out[sweeps] = C.homogenize_rve(rve, 32, forces_N=forces, solver="matrix-free")
+        out[sweeps] = C.homogenize_rve(rve, 32, forces_N=forces, solver="matrix-free",
+                                       options=opts.replace(matfree_interface_sweeps=sweeps))
     it0, it1 = out[0].iterations, out[1].iterations
     assert max(it1.values()) < max(it0.values())
     assert sum(it1.values()) < 0.9 * sum(it0.values())
@@ -362,24 +363,24 @@ def test_interface_sweeps_cut_iterations(monkeypatch):
 
 
 
-def test_coupled_block_cg_cuts_iterations(monkeypatch):
-    """The load cases' CGs coupled (homogenize.cell.MATFREE_BLOCK_CG) against lock-step
+def test_coupled_block_cg_cuts_iterations():
+    """The load cases' CGs coupled (homogenize.solvers.SolverOptions.block_cg) against lock-step
     independent CGs on the RVE of 100 particles of 1.25 voxels at 32^3 (results/cell/README.md,
     "Coupled block CG"): the default "strains" couples the six strains (fewer iterations each)
     and leaves the magnetic column's recursion alone (its single-column iterations); "coupled"
     puts the magnetic column in the block too (fewer for it as well on this RVE). The same C_eff
     and magnetic stress to the solver tolerance in every mode."""
     from homogenize.bench.cell import _rve
-    assert C.MATFREE_BLOCK_CG == "strains"
+    assert SolverOptions().block_cg == "strains"
     # the block CG alone: particle patches (the default since session 14) cut the iterations of
     # every mode to where the modes' differences are within one or two iterations
-    monkeypatch.setattr(C, "MATFREE_PATCH_SHELL", None)
+    opts = SolverOptions(patch_shell_voxels=None)
     rve = _rve(64)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     out = {}
     for mode in ("independent", "strains", "coupled"):
-        monkeypatch.setattr(C, "MATFREE_BLOCK_CG", mode)
-        out[mode] = C.homogenize_rve(rve, 32, forces_N=forces, solver="matrix-free")
+        out[mode] = C.homogenize_rve(rve, 32, forces_N=forces, solver="matrix-free",
+                                     options=opts.replace(block_cg=mode))
         assert out[mode].settings["block_cg"] == mode
     it0 = out["independent"].iterations
     strains = [c for c in it0 if c != "magnetic"]

@@ -17,6 +17,7 @@ import pytest
 from homogenize import _matfree as mf
 from homogenize import _patches as pt
 from homogenize import cell as C
+from homogenize.solvers import AMGOptions, SolverOptions
 
 from .test_matfree import _assembled, _fields, _geometry, _pin, check_spd_and_convergent
 
@@ -135,7 +136,7 @@ def test_patched_vcycle_symmetric_positive_definite_and_convergent():
     n = 16
     mesh, lam, mu, comp, op, P = _setup(n=n, n_part=8, seed=5, shell=1.0)
     field = mf.element_field(lam, mu, mesh.h_m, comp)
-    kw = dict(pin=0, pin_scale=op.pin_scale, h=mesh.h_m, amg_options=C.AMG_OPTIONS, fine_op=op,
+    kw = dict(pin=0, pin_scale=op.pin_scale, h=mesh.h_m, amg_options=AMGOptions(), fine_op=op,
               assembled_max=4, interface_sweeps=1)
     M = mf.GeometricVCycle(field, patches=P, **kw)
     M0 = mf.GeometricVCycle(field, **kw)
@@ -147,36 +148,35 @@ def test_patched_vcycle_symmetric_positive_definite_and_convergent():
     assert e_p < 0.5 * e_start and e_p < e_0
 
 
-def test_c_eff_with_patches_equals_assembled_solver(monkeypatch):
+def test_c_eff_with_patches_equals_assembled_solver():
     geom = _geometry(n_part=8, seed=7, r=(0.08, 0.13))
     forces = np.random.default_rng(8).normal(size=(8, 3)) * 1e-15
     a = C.homogenize_rve(geom, 12, solver="fast", forces_N=forces, tol=1e-8)
-    monkeypatch.setattr(C, "MATFREE_PATCH_SHELL", 0.5)
-    b = C.homogenize_rve(geom, 12, solver="matrix-free", forces_N=forces, tol=1e-8)
+    b = C.homogenize_rve(geom, 12, solver="matrix-free", forces_N=forces, tol=1e-8,
+                         options=SolverOptions(patch_shell_voxels=0.5))
     assert b.settings["patch_shell_voxels"] == 0.5
     assert np.abs(a.C_eff_Pa - b.C_eff_Pa).max() <= 1e-8 * np.abs(a.C_eff_Pa).max()
     assert np.abs(a.stress_mag_Pa - b.stress_mag_Pa).max() <= 1e-6 * np.abs(a.stress_mag_Pa).max()
 
 
-def test_patches_cut_iterations_on_small_particles(monkeypatch):
+def test_patches_cut_iterations_on_small_particles():
     """100 particles of 1.25 voxels mean radius at 32^3 with random particle forces
     (results/cell/particle_patch_experiments.json): at the same user tolerance (the patched CG runs
-    to MATFREE_PATCH_TOL_FACTOR x tol) the patches need fewer iterations in every column, the
+    to SolverOptions.patch_tol_factor x tol) the patches need fewer iterations in every column, the
     magnetic one most, and their C_eff and magnetic stress are no further from a tight reference
     than the default's (within 2x: the two stopping points differ by chance)."""
     from homogenize.bench.cell import _rve
     rve = _rve(64)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
-    monkeypatch.setattr(C, "MATFREE_PATCH_SHELL", None)
     ref = C.homogenize_rve(rve, 32, solver="matrix-free", forces_N=forces, tol=1e-11,
-                           tol_magnetic=1e-10)
+                           tol_magnetic=1e-10, options=SolverOptions(patch_shell_voxels=None))
     out = {}
     for shell in (None, 0.5):
-        monkeypatch.setattr(C, "MATFREE_PATCH_SHELL", shell)
-        out[shell] = C.homogenize_rve(rve, 32, solver="matrix-free", forces_N=forces, tol=1e-6)
+        out[shell] = C.homogenize_rve(rve, 32, solver="matrix-free", forces_N=forces, tol=1e-6,
+                                      options=SolverOptions(patch_shell_voxels=shell))
     assert out[None].settings["patched_particles"] == 0
     assert out[0.5].settings["patched_particles"] == rve.n
-    assert out[0.5].settings["tol_cg"] == pytest.approx(1e-6 * C.MATFREE_PATCH_TOL_FACTOR)
+    assert out[0.5].settings["tol_cg"] == pytest.approx(1e-6 * SolverOptions().patch_tol_factor)
     it0, it1 = out[None].iterations, out[0.5].iterations
     strains = [c for c in it0 if c != "magnetic"]
     assert max(it1[c] for c in strains) < max(it0[c] for c in strains)
@@ -190,13 +190,13 @@ def test_patches_cut_iterations_on_small_particles(monkeypatch):
     assert e1[0] <= max(2 * e0[0], 1e-9) and e1[1] <= max(2 * e0[1], 1e-9), (e0, e1)
 
 
-def test_patch_rule(monkeypatch):
+def test_patch_rule():
     """Patches for many particles or small ones (homogenize.cell.use_patches), none for the
     64^3 bench RVE's 100 particles of ~2.5 voxels (where they cost more than they save), none
-    without particles or with MATFREE_PATCH_SHELL = None."""
+    without particles or with patch_shell_voxels = None."""
     assert not C.use_patches(100, np.full(100, 2.5))
-    assert C.use_patches(C.MATFREE_PATCH_MIN_PARTICLES, np.full(C.MATFREE_PATCH_MIN_PARTICLES, 2.5))
+    m = SolverOptions().patch_min_particles
+    assert m == 200 and C.use_patches(m, np.full(m, 2.5))
     assert C.use_patches(100, np.full(100, 1.25))
     assert not C.use_patches(0, np.zeros(0))
-    monkeypatch.setattr(C, "MATFREE_PATCH_SHELL", None)
-    assert not C.use_patches(1000, np.full(1000, 1.0))
+    assert not C.use_patches(1000, np.full(1000, 1.0), SolverOptions(patch_shell_voxels=None))
