@@ -105,12 +105,12 @@ from micro._validate import ConvergenceError, InputError, check_choice, check_fi
     check_positive
 
 __all__ = ["ConvergenceError", "LinearLaw", "FroehlichKennellyLaw", "LangevinLaw", "TanhLaw",
-           "linear", "froehlich_kennelly", "langevin", "tanh",
+           "linear", "froehlich_kennelly", "langevin", "tanh", "check_law",
            "Sphere", "Spheroid", "Cylinder", "Profile", "MeshOptions", "BodyMesh",
-           "axisymmetric_mesh", "ball_mesh_3d", "MagnetostaticResult", "solve_axisymmetric",
-           "solve_3d", "field_at", "MagneticLoads", "magnetic_loads", "body_force_at",
-           "traction_at", "maxwell_force_N", "coenergy_J", "uniform_applied_gradient_field",
-           "applied_field"]
+           "axisymmetric_mesh", "ball_mesh_3d", "uniform_applied_gradient_field",
+           "applied_field", "MagnetostaticResult", "solve_axisymmetric", "solve_3d", "field_at",
+           "body_fields_at", "MagneticLoads", "magnetic_loads", "body_force_at", "traction_at",
+           "maxwell_force_N", "coenergy_J"]
 
 TWO_PI = 2.0 * math.pi
 #: the 3D solver's AMG (scalar Laplacian, one hierarchy per solve; pyamg's default strength)
@@ -1273,6 +1273,34 @@ def _loads_at(result, points_m, normals, fd_step_m):
         g0, x0, hs = _fit_gradients(bfit, rec[i])
         dH[i] += g0[:, k] + np.einsum("ijn,jn->in", hs[:, :, k], xf - x0[:, k])
     return (MU0 * np.einsum("ijn,jn->in", dH, M)).reshape(shape)
+
+
+def body_fields_at(result: MagnetostaticResult, points_m):
+    """Inside values of the total field ``H`` and the magnetization ``M`` [A/m] at body points.
+
+    points_m : (dim, ...) [m] -- points of the body (e.g. a mechanics mesh's quadrature or
+        surface points); a point on the surface or slightly outside this mesh's polygonal body
+        takes the fields of the body element holding it or of the nearest one.
+    Returns ``(H, M)``, each (dim, ...) [A/m].
+    """
+    g = result.geometry
+    dim = g.mesh.p.shape[0]
+    x = np.asarray(check_finite("points_m", points_m, "m"), float)
+    if x.shape[0] != dim:
+        raise InputError(f"points_m must have shape ({dim}, ...) [m], got {x.shape}")
+    xf = x.reshape(dim, -1)
+    el = g.body_elements[_body_elements_at(result, xf)]
+    H = result.H_applied(xf) - result.grad_phi(xf, el)
+    return H.reshape(x.shape), _M_of(result, H, xf).reshape(x.shape)
+
+
+def check_law(law):
+    """Return ``law`` if it has the interface of a magnetization law: ``M_A_per_m(H)`` (|M| [A/m]
+    at field magnitudes ``H`` [A/m], arrays, ``H >= 0``) and ``dM_dH(H)`` (d|M|/d|H| [-]);
+    raise :class:`InputError` otherwise."""
+    if law is None:
+        raise InputError("a magnetization law is required (M_A_per_m(H), dM_dH(H))")
+    return _check_law(law)
 
 
 def body_force_at(result: MagnetostaticResult, points_m, fd_step_m: float | None = None):

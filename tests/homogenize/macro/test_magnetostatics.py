@@ -16,7 +16,8 @@ from scipy.optimize import brentq
 
 from homogenize.macro.magnetostatics import (BodyMesh, ConvergenceError, Cylinder, MeshOptions,
                                              Profile, Sphere, Spheroid, applied_field,
-                                             axisymmetric_mesh, ball_mesh_3d, body_force_at,
+                                             axisymmetric_mesh, ball_mesh_3d, body_fields_at,
+                                             body_force_at, check_law,
                                              coenergy_J, field_at, froehlich_kennelly,
                                              langevin, linear, magnetic_loads, maxwell_force_N,
                                              solve_3d, solve_axisymmetric, tanh, traction_at,
@@ -263,6 +264,11 @@ def test_loads_at_the_points_of_another_mesh():
                                rtol=1e-12, atol=1e-12 * np.max(own.traction_Pa))
     # at the points of a finer, different polygon (some just outside this mesh's body): the
     # net force stays within the discretization error (measured -0.34 % against -0.36 %)
+    H, M = body_fields_at(r, own.x_facet_m)
+    np.testing.assert_allclose(M, chi * H, rtol=1e-14)
+    Mn = np.sum(M * nrm, axis=0)
+    np.testing.assert_allclose(0.5 * MU0 * Mn ** 2 * nrm, own.traction_Pa, rtol=1e-12,
+                               atol=1e-12 * np.max(own.traction_Pa))
     other = magnetic_loads(solve_axisymmetric(Sphere(a), linear(chi), H_applied=Ha,
                                               options=_opts(70)))
     t2 = traction_at(r, other.x_facet_m, np.broadcast_to(other.normal[:, :, None],
@@ -406,5 +412,8 @@ def test_body_touching_the_domain_boundary_is_refused():
         solve_axisymmetric(Sphere(A), linear(1.0), 1e4, M_imposed=(0.0, 1.0))
     with pytest.raises(InputError, match="M_A_per_m"):
         solve_axisymmetric(Sphere(A), object(), 1e4)
+    with pytest.raises(InputError, match="M_A_per_m"):
+        check_law(None)
+    assert check_law(tanh(5.0, MS)) == tanh(5.0, MS)
     with pytest.raises(InputError, match="star-shaped"):
         axisymmetric_mesh(Profile(((0, A), (A, A), (0.2 * A, 0.9 * A), (A, -A), (0, -A))))
