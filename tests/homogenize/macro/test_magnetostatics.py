@@ -158,6 +158,27 @@ def test_nonlinear_sphere_against_the_scalar_equation(law):
     assert 3 <= r.iterations <= 7                        # measured 4 (FK), 5 (Langevin, tanh)
 
 
+def test_high_permeability_sphere_needs_the_line_search_and_converges():
+    # chi0 = 1e4 (soft iron) in the reduced potential: H_in = H0 - M/3 is a small difference
+    # of large terms (H_in / H0 = 3e-4 here); Newton from phi = 0 needs the line search for the
+    # first steps, then converges quadratically
+    law = froehlich_kennelly(1e4, MS)
+    H0 = 1e4
+    r = solve_axisymmetric(Sphere(A), law, H0, options=_opts(32))
+    H_in = brentq(lambda h: h - H0 + float(law.M_A_per_m(np.array([h]))[0]) / 3, 0, H0,
+                  xtol=1e-14, rtol=1e-15)
+    # measured: 10 iterations; M 2.3e-4, H_in 2.4e-4 (the polygonal sphere's N error, not
+    # amplified by the cancellation thanks to the exact uniform field of P2)
+    assert r.iterations <= 20
+    assert r.M_mean_A_per_m[1] == pytest.approx(float(law.M_A_per_m(np.array([H_in]))[0]),
+                                                rel=1e-3)
+    assert r.H_mean_A_per_m[1] == pytest.approx(H_in, rel=1e-2)
+    h = np.array(r.residual_history)
+    # the last steps: 3.7e-3, 1.2e-5, 1.7e-10, 1.4e-12 (round-off): order 2.0 before round-off
+    assert h[-1] < 1e-10 and h[-3] < 1e-3
+    assert math.log(h[-2]) / math.log(h[-3]) > 1.8, h
+
+
 def test_linear_law_is_one_linear_solve():
     chi = 2.5
     r = solve_axisymmetric(Sphere(A), linear(chi), 1e4, options=_opts(32))
