@@ -700,9 +700,11 @@ class MagnetostaticResult:
     H_A_per_m, M_A_per_m, B_T : (dim, n_el) total field, magnetization, flux density;
     M_mean_A_per_m, H_mean_A_per_m, H_applied_mean_A_per_m : (dim,) volume means over the body
     (vector means: the r entry of an axisymmetric body is 0);
-    volume_m3 : meshed body volume; demag_factor : magnetometric N along ``axis``
-    ``(<H_a> - <H>) . e / <M> . e`` [-]; iterations, residual_history : Newton's record;
-    law, H_applied (callable of x (dim, ...) -> (dim, ...)), M_imposed (callable or None).
+    volume_m3 : meshed body volume; demag_factor : magnetometric N along ``axis`` ``e``
+    ``(<H_a> - <H>) . e / <M> . e`` [-] (``e``: the uniform applied field's direction, else z;
+    along ``<M>`` for a magnet without applied field); iterations, residual_history :
+    Newton's record; law, H_applied (callable of x (dim, ...) -> (dim, ...)), M_imposed
+    (callable or None).
     """
     geometry: BodyMesh
     basis: object
@@ -923,10 +925,14 @@ def _solve(geometry: BodyMesh, law, H0, H_applied, M_imposed, exterior, rtol, ma
         # vector means of an axisymmetric field: e_r averages to zero over the revolution
         for v in (Mmean, Hmean, Hamean):
             v[0] = 0.0
+    # the axis of N: the uniform applied field's direction, else z (a field along the axis),
+    # else (no applied field: a magnet) the mean magnetization's
     e = np.zeros(dim)
     e[-1] = 1.0
     if uniform and np.ndim(H0) > 0 and np.linalg.norm(H0) > 0:
         e = np.asarray(H0, float) / np.linalg.norm(H0)
+    elif np.linalg.norm(Hamean) == 0 and np.linalg.norm(Mmean) > 0:
+        e = Mmean / np.linalg.norm(Mmean)
     Ndem = float((Hamean - Hmean) @ e / (Mmean @ e)) if abs(Mmean @ e) > 0 else float("nan")
     return MagnetostaticResult(geometry, basis, phi_in, phi_ext, Hc, Mc, Bc, Mmean, Hmean,
                                Hamean, V, Ndem, iterations, tuple(history), law, Ha, Mimp, e,
@@ -1028,7 +1034,7 @@ def field_at(result: MagnetostaticResult, points_m) -> np.ndarray:
     gphi = np.zeros_like(x)
     inside = rho < g.radius_m * (1 - 1e-12)
     if np.any(inside):
-        el = g.mesh.element_finder()(*x[:, inside])
+        el = _locate(g.mesh, np.arange(g.mesh.t.shape[1]), x[:, inside])
         gphi[:, inside] = result.grad_phi(x[:, inside], el)
     out = ~inside
     if np.any(out):
@@ -1040,7 +1046,7 @@ def field_at(result: MagnetostaticResult, points_m) -> np.ndarray:
         elem = ElementTriP2() if g.axisymmetric else ElementTetP2()
         be = Basis(g.exterior_mesh, elem, intorder=2)
         g0, x0, hs = _fit_gradients(be, result.phi_exterior_A)
-        el = g.exterior_mesh.element_finder()(*xp)
+        el = _locate(g.exterior_mesh, np.arange(g.exterior_mesh.t.shape[1]), xp)
         gp = g0[:, el] + np.einsum("ijn,jn->in", hs[:, :, el], xp - x0[:, el])
         yhat = y / np.sqrt(r2)
         # J_ij = (R^2 / |y|^2) (delta_ij - 2 yhat_i yhat_j), symmetric
@@ -1223,17 +1229,16 @@ def magnetic_loads(result: MagnetostaticResult, intorder: int = 4,
     return MagneticLoads(be, x, f.reshape(dim, ne, nq), dV, facets, fe, xq, nrm, t, dA, axi)
 
 
-def _body_elements_at(result, x, k_near: int = 12):
-    """Index into ``body_elements`` of the body element holding each point ``x`` (dim, n).
+def _locate(mesh, elements, x, k_near: int = 12):
+    """Index into ``elements`` (of ``mesh``) of the element holding each point ``x`` (dim, n).
 
-    Candidates: the ``k_near`` body elements with the nearest centroids; the one whose smallest
-    barycentric coordinate is largest wins, so points on a facet get a body element and points
-    just outside the meshed body (a mechanics mesh's own polygonal surface) get the nearest one
-    (its fields are polynomials and extrapolate smoothly)."""
-    g = result.geometry
-    t = g.mesh.t[:, g.body_elements]
-    P = g.mesh.p[:, t]                                   # (dim, dim+1, ne)
-    dim = P.shape[0]
+    Candidates: the ``k_near`` elements with the nearest centroids; the one whose smallest
+    barycentric coordinate is largest wins, so a point on a facet gets one of its elements and
+    a point just outside the meshed region (between a polygonal boundary and the true curve,
+    or a mechanics mesh's own surface) gets the nearest element (its fields are polynomials
+    and extrapolate smoothly)."""
+    t = mesh.t[:, elements]
+    P = mesh.p[:, t]                                     # (dim, dim+1, ne)
     k_near = min(k_near, t.shape[1])
     _, cand = cKDTree(P.mean(axis=1).T).query(x.T, k=k_near)
     cand = cand.reshape(x.shape[1], k_near)
@@ -1244,6 +1249,13 @@ def _body_elements_at(result, x, k_near: int = 12):
     bary = np.concatenate([1.0 - lam.sum(axis=2, keepdims=True), lam], axis=2)
     best = np.argmax(bary.min(axis=2), axis=1)
     return cand[np.arange(x.shape[1]), best]
+
+
+def _body_elements_at(result, x):
+    """Index into ``body_elements`` of the body element holding each point ``x`` (dim, n), or
+    the nearest one (see :func:`_locate`)."""
+    g = result.geometry
+    return _locate(g.mesh, g.body_elements, x)
 
 
 def _loads_at(result, points_m, normals, fd_step_m):
