@@ -995,7 +995,12 @@ def solve_axisymmetric(body, law=None, H0_A_per_m: float = 0.0, *, H_applied=Non
     ConvergenceError (RuntimeError) -- Newton failed (``residual_history``)
     """
     if geometry is None:
+        if not callable(getattr(body, "profile", None)):
+            raise InputError("body must be a Sphere, Spheroid, Cylinder or Profile (or pass "
+                             f"geometry=), got {body!r}")
         geometry = axisymmetric_mesh(body, options, center_z_m, domain_radius_m)
+    elif not isinstance(geometry, BodyMesh) or not geometry.axisymmetric:
+        raise InputError("geometry must be an axisymmetric BodyMesh (axisymmetric_mesh)")
     return _solve(geometry, law, H0_A_per_m, H_applied, M_imposed, exterior, rtol, max_iter,
                   "direct")
 
@@ -1009,8 +1014,8 @@ def solve_3d(geometry: BodyMesh, law=None, H0_A_per_m=0.0, *, H_applied=None, M_
     ``linear_solver`` : "auto" | "direct" | "amg-cg" (pyamg smoothed aggregation, set up once
     per solve on the first tangent and reused as preconditioner by every Newton step).
     """
-    if geometry.axisymmetric:
-        raise InputError("solve_3d needs a 3D geometry (ball_mesh_3d)")
+    if not isinstance(geometry, BodyMesh) or geometry.axisymmetric:
+        raise InputError("solve_3d needs a 3D BodyMesh (ball_mesh_3d)")
     check_choice("linear_solver", linear_solver, ("auto", "direct", "amg-cg"))
     return _solve(geometry, law, H0_A_per_m, H_applied, M_imposed, exterior, rtol, max_iter,
                   linear_solver)

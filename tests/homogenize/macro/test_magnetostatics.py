@@ -451,6 +451,10 @@ def test_body_touching_the_domain_boundary_is_refused():
     with pytest.raises(ValueError, match="strictly inside the field domain"):
         BodyMesh(g.mesh, np.arange(g.mesh.t.shape[1]), g.exterior_mesh, g.center_m,
                  g.radius_m, True)
+    with pytest.raises(InputError, match="body must be"):
+        solve_axisymmetric(None, linear(1.0), 1e4)
+    with pytest.raises(InputError, match="3D BodyMesh"):
+        solve_3d(g, linear(1.0), 1e4)
     with pytest.raises(InputError, match="exactly one"):
         solve_axisymmetric(Sphere(A), linear(1.0), 1e4, M_imposed=(0.0, 1.0))
     with pytest.raises(InputError, match="M_A_per_m"):
