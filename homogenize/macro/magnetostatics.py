@@ -1080,7 +1080,11 @@ class MagneticLoads:
     dV_m3 : (n_e, q) quadrature weights (with ``2 pi r`` if axisymmetric) [m^3];
     facets : (n_f,) body-surface facets of the mesh; facet_elements : (n_f,) their body
     element; x_facet_m : (dim, n_f, qf) [m]; normal : (dim, n_f) outward unit normal;
-    traction_Pa : (dim, n_f, qf) ``(mu0 / 2) (M . n)^2 n`` [Pa]; dA_m2 : (n_f, qf) [m^2].
+    traction_Pa : (dim, n_f, qf) ``(mu0 / 2) (M . n)^2 n`` [Pa]; dA_m2 : (n_f, qf) [m^2];
+    axisymmetric : bool -- (r, z) components, weights of the whole revolution.
+
+    A mechanics solver on this mesh adds ``sum f . v dV + sum t . v dA`` to its load vector; one
+    on its own mesh evaluates :func:`body_force_at` and :func:`traction_at` at its points.
     """
     elements: np.ndarray
     x_element_m: np.ndarray
@@ -1171,8 +1175,21 @@ def magnetic_loads(result: MagnetostaticResult, intorder: int = 4,
     """Kelvin body force at element quadrature points and surface traction at body-facet
     quadrature points (see the module docstring for the formulation).
 
-    ``fd_step_m`` : central-difference step for ``grad H_a`` of a callable applied field
-    (default 1e-5 R: truncation ~1e-10, round-off ~1e-11 relative).
+    Parameters
+    ----------
+    result : MagnetostaticResult
+    intorder : int -- quadrature degree of the element points (facets: Gauss-Legendre with
+        ``max(2, (intorder + 2) // 2)`` points per segment; a 6-point rule on 3D triangles)
+    fd_step_m : float, optional -- central-difference step for ``grad H_a`` of the applied field
+        [m] (default 1e-5 R: truncation ~1e-10, round-off ~1e-11 relative)
+    recover : bool -- ``grad H`` from the L2 projection of the self-field onto continuous P2
+        over the body (default), or from the element-wise Hessian of the P2 potential (noisier;
+        for a sphere in a gradient field its body-force sum errs by +5 % at n_boundary = 48
+        against -0.16 % recovered)
+
+    Returns
+    -------
+    MagneticLoads
     """
     g = result.geometry
     mesh = g.mesh

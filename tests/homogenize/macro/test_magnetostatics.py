@@ -238,6 +238,26 @@ def test_sphere_in_a_gradient_field_gets_the_dipole_force():
     assert loads.body_force_N_m3.shape == (2,) + loads.dV_m3.shape
 
 
+def test_split_of_the_kelvin_loads_on_a_sphere():
+    # linear sphere in H0 e_z + G (z e_z - r/2 e_r): inside, H = alpha e_z + beta (z e_z - r/2
+    # e_r) with alpha = 3 H0 / (3 + chi) (l = 1) and beta = 5 G / (5 + 2 chi) (l = 2), so the
+    # body force sums to mu0 chi alpha beta V and the traction (mu0/2)(M.n)^2 n to
+    # mu0 chi^2 alpha beta (8 pi / 15) a^3: shares 5 / (5 + 2 chi) and 2 chi / (5 + 2 chi)
+    a, chi, H0, G = A, 3.0, 1e4, 2e6
+    alpha, beta = 3 * H0 / (3 + chi), 5 * G / (5 + 2 * chi)
+    V = 4 / 3 * math.pi * a ** 3
+    r = solve_axisymmetric(Sphere(a), linear(chi), H_applied=uniform_applied_gradient_field(H0, G),
+                           options=_opts(48))
+    loads = magnetic_loads(r)
+    # measured -0.16 % (body force, recovered gradient), -0.53 % (traction) at n = 48
+    assert loads.body_force_total_N[1] == pytest.approx(MU0 * chi * alpha * beta * V, rel=5e-3)
+    assert loads.traction_total_N[1] == pytest.approx(
+        MU0 * chi ** 2 * alpha * beta * 8 * math.pi / 15 * a ** 3, rel=1e-2)
+    # the element-wise Hessian instead of the recovered gradient: +5.0 % (why it is not used)
+    raw = magnetic_loads(r, recover=False).body_force_total_N[1] / (MU0 * chi * alpha * beta * V)
+    assert 1.02 < raw < 1.1
+
+
 def test_total_kelvin_load_converges():
     a, chi, H0, G = A, 3.0, 1e4, 2e6
     F_ref = MU0 * G * 3 * chi / (3 + chi) * H0 * 4 / 3 * math.pi * a ** 3
