@@ -4,7 +4,8 @@ against closed forms, the field of a magnet against magpylib, nonlinear laws, th
 virtual work of the co-energy.
 
 Mesh sizes are the smallest that reach each tolerance with a margin of >= 2 (the measured values
-are quoted next to each assertion); the whole file runs in ~30 s.
+are quoted next to each assertion); the whole file runs in 15-25 s on one thread (~40 s on
+a loaded two-core machine with multi-threaded BLAS, mostly the 3D CG).
 """
 import math
 
