@@ -1,0 +1,423 @@
+"""The specimen in its field: magneto-mechanics of a finite, deforming body of revolution.
+
+What a magnetostriction experiment measures is the change of LENGTH of a specimen between its
+end faces (or poles), not the volume-mean strain of an RVE. This module predicts it: the field
+in and around the body (:mod:`homogenize.macro.magnetostatics`, exact exterior by the Kelvin
+transformation, the body's nonlinear law ``M(H)`` by Newton) and the finite-strain, nearly
+incompressible neo-Hookean body (:mod:`homogenize.macro.finite_strain`, Taylor-Hood u-p) are
+solved in turn on the DEFORMED body until the change of length stops changing (staggered
+coupling), field step after field step.
+
+Magnetic loads, in one formulation (Kelvin's; see :mod:`homogenize.macro.magnetostatics` for
+its equivalence with the Maxwell stress): the surface traction ``(mu0 / 2) (M . n)^2 n`` and the
+body force ``f = mu0 (M . grad) H``. For the isotropic laws of a soft composite ``M`` is parallel
+to ``H`` and ``curl H = 0``, so ``f = mu0 M grad|H| = grad psi`` with the magnetic pressure
+
+    psi(x) = mu0 int_0^|H(x)| M(h) dh   [Pa]
+
+(``mu0 chi H^2 / 2`` for a linear law). A gradient body force is the divergence of the isotropic
+stress ``psi I``; moving it to the boundary gives the loads actually applied, equal to the
+Kelvin ones in the continuum and free of field gradients (which a P2 potential resolves only to
+first order, and not at all across the surface):
+
+* traction ``t = [(mu0 / 2) (M . n)^2 + psi] n`` per current area on the current surface
+  (``M``, ``H`` the inside values);
+* the Cauchy stress ``psi I`` added to the elastic one at each material point: it loads a
+  nearly incompressible body only through the non-uniform part of ``psi`` (a uniform ``psi``,
+  as inside an ellipsoid, cancels the extra traction exactly);
+* the microstructural magnetic stress of the particles' interactions (models ``affine`` and
+  ``relaxed``): the RVE's ``stress_mag`` as a Cauchy stress at each material point,
+  ``sigma_mag = kappa mu0 |M|^2 (m m - I/3)``, ``m = M / |M|``: a positive ``kappa`` shortens a
+  free body along ``M`` by ``kappa mu0 M^2 / (3 G)`` (small strain, incompressible). Only its
+  deviatoric part is kept: the RVE's isotropic part is a pressure that a nearly incompressible
+  body does not feel.
+
+Models (``model=``), so that three descriptions can be compared on the same specimen:
+
+* ``"continuum"`` -- the Kelvin loads only (no microstructural term), as the continuum models
+  of Lefevre, Danas & Lopez-Pamies (J. Mech. Phys. Solids 107, 343, 2017) and Stewart & Anand
+  (J. Mech. Phys. Solids 194, 105934, 2025) assume;
+* ``"affine"`` -- plus ``sigma_mag`` of randomly dispersed particles moving affinely with the
+  matrix, ``kappa(phi, m)`` from the project's cell FEM
+  (:func:`homogenize.experiments.tables.microstructure_stress_coefficient`, reduced
+  magnetization ``m = |M| / (phi Ms)``);
+* ``"relaxed"`` -- plus ``sigma_mag`` of RVEs whose particles restructure in the field; its
+  ``kappa(|M|)`` comes from relax tables and is passed in by the caller (``kappa=``).
+
+For a sphere with a uniform magnetization (the linear limit) the continuum model's pole strain
+is ``(5/57) mu0 M^2 / G`` and its volume-mean strain ``(1/15) mu0 M^2 / G`` (Lamb's solution;
+tests), while a uniform ``sigma_mag`` strains the free body uniformly: the affine model with the
+isotropic (Lorentz) value ``kappa = 1/5`` cancels the mean strain of a sphere exactly but not
+its change of length, ``(5/57 - 1/15) mu0 M^2 / G``.
+
+Units: SI (m, Pa, A/m, T).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.constants import mu_0 as MU0
+from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+from skfem import MeshTri
+
+from homogenize.macro import finite_strain as fs
+from homogenize.macro import magnetostatics as ms
+from micro._validate import ConvergenceError, InputError, check_choice, check_positive
+
+__all__ = ["MODELS", "SHAPES", "Specimen", "SpecimenStep", "SpecimenResult", "solve_specimen",
+           "affine_kappa", "magnetic_pressure_Pa"]
+
+MODELS = ("continuum", "affine", "relaxed")
+SHAPES = ("sphere", "spheroid", "cylinder")
+
+
+@dataclass(frozen=True)
+class Specimen:
+    """A body of revolution about the field axis z, centred on the origin.
+
+    shape : "sphere" | "spheroid" | "cylinder"
+    radius_m : equatorial radius / cylinder radius R [m]
+    length_m : length along the field, pole to pole or end face to end face [m] (a sphere:
+        ``2 R``, given or not)
+    n_mesh : elements along the radius of the mechanics mesh (quarter section) [-]
+    n_boundary : segments of the field mesh along the body's meridian profile [-]
+    """
+    shape: str
+    radius_m: float
+    length_m: float | None = None
+    n_mesh: int = 8
+    n_boundary: int = 48
+
+    def __post_init__(self):
+        check_choice("shape", self.shape, SHAPES)
+        R = check_positive("radius_m", self.radius_m, "m")
+        if self.length_m is None:
+            if self.shape != "sphere":
+                raise InputError(f"a {self.shape} needs length_m (its length along the field)")
+            object.__setattr__(self, "length_m", 2.0 * R)
+        L = check_positive("length_m", self.length_m, "m")
+        if self.shape == "sphere" and abs(L - 2.0 * R) > 1e-9 * R:
+            raise InputError(f"a sphere of radius {R:g} m has length 2R = {2 * R:g} m, got "
+                             f"length_m = {L:g} m (use shape='spheroid')")
+        for name, lo in (("n_mesh", 2), ("n_boundary", 16)):
+            v = getattr(self, name)
+            if int(v) != v or v < lo:
+                raise InputError(f"{name} must be an integer >= {lo}, got {v!r}")
+
+    @property
+    def aspect_ratio(self) -> float:
+        """Length over diameter, ``L / (2 R)`` [-]."""
+        return self.length_m / (2.0 * self.radius_m)
+
+    def mechanics_body(self) -> fs.AxisymmetricBody:
+        """The quarter section ``r >= 0, z >= 0`` (symmetry planes r = 0 and z = 0)."""
+        R, c, n = self.radius_m, 0.5 * self.length_m, int(self.n_mesh)
+        if self.shape == "sphere":
+            return fs.sphere_body(R, n)
+        if self.shape == "spheroid":
+            return fs.spheroid_body(R, c, n)
+        return fs.cylinder_body(R, self.length_m, n)
+
+
+def affine_kappa(phi: float, Ms_particle_A_per_m: float):
+    """``kappa(|M|)`` [-] of the affine model: the cell FEM's microstructural stress coefficient
+    of randomly dispersed particles at volume fraction ``phi`` [-], as a function of the
+    composite's magnetization ``|M|`` [A/m] through ``m = |M| / (phi Ms)``
+    (:func:`homogenize.experiments.tables.microstructure_stress_coefficient`)."""
+    from homogenize.experiments.tables import microstructure_stress_coefficient
+    phi = check_positive("phi", phi)
+    Ms = check_positive("Ms_particle_A_per_m", Ms_particle_A_per_m, "A/m")
+
+    def kappa(M_abs):
+        m = np.clip(np.asarray(M_abs, float) / (phi * Ms), 0.0, 1.0)
+        return np.asarray(microstructure_stress_coefficient(np.full(m.shape, phi), m.ravel()),
+                          float).reshape(m.shape)
+    return kappa
+
+
+@dataclass(frozen=True)
+class SpecimenStep:
+    """The converged state at one applied field (SI).
+
+    B_applied_T : mu0 H0 of the uniform applied field [T]
+    M_mean_A_per_m : volume mean of M_z over the deformed body [A/m]
+    H_mean_A_per_m : volume mean of H_z inside [A/m]; demag_factor : (H0 - <H>) / <M> [-]
+    length_change_axis_m, length_change_mean_m : change of the length between the end faces on
+        the axis, and between the area means of the end faces (cylinder; NaN for a sphere or
+        spheroid, whose ends are the poles) [m]
+    strain_axis, strain_end_mean : the same over the initial length [-]
+    diameter_change_m, lateral_strain : at mid-height / the equator [m], [-]
+    mean_strain_zz : volume mean of the axial strain (what an RVE gives) [-]
+    stagger_iterations : field-mechanics iterations; newton_iterations : all Newton steps
+    stagger_history : relative change of the length per iteration [-]
+    """
+    B_applied_T: float
+    M_mean_A_per_m: float
+    H_mean_A_per_m: float
+    demag_factor: float
+    length_change_axis_m: float
+    length_change_mean_m: float
+    strain_axis: float
+    strain_end_mean: float
+    diameter_change_m: float
+    lateral_strain: float
+    mean_strain_zz: float
+    stagger_iterations: int
+    newton_iterations: int
+    stagger_history: tuple
+
+
+@dataclass(frozen=True)
+class SpecimenResult:
+    """All field steps of :func:`solve_specimen` (``steps``), with what produced them."""
+    specimen: Specimen
+    model: str
+    shear_modulus_Pa: float
+    bulk_modulus_Pa: float
+    law: str
+    steps: tuple
+    solution: object = field(repr=False, compare=False, default=None)
+    field_result: object = field(repr=False, compare=False, default=None)
+
+    def to_dict(self) -> dict:
+        """JSON-ready (SI units)."""
+        s = self.specimen
+        return {"specimen": {"shape": s.shape, "radius_m": s.radius_m, "length_m": s.length_m,
+                             "aspect_ratio_L_over_D": s.aspect_ratio, "n_mesh": s.n_mesh,
+                             "n_boundary": s.n_boundary},
+                "model": self.model, "shear_modulus_Pa": self.shear_modulus_Pa,
+                "bulk_modulus_Pa": self.bulk_modulus_Pa, "law": self.law,
+                "steps": [dict(st.__dict__, stagger_history=list(st.stagger_history))
+                          for st in self.steps]}
+
+
+def _check_steps(B_applied_T) -> np.ndarray:
+    B = np.atleast_1d(np.asarray(B_applied_T, dtype=float))
+    if B.ndim != 1 or B.size == 0 or not np.all(np.isfinite(B)):
+        raise InputError("the applied field steps B_applied_T must be a non-empty list of "
+                         "finite values [T]")
+    if B[0] < 0 or np.any(np.diff(B) <= 0):
+        raise InputError(f"the applied field steps must increase strictly from >= 0 T, got "
+                         f"{B.tolist()}")
+    return B
+
+
+def _field_shape(specimen: Specimen):
+    R, c = specimen.radius_m, 0.5 * specimen.length_m
+    if specimen.shape == "sphere":
+        return ms.Sphere(R)
+    if specimen.shape == "spheroid":
+        return ms.Spheroid(c, R)
+    return ms.Cylinder(R, specimen.length_m)
+
+
+def _moved_geometry(g0: ms.BodyMesh, sol) -> ms.BodyMesh:
+    """The field mesh ``g0`` of the undeformed body moved with the body: its body vertices by
+    the mechanics displacement (the quarter's solution mirrored about z = 0, interpolated
+    linearly between its P2 nodes; nearest node just outside their hull, where the exact
+    profile lies outside the mechanics polygon), the air vertices by the displacement of the
+    body surface on their ray, blended linearly to zero at the domain sphere (whose Kelvin
+    exterior stays as it is). Moving one mesh instead of meshing the deformed body anew keeps
+    the field a smooth function of the deformation: the staggered iteration then converges to
+    its tolerance, not to the noise of re-meshing."""
+    if sol is None:
+        return g0
+    P, U = sol.doflocs_m, sol.u_m
+    up = P[1] > 0.0
+    Pf = np.hstack([P, P[:, up] * np.array([[1.0], [-1.0]])])
+    Uf = np.hstack([U, U[:, up] * np.array([[1.0], [-1.0]])])
+    lin = LinearNDInterpolator(Pf.T, Uf.T)
+    near = NearestNDInterpolator(Pf.T, Uf.T)
+    mesh = g0.mesh
+    p = mesh.p
+    body_v = np.unique(mesh.t[:, g0.body_elements])
+    d = np.zeros_like(p)
+    db = lin(p[:, body_v].T)
+    miss = np.isnan(db[:, 0])
+    if np.any(miss):
+        db[miss] = near(p[:, body_v[miss]].T)
+    d[:, body_v] = db.T
+    # air: the body surface's displacement along each ray, to zero at the domain sphere
+    c = g0.center_m.reshape(2, 1)
+    y = p - c
+    rho, theta = np.hypot(y[0], y[1]), np.arctan2(y[0], y[1])
+    surf = np.unique(mesh.facets[:, g0.body_facets])
+    order = surf[np.argsort(theta[surf])]
+    air = np.setdiff1d(np.arange(p.shape[1]), body_v)
+    ts = theta[order]
+    rho_b = np.interp(theta[air], ts, rho[order])
+    w = np.clip((g0.radius_m - rho[air]) / (g0.radius_m - rho_b), 0.0, 1.0)
+    for i in range(2):
+        d[i, air] = w * np.interp(theta[air], ts, d[i, order])
+    d[0, p[0] == 0.0] = 0.0                                # the axis stays the axis
+    return ms.BodyMesh(MeshTri(p + d, mesh.t), g0.body_elements, g0.exterior_mesh,
+                       g0.center_m, g0.radius_m, True)
+
+
+def _prescribed_stress(M, kappa) -> np.ndarray:
+    """``kappa mu0 |M|^2 (m m - I/3)`` at points: ``M`` (2, ne, nq) (r, z) -> (ne, nq, 3, 3)
+    Cartesian at the meridian plane (x = r, y = theta, z)."""
+    Mr, Mz = M
+    M2 = Mr * Mr + Mz * Mz
+    k = np.asarray(kappa(np.sqrt(M2)), float) * MU0
+    S = np.zeros(M2.shape + (3, 3))
+    S[..., 0, 0] = k * (Mr * Mr - M2 / 3.0)
+    S[..., 2, 2] = k * (Mz * Mz - M2 / 3.0)
+    S[..., 1, 1] = k * (-M2 / 3.0)
+    S[..., 0, 2] = S[..., 2, 0] = k * Mr * Mz
+    return S
+
+
+#: Gauss-Legendre rule of the magnetic pressure integral psi = mu0 int_0^H M(h) dh: M(h) of
+#: the laws is smooth (analytic) on [0, H]; 24 points integrate it to round-off for H up to
+#: many times the saturation knee (checked against the closed forms in the tests)
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(24)
+
+
+def magnetic_pressure_Pa(law, H_abs) -> np.ndarray:
+    """``psi = mu0 int_0^H M(h) dh`` [Pa] of an isotropic law at field magnitudes ``H_abs``
+    [A/m] (array); the Kelvin body force of a soft body is ``grad psi``."""
+    H = np.asarray(H_abs, float)
+    h = 0.5 * H[..., None] * (_GL_X + 1.0)
+    return MU0 * 0.5 * H * np.sum(_GL_W * np.asarray(law.M_A_per_m(h), float), axis=-1)
+
+
+def _element_state(body, sol):
+    """Current positions (2, ne, nq) of the element quadrature points and J = det F."""
+    X = fs.element_points(body)
+    if sol is None:
+        return X, np.ones(X.shape[1:])
+    u = np.stack([np.asarray(sol.basis.interpolate(ui)) for ui in sol.u_m])
+    return X + u, np.linalg.det(fs.deformation_gradient(sol))
+
+
+def _law_name(law) -> str:
+    params = ", ".join(f"{k}={v:g}" for k, v in getattr(law, "__dict__", {}).items()
+                       if isinstance(v, (int, float)))
+    return f"{type(law).__name__}({params})"
+
+
+def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied_T, *,
+                   model: str = "continuum", kappa=None, tol: float = 1e-4,
+                   max_stagger: int = 30, relaxation: float = 1.0,
+                   load_steps: int = 2, progress=None) -> SpecimenResult:
+    """Field steps of a specimen in a uniform applied field along its axis.
+
+    Parameters
+    ----------
+    specimen : Specimen
+    law : magnetization law of the composite (``M_A_per_m(H)``, ``dM_dH(H)``; e.g.
+        :func:`homogenize.macro.magnetostatics.froehlich_kennelly`)
+    solid : NeoHookeanSolid -- the composite's shear and bulk moduli [Pa]
+    B_applied_T : increasing applied fields ``mu0 H0`` [T], >= 0
+    model : "continuum" | "affine" | "relaxed" (module docstring)
+    kappa : callable ``kappa(|M| [A/m]) -> [-]`` (or a number) -- the microstructural stress
+        coefficient; required by "affine" (e.g. :func:`affine_kappa`) and "relaxed"
+    tol : relative change of the change of length between two staggered iterations at which
+        a field step is converged [-]
+    max_stagger : staggered iterations per step before :class:`ConvergenceError`
+    relaxation : under-relaxation of the magnetic loads between iterations, (0, 1]
+    load_steps : load steps of each mechanics solve (Newton from the undeformed body)
+    progress : callable ``progress(i, n, B)`` after each field step, or None
+
+    Returns
+    -------
+    SpecimenResult (``steps``: one :class:`SpecimenStep` per field; ``solution`` and
+    ``field_result``: the last mechanics and field solutions, e.g. for VTU output)
+
+    Raises
+    ------
+    InputError -- bad input (before any work); ConvergenceError -- a field step whose
+    staggered iteration or Newton failed (``residual_history`` holds the relative changes)
+    """
+    if not isinstance(specimen, Specimen):
+        raise InputError(f"specimen must be a Specimen, got {type(specimen).__name__}")
+    if not isinstance(solid, fs.NeoHookeanSolid):
+        raise InputError(f"solid must be a NeoHookeanSolid, got {type(solid).__name__}")
+    check_choice("model", model, MODELS)
+    B = _check_steps(B_applied_T)
+    ms.check_law(law)
+    if model == "continuum":
+        kappa = None
+    elif kappa is None:
+        raise InputError(f"model {model!r} needs kappa (the microstructural stress "
+                         "coefficient): affine_kappa(phi, Ms) for 'affine', one from relax "
+                         "tables for 'relaxed'")
+    elif not callable(kappa):
+        k0 = float(kappa)
+        kappa = lambda M_abs, k0=k0: np.full(np.shape(M_abs), k0)  # noqa: E731
+    tol = check_positive("tol", tol)
+    relaxation = float(relaxation)
+    if not 0.0 < relaxation <= 1.0:
+        raise InputError(f"relaxation must lie in (0, 1], got {relaxation}")
+    body = specimen.mechanics_body()
+    g0 = ms.axisymmetric_mesh(_field_shape(specimen),
+                              ms.MeshOptions(n_boundary=int(specimen.n_boundary)))
+    L0 = specimen.length_m
+    sol, res, steps = None, None, []
+    prev_loads = None
+    for i, b in enumerate(B):
+        H0 = b / MU0
+        hist, newton, dl_prev = [], 0, None
+        for it in range(1, max_stagger + 1):
+            res = ms.solve_axisymmetric(None, law, H0, geometry=_moved_geometry(g0, sol))
+            if sol is None:
+                xf, nf = fs.facet_points(body)
+            else:
+                xf, nf = fs.current_facet_points(sol)
+            xe, _ = _element_state(body, sol)
+            Hf, Mf = ms.body_fields_at(res, xf)
+            nf = nf / np.linalg.norm(nf, axis=0)
+            psi_f = magnetic_pressure_Pa(law, np.linalg.norm(Hf, axis=0))
+            t = (0.5 * MU0 * np.sum(Mf * nf, axis=0) ** 2 + psi_f) * nf
+            He, Me = ms.body_fields_at(res, xe)
+            S = magnetic_pressure_Pa(law, np.linalg.norm(He, axis=0))[..., None, None] \
+                * np.eye(3)
+            if kappa is not None:
+                S = S + _prescribed_stress(Me, kappa)
+            if prev_loads is not None and relaxation < 1.0:
+                w = relaxation
+                t = w * t + (1 - w) * prev_loads[0]
+                S = w * S + (1 - w) * prev_loads[1]
+            prev_loads = (t, S)
+            loads = fs.Loads((fs.Traction(t, "surface", follower=True),),
+                             prescribed_stress_Pa=S)
+            sol = fs.solve_axisymmetric(body, solid, loads, load_steps=load_steps)
+            newton += sol.newton_iterations
+            dl = fs.length_change_m(sol)[0]
+            if dl_prev is not None:
+                # relative to the change of length, or to the magnetic strain scale
+                # mu0 <M>^2 / G where the two load parts cancel (affine sphere)
+                scale = max(abs(dl), L0 * MU0 * float(res.M_mean_A_per_m[-1]) ** 2
+                            / solid.G_Pa, 1e-300)
+                change = abs(dl - dl_prev) / scale
+                hist.append(float(change))
+                if change <= tol:
+                    break
+            elif b == 0.0:
+                hist.append(0.0)
+                break
+            dl_prev = dl
+        else:
+            raise ConvergenceError(
+                f"the field-mechanics iteration did not converge at B = {b:g} T in "
+                f"{max_stagger} iterations (relative changes of the length "
+                f"{', '.join(f'{h:.2g}' for h in hist[-5:])}); try relaxation < 1 or smaller "
+                "field steps", hist)
+        dl_axis, dl_mean = fs.length_change_m(sol)
+        dd = fs.diameter_change_m(sol)
+        steps.append(SpecimenStep(
+            B_applied_T=float(b), M_mean_A_per_m=float(res.M_mean_A_per_m[-1]),
+            H_mean_A_per_m=float(res.H_mean_A_per_m[-1]),
+            demag_factor=float(res.demag_factor) if b > 0 else float("nan"),
+            length_change_axis_m=dl_axis, length_change_mean_m=float(dl_mean),
+            strain_axis=dl_axis / L0, strain_end_mean=float(dl_mean) / L0,
+            diameter_change_m=dd, lateral_strain=dd / (2.0 * specimen.radius_m),
+            mean_strain_zz=float(fs.mean_strain(sol)[2, 2]), stagger_iterations=it,
+            newton_iterations=newton, stagger_history=tuple(hist)))
+        if progress is not None:
+            progress(i + 1, len(B), float(b))
+    return SpecimenResult(specimen, model, solid.G_Pa, solid.K_Pa, _law_name(law),
+                          tuple(steps), sol, res)
