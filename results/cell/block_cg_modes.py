@@ -1,6 +1,6 @@
 """How the matrix-free solver's load cases share their CG search directions
-(homogenize.cell.MATFREE_BLOCK_CG): the numbers behind results/cell/block_cg_modes.json and the
-"Coupled block CG" section of results/cell/README.md.
+(homogenize.solvers.SolverOptions.block_cg): the numbers behind results/cell/block_cg_modes.json
+and the "Coupled block CG" section of results/cell/README.md.
 
 Bench RVEs (homogenize.bench.cell._rve: the seed paper's size distribution at 3.5 vol%), 6 unit
 strains + random particle forces, the default tolerances (strains 1e-6, magnetic column
@@ -8,7 +8,7 @@ magnetic_tol = 1e-3), solver="matrix-free", each case in its OWN process (so tha
 its own), the three modes of one RVE one after the other:
 
 * "independent": lock-step single-column CGs (the default of session 11);
-* "coupled": all seven columns in one block CG (homogenize._amg.coupled_block_cg);
+* "coupled": all seven columns in one block CG (homogenize.solvers.coupled_block_cg);
 * "strains": the six strains coupled, the magnetic column on its own (the default since 12).
 
 Iterations are deterministic; seconds and peak RSS are those of the machine at the time.
@@ -33,19 +33,18 @@ PLAN = [(a, b, m) for a, b in RVES for m in MODES]
 
 def one(rve_voxels: int, voxels: int, mode: str) -> dict:
     """One case, in this process."""
-    from unittest import mock
-
     import numpy as np
 
     import homogenize.cell as cell
     from homogenize.bench.cell import _rve
+    from homogenize.solvers import SolverOptions
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     # no particle patches (session 14): the block CG modes as measured in session 12
-    with mock.patch.multiple(cell, MATFREE_BLOCK_CG=mode, MATFREE_PATCH_SHELL=None):
-        t0 = time.perf_counter()
-        r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free")
-        sec = time.perf_counter() - t0
+    opts = SolverOptions(block_cg=mode, patch_shell_voxels=None)
+    t0 = time.perf_counter()
+    r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", options=opts)
+    sec = time.perf_counter() - t0
     it = r.iterations
     return {"rve_voxels": rve_voxels, "voxels": voxels, "block_cg": r.settings["block_cg"],
             "n_particles": int(rve.n), "iterations": it,

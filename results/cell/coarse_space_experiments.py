@@ -25,10 +25,10 @@ mean radius at 32^3" (rve_voxels 64, voxels 32), where solver="matrix-free" need
 6. "sa-two-grid": the first level of smoothed aggregation in the matrix-free solver's place. A
    two-grid cycle with the same fine smoother (one 8-colour block Gauss-Seidel sweep per side,
    matrix-free) whose coarse space is the first prolongator P of `"fast"`'s hierarchy (pyamg
-   smoothed aggregation of the assembled fine matrix, cell.AMG_OPTIONS, rigid-body candidates),
+   smoothed aggregation of the assembled fine matrix, SolverOptions().amg, rigid-body candidates),
    solved exactly (sparse LU of P^T K P); "sa-two-grid-tentative": the same aggregates with the
    unsmoothed tentative prolongator T. Against the trilinear two-grid cycle with an exact coarse
-   solve (multigrid_robustness.py, MATFREE_COARSE = "lu") this tells whether the first coarse
+   solve (multigrid_robustness.py, matfree_coarse = "lu") this tells whether the first coarse
    space is what makes smoothed aggregation robust, and whether its smoothing or its
    aggregates carry it.
 7. "aggregate-two-grid": the same two-grid cycle with GEOMETRIC aggregates that a matrix-free
@@ -39,24 +39,23 @@ mean radius at 32^3" (rve_voxels 64, voxels 32), where solver="matrix-free" need
    Also on the hard case of multigrid_robustness.py (801 particles of 1.25 voxels mean radius
    at 64^3) and on the 64^3 bench RVE.
 
-The experimental preconditioners live in this script (they are not part of mapsim); they hook
-into homogenize.cell by replacing the matrix-free solver's preconditioner after its setup.
+The experimental preconditioners live in this script (they are not part of mapsim); they take
+the matrix-free solver's place after its setup (SolverOptions.preconditioner).
 Run: .venv/bin/python results/cell/coarse_space_experiments.py   (~50 min from scratch)
      --out F writes the JSON elsewhere; --missing runs only the cases it does not hold yet.
 """
 import time
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
-import pyamg
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 import homogenize._assembly as asm
 import homogenize._matfree as mf
 import homogenize.cell as cell
-from homogenize._amg import BlockVCycle
+from homogenize.solvers import (BlockVCycle, SolverOptions, grid_node_coordinates,
+                                rigid_body_modes, smoothed_aggregation)
 from homogenize.bench.cell import _rve
 from micro.materials import PDMS
 
@@ -145,14 +144,15 @@ class RigidInclusionTwoGrid:
             lu = splu(sp.csc_matrix(A + 1e-9 * scale * sp.identity(A.shape[0])))
             self.coarse = lambda B: lu.solve(np.asarray(B))
         else:
-            Bp = splu(sp.csc_matrix(Z.T @ Z)).solve(np.asarray(Z.T @ asm.rigid_body_modes(n, h)))
-            B = np.vstack([asm.rigid_body_modes(nc, 2 * h), Bp])
-            opts = dict(cell.AMG_OPTIONS, max_coarse=max(50, min(600, A.shape[0] // 120)))
-            self.coarse = BlockVCycle(pyamg.smoothed_aggregation_solver(A, B=B, **opts))
+            Bp = splu(sp.csc_matrix(Z.T @ Z)).solve(np.asarray(Z.T @ _modes(n)))
+            B = np.vstack([_modes(nc), Bp])
+            opts = SolverOptions().amg.replace(max_coarse=max(50, min(600, A.shape[0] // 120)))
+            self.coarse = BlockVCycle(smoothed_aggregation(A, B, opts))
         self.Z, self.ZT = Z, Z.T.tocsr()
         self.ng = 3 * nc ** 3
         self.shape = op.shape
-        self.levels, self.coarse_n, self.field_bytes = [None], nc, [0]      # what cell reports
+        # what cell reports of its preconditioner
+        self.levels, self.coarse_n, self.field_bytes, self.interface_sweeps = [None], nc, [0], 0
 
     def __matmul__(self, B):
         B = np.ascontiguousarray(B, dtype=np.float64)
@@ -183,7 +183,7 @@ class TwoGrid:
     """Two-grid cycle: one fine 8-colour Gauss-Seidel sweep per side (matrix-free), the coarse
     space spanned by the columns of ``P`` (3N x m), the coarse problem ``P^T K P`` solved
     exactly (``coarse="lu"``) or by one / three smoothed-aggregation V-cycles (``"amg"``,
-    ``"amg3"``: cell.AMG_OPTIONS, the fine rigid-body modes restricted as candidates; a fixed
+    ``"amg3"``: SolverOptions().amg, the fine rigid-body modes restricted as candidates; a fixed
     number of V-cycles is still a symmetric linear operator). Module docstring, 6 and 7."""
 
     def __init__(self, op, field, pin, h, P, coarse="lu"):
@@ -197,9 +197,9 @@ class TwoGrid:
             lu = splu(Ac + 1e-12 * abs(Ac).max() * sp.identity(Ac.shape[0], format="csc"))
             self.solve = lu.solve
         else:
-            Bc = np.asarray(P.T @ asm.rigid_body_modes(n, h))
-            opts = dict(cell.AMG_OPTIONS, max_coarse=max(50, min(600, Ac.shape[0] // 120)))
-            cyc = BlockVCycle(pyamg.smoothed_aggregation_solver(sp.bsr_matrix(Ac), B=Bc, **opts))
+            Bc = np.asarray(P.T @ _modes(n))
+            opts = SolverOptions().amg.replace(max_coarse=max(50, min(600, Ac.shape[0] // 120)))
+            cyc = BlockVCycle(smoothed_aggregation(sp.bsr_matrix(Ac), Bc, opts))
             reps = 3 if coarse == "amg3" else 1
 
             def solve(B):
@@ -210,7 +210,9 @@ class TwoGrid:
             self.solve = solve
         self.P, self.PT = P, P.T.tocsr()
         self.shape = op.shape
-        self.levels, self.coarse_n, self.field_bytes = [None], P.shape[1], [0]  # what cell reports
+        # what cell reports of its preconditioner
+        self.levels, self.coarse_n, self.field_bytes = [None], P.shape[1], [0]
+        self.interface_sweeps = 0
 
     def __matmul__(self, B):
         B = np.ascontiguousarray(B, dtype=np.float64)
@@ -231,11 +233,11 @@ class TwoGrid:
 
 def sa_prolongator(op, field, pin, h, tentative: bool) -> sp.csr_matrix:
     """The first prolongator of smoothed aggregation on the assembled fine matrix (pyamg,
-    cell.AMG_OPTIONS as `"fast"` uses them), or its tentative (unsmoothed) one."""
+    SolverOptions().amg as `"fast"` uses them), or its tentative (unsmoothed) one."""
     K = mf.typed_bsr(field, pin=pin, pin_scale=op.pin_scale)
-    opts = dict(cell.AMG_OPTIONS, max_coarse=max(300, min(4000, K.shape[0] // 20)))
-    ml = pyamg.smoothed_aggregation_solver(K, B=asm.rigid_body_modes(field.n, h), keep=tentative,
-                                            **opts)
+    opts = SolverOptions().amg.replace(max_coarse=max(300, min(4000, K.shape[0] // 20)),
+                                       keep=tentative)
+    ml = smoothed_aggregation(K, _modes(field.n), opts)
     return sp.csr_matrix(ml.levels[0].T if tentative else ml.levels[0].P)
 
 
@@ -287,71 +289,77 @@ def particle_of_node(Z: sp.spmatrix, N: int) -> np.ndarray:
     return body
 
 
+def _modes(n: int) -> np.ndarray:
+    """The rigid-body modes of the periodic n^3 grid's nodes (the solvers' near-null space)."""
+    return rigid_body_modes(grid_node_coordinates(n))
+
+
+def capped_field(field, cap: float):
+    """The element field with every element type's stiffness capped at ``cap`` times the
+    softest shared type's (module docstring, 2)."""
+    nrm = np.abs(field.Ktab).max(axis=(1, 2))
+    s = np.minimum(1.0, cap * nrm[:field.n_shared].min() / nrm)
+    return mf.ElementField(field.n, field.etype, field.Ktab * s[:, None, None], field.n_shared)
+
+
+def preconditioner(case: dict, options: SolverOptions):
+    """The matrix-free solver's preconditioner for ``case`` (SolverOptions.preconditioner): the
+    solver's own V-cycle, or this script's in its place."""
+    variant = case["variant"]
+
+    def make(st):
+        if variant in ("trilinear", "fast", "trilinear-lu"):
+            return st.vcycle
+        op, field = st.operator, st.field
+        if variant == "capped":
+            # the fine level smooths the true operator; the coarse levels are the Galerkin
+            # operators of the capped field
+            return mf.GeometricVCycle(
+                capped_field(field, case["cap"]), pin=st.pin, pin_scale=op.pin_scale, h=st.h,
+                amg_options=options.amg, fine_op=op,
+                assembled_max=options.matfree_assembled_max, coarse=options.matfree_coarse,
+                sweeps=options.matfree_sweeps,
+                interface_sweeps=options.matfree_interface_sweeps,
+                interface_halo=options.matfree_interface_halo)
+        if variant in ("rigid", "rigid-lu", "rigid-smoothed"):
+            Z = st.deflation_space(st.mesh.fraction > 0)          # every voxel holding iron
+            return RigidInclusionTwoGrid(op, field, Z, st.pin, st.h, exact=variant == "rigid-lu",
+                                         smooth=variant == "rigid-smoothed")
+        if variant == "aggregate-two-grid":
+            N = field.n ** 3
+            body = (particle_of_node(st.deflation_space(st.mesh.fraction >= 0.5), N)
+                    if case.get("split", True) else -np.ones(N, dtype=np.int64))
+            P = aggregate_modes(field.n, st.h, body, case["block"])
+        else:                                       # "sa-two-grid", "sa-two-grid-tentative"
+            P = sa_prolongator(op, field, st.pin, st.h,
+                               tentative=variant == "sa-two-grid-tentative")
+        return TwoGrid(op, field, st.pin, st.h, P, coarse=case.get("coarse", "lu"))
+    return make
+
+
+def options_for(case: dict) -> SolverOptions:
+    """The matrix-free V-cycle as when the JSON was made (sessions 6-8): no interface sweeps,
+    independent CG columns (SolverOptions.block_cg, session 12), no particle patches;
+    "trilinear-lu": the geometric two-grid cycle with an exact coarse solve; ``sweeps``: the fine
+    Gauss-Seidel sweeps per side."""
+    opts = SolverOptions(matfree_interface_sweeps=0, block_cg="independent",
+                         patch_shell_voxels=None,
+                         matfree_coarse="lu" if case["variant"] == "trilinear-lu" else "amg",
+                         matfree_sweeps=case.get("sweeps", 1))
+    return opts.replace(preconditioner=preconditioner(case, opts))
+
+
 def run(case: dict) -> dict:
     rve = _rve(case["rve_voxels"], 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
-    variant = case["variant"]
-    orig_init, orig_coarsen = cell._CellSolver._init_matrix_free, mf.coarsen
-    orig_vcycle = mf.GeometricVCycle.__init__
-
-    def init(self, lam, mu, composite, stiff_mask):
-        orig_init(self, lam, mu, composite, stiff_mask)
-        if variant in ("trilinear", "fast", "capped", "trilinear-lu"):
-            return
-        field = mf.element_field(lam, mu, self.h, composite)       # the solver keeps none
-        if variant in ("rigid", "rigid-lu", "rigid-smoothed"):
-            Z = self._deflation_space(self.mesh.fraction > 0)      # every voxel holding iron
-            self.M = RigidInclusionTwoGrid(self.matvec, field, Z, self.pin, self.h,
-                                           exact=variant == "rigid-lu",
-                                           smooth=variant == "rigid-smoothed")
-            return
-        if variant == "aggregate-two-grid":
-            N = field.n ** 3
-            body = (particle_of_node(self._deflation_space(self.mesh.fraction >= 0.5), N)
-                    if case.get("split", True) else -np.ones(N, dtype=np.int64))
-            P = aggregate_modes(field.n, self.h, body, case["block"])
-        else:                                       # "sa-two-grid", "sa-two-grid-tentative"
-            P = sa_prolongator(self.matvec, field, self.pin, self.h,
-                               tentative=variant == "sa-two-grid-tentative")
-        self.M = TwoGrid(self.matvec, field, self.pin, self.h, P,
-                         coarse=case.get("coarse", "lu"))
-
-    def capped(field, chunk=4096):
-        if field.n == case["voxels"]:
-            nrm = np.abs(field.Ktab).max(axis=(1, 2))
-            s = np.minimum(1.0, case["cap"] * nrm[:field.n_shared].min() / nrm)
-            field = mf.ElementField(field.n, field.etype, field.Ktab * s[:, None, None],
-                                    field.n_shared)
-        return orig_coarsen(field, chunk)
-
-    def vcycle(self, field, **kw):
-        orig_vcycle(self, field, **dict(kw, sweeps=case.get("sweeps", 1)))
-
-    cell._CellSolver._init_matrix_free = init
-    mf.GeometricVCycle.__init__ = vcycle
-    if variant == "capped":
-        mf.coarsen = capped
-    # the matrix-free V-cycle as when the JSON was made (sessions 6-8): no interface sweeps,
-    # independent CG columns (homogenize.cell.MATFREE_BLOCK_CG, session 12); "trilinear-lu": the
-    # geometric two-grid cycle with an exact coarse solve
-    consts = mock.patch.multiple(
-        cell, MATFREE_INTERFACE_SWEEPS=0, MATFREE_BLOCK_CG="independent", MATFREE_PATCH_SHELL=None,
-        MATFREE_COARSE="lu" if variant == "trilinear-lu" else cell.MATFREE_COARSE)
-    consts.start()
-    try:
-        kw = dict(matrix_nu=case.get("nu", PDMS.nu), method=case.get("method", "composite"))
-        if case.get("homogeneous"):
-            kw.update(particle_E_Pa=PDMS.E_Pa, particle_nu=kw["matrix_nu"])
-        t0 = time.perf_counter()
-        # tol_magnetic: every column at 1e-6, as when the JSON was made (session 8)
-        r = cell.homogenize_rve(rve, case["voxels"], forces_N=forces, solver=case["solver"],
-                                tol_magnetic=1e-6, **kw)
-        sec = time.perf_counter() - t0
-    finally:
-        cell._CellSolver._init_matrix_free = orig_init
-        mf.coarsen = orig_coarsen
-        mf.GeometricVCycle.__init__ = orig_vcycle
-        consts.stop()
+    kw = dict(matrix_nu=case.get("nu", PDMS.nu), method=case.get("method", "composite"))
+    if case.get("homogeneous"):
+        kw.update(particle_E_Pa=PDMS.E_Pa, particle_nu=kw["matrix_nu"])
+    t0 = time.perf_counter()
+    # tol_magnetic: every column at 1e-6, as when the JSON was made (session 8)
+    r = cell.homogenize_rve(rve, case["voxels"], forces_N=forces, solver=case["solver"],
+                            tol_magnetic=1e-6, options=options_for(case), **kw)
+    sec = time.perf_counter() - t0
     it = r.iterations
     return dict(case, n_particles=int(rve.n), iterations=it,
                 max_strain_iterations=max(v for k, v in it.items() if k != "magnetic"),

@@ -6,7 +6,7 @@ The magnetic column (random particle forces, stopped at magnetic_tol = 1e-3) nee
 iterations of the six strains (stopped at 1e-6) on the bench RVEs, and runs on alone after
 them (128^3: strains 70-94, magnetic 190). Its residual history has a long plateau (`history`
 rows: every column to 1e-6, 100 particles of 1.25 voxels at 32^3). Variants of the block CG
-(homogenize._amg.coupled_block_cg), each as a drop-in for it in homogenize.cell:
+(homogenize.solvers.coupled_block_cg), each as a drop-in for it (SolverOptions.krylov):
 
 * "strains": the default (six strains coupled, the magnetic column on its own recursion);
 * "coupled": all seven columns in one block that shrinks as columns converge;
@@ -47,7 +47,8 @@ def _keep_block_cg(A, M, F, *, tol, maxiter, deflation=None, callback=None, grou
     import numpy as np
 
     from homogenize import _kernels as kn
-    from homogenize._amg import CG_CHUNK, _cg_start, _colnorms, _gram, _group_pinv, _own
+    from homogenize.solvers.krylov import (CG_CHUNK, _cg_start, _colnorms, _gram, _group_pinv,
+                                           _own)
     k = F.shape[1]
     X, Xa, R, hist, idx, fa, tols = _cg_start(A, F, tol, deflation)
     if idx.size != k:
@@ -84,8 +85,8 @@ def _restart_block_cg(A, M, F, *, tol, maxiter, deflation=None, callback=None, g
     import numpy as np
 
     from homogenize import _kernels as kn
-    from homogenize._amg import (CG_CHUNK, _cg_start, _colnorms, _gram, _group_pinv, _own,
-                                 _record_step)
+    from homogenize.solvers.krylov import (CG_CHUNK, _cg_start, _colnorms, _gram, _group_pinv,
+                                           _own, _record_step)
     k = F.shape[1]
     X, Xa, R, hist, idx, fa, tols = _cg_start(A, F, tol, deflation)
     labels = np.zeros(k, np.int64) if groups is None else np.asarray(groups)
@@ -130,7 +131,7 @@ def _split_block_cg(nsplit: int):
     the slowest part's."""
     import numpy as np
 
-    from homogenize._amg import coupled_block_cg
+    from homogenize.solvers import coupled_block_cg
 
     def solve(A, M, F, *, tol, groups=None, **kw):
         if F.shape[1] != 7:
@@ -160,7 +161,7 @@ def _split_block_cg(nsplit: int):
 def _scaled_block_cg(A, M, F, **kw):
     import numpy as np
 
-    from homogenize._amg import coupled_block_cg
+    from homogenize.solvers import coupled_block_cg
     s = np.linalg.norm(F, axis=0)
     s[s == 0.0] = 1.0
     X, h = coupled_block_cg(A, M, F / s, **kw)
@@ -168,13 +169,11 @@ def _scaled_block_cg(A, M, F, **kw):
 
 
 def one(variant: str, rve_voxels: int, voxels: int) -> dict:
-    from unittest import mock
-
     import numpy as np
 
     import homogenize.cell as cell
-    from homogenize._amg import coupled_block_cg
     from homogenize.bench.cell import _rve
+    from homogenize.solvers import SolverOptions, coupled_block_cg
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     mode = "strains" if variant in ("strains", "history", "split3", "split6") else "coupled"
@@ -187,21 +186,14 @@ def one(variant: str, rve_voxels: int, voxels: int) -> dict:
         X, h = solver(*a, **kw)
         seen["hist"] = h
         return X, h
-    patches = [mock.patch.object(cell, "MATFREE_BLOCK_CG", mode),
-               mock.patch.object(cell, "coupled_block_cg", spy),
-               # the solver of session 13: no particle patches (the default since session 14)
-               mock.patch.object(cell, "MATFREE_PATCH_SHELL", None)]
-    if variant == "history":                     # every column to 1e-6
-        patches.append(mock.patch.object(cell, "magnetic_tol", lambda tol: tol))
-    for p in patches:
-        p.start()
-    try:
-        t0 = time.perf_counter()
-        r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free")
-        sec = time.perf_counter() - t0
-    finally:
-        for p in patches:
-            p.stop()
+    # the solver of session 13: no particle patches (the default since session 14)
+    opts = SolverOptions(block_cg=mode, krylov=spy, patch_shell_voxels=None)
+    # "history": every column to 1e-6 (the default tol), the magnetic one too
+    tol_magnetic = 1e-6 if variant == "history" else None
+    t0 = time.perf_counter()
+    r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", options=opts,
+                            tol_magnetic=tol_magnetic)
+    sec = time.perf_counter() - t0
     it = r.iterations
     row = {"variant": variant, "rve_voxels": rve_voxels, "voxels": voxels,
            "n_particles": int(rve.n), "iterations": it,
@@ -238,7 +230,7 @@ def main() -> None:
                          + (" --full" if full else ""),
                          "each case in its own process; iterations deterministic, seconds "
                          "the machine's at the time; variants are drop-ins for "
-                         "homogenize._amg.coupled_block_cg defined in the script")
+                         "homogenize.solvers.coupled_block_cg defined in the script")
 
 
 if __name__ == "__main__":

@@ -24,13 +24,12 @@ Run: .venv/bin/python results/cell/magnetic_tolerance.py          (~6 min, ~1.5 
 import argparse
 import time
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 
 from homogenize.bench.cell import _rve
-import homogenize.cell as cell
 from homogenize.cell import homogenize_rve, tensor_to_voigt
+from homogenize.solvers import SolverOptions
 from micro.dipoles import solve
 
 import _resumable
@@ -44,12 +43,14 @@ def _rel(a, b, scale) -> float:
     return float(np.abs(np.asarray(a) - np.asarray(b)).max() / scale)
 
 
-# the matrix-free V-cycle as when the JSON was made (session 10): no interface sweeps
-# (homogenize.cell.MATFREE_INTERFACE_SWEEPS, session 11), independent CG columns
-# (homogenize.cell.MATFREE_BLOCK_CG, session 12)
-# and no particle patches (homogenize.cell.MATFREE_PATCH_SHELL, session 14)
-@mock.patch.multiple(cell, MATFREE_INTERFACE_SWEEPS=0, MATFREE_BLOCK_CG="independent",
-                     MATFREE_PATCH_SHELL=None)
+#: the matrix-free V-cycle as when the JSON was made (session 10): no interface sweeps
+#: (SolverOptions.matfree_interface_sweeps, session 11), independent CG columns
+#: (SolverOptions.block_cg, session 12) and no particle patches (SolverOptions.patch_shell_voxels,
+#: session 14)
+OPTIONS = SolverOptions(matfree_interface_sweeps=0, block_cg="independent",
+                        patch_shell_voxels=None)
+
+
 def study(voxels: int, solver: str = "matrix-free") -> list[dict]:
     rve = _rve(voxels)
     st = solve(rve, 0.1, 1.78, "frohlich-kennelly")
@@ -57,7 +58,7 @@ def study(voxels: int, solver: str = "matrix-free") -> list[dict]:
              "random": (np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15, None)}
     rows = []
     for load, (forces, virial) in loads.items():
-        kw = dict(forces_N=forces, virial_stress_Pa=virial, solver=solver)
+        kw = dict(forces_N=forces, virial_stress_Pa=virial, solver=solver, options=OPTIONS)
         ref = homogenize_rve(rve, voxels, tol=1e-9, tol_magnetic=1e-9, **kw)
         s_el = tensor_to_voigt(ref.stress_mag_elastic_Pa)
         s_tot = tensor_to_voigt(ref.stress_mag_Pa)

@@ -11,13 +11,13 @@ default), solved on `voxels` per edge:
 * fixed resolution (rve_voxels == voxels, mean radius 2.5 voxels), growing particle count;
 * particles at half the resolution (rve_voxels == 2 voxels, mean radius 1.25 voxels);
 * the matrix-free V-cycle with its assembled coarse grid solved EXACTLY (sparse LU,
-  homogenize.cell.MATFREE_COARSE = "lu"): if the iterations stay, the geometric (trilinear)
+  SolverOptions.matfree_coarse = "lu"): if the iterations stay, the geometric (trilinear)
   level limits convergence, not the AMG below it;
 * the matrix-free cases again with one more Gauss-Seidel sweep per side over the interface
   nodes (interface_sweeps 1, the default since session 11; the rows with 0 are the V-cycle
   before it);
 * the matrix-free cases with the load cases in one coupled block CG (block_cg "coupled",
-  homogenize.cell.MATFREE_BLOCK_CG, the default since session 12; rows without the key, or
+  SolverOptions.block_cg, the default since session 12; rows without the key, or
   with "independent", ran lock-step independent CGs).
 
 Iteration counts are deterministic; seconds are wall times on whatever else the machine ran.
@@ -27,11 +27,11 @@ Run: .venv/bin/python results/cell/multigrid_robustness.py          (~25 min, ~3
 """
 import time
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 
 import homogenize.cell as cell
+from homogenize.solvers import SolverOptions
 from homogenize.bench.cell import _rve
 
 import _resumable
@@ -40,9 +40,9 @@ HERE = Path(__file__).resolve().parent
 JSON = HERE / "multigrid_robustness.json"
 #: (rve_voxels, voxels, solver, coarse, interface_sweeps, block_cg); the rows with
 #: interface_sweeps 0 are the matrix-free V-cycle before session 11, those with 1 and
-#: "independent" the default of session 11 (homogenize.cell.MATFREE_INTERFACE_SWEEPS: one more
+#: "independent" the default of session 11 (SolverOptions.matfree_interface_sweeps: one more
 #: sweep per side over the interface nodes), those with "coupled" the present default
-#: (homogenize.cell.MATFREE_BLOCK_CG: one block Krylov space for all load cases)
+#: (SolverOptions.block_cg: one block Krylov space for all load cases)
 _MF = [(32, 32), (48, 48), (64, 64), (96, 96), (64, 32), (96, 48), (128, 64)]
 _I, _C = "independent", "coupled"
 PLAN = ([(32, 32, "matrix-free", "amg", 0, _I), (48, 48, "matrix-free", "amg", 0, _I),
@@ -62,15 +62,14 @@ def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int
         block_cg: str) -> dict:
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
-    with mock.patch.multiple(cell, MATFREE_COARSE=coarse or "amg",
-                             MATFREE_INTERFACE_SWEEPS=interface_sweeps,
-                             MATFREE_BLOCK_CG=block_cg,
-                             # no particle patches (session 14): the multigrid as measured here
-                             MATFREE_PATCH_SHELL=None):
-        t0 = time.perf_counter()
-        r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver=solver,
-                                tol_magnetic=1e-6)
-        sec = time.perf_counter() - t0
+    opts = SolverOptions(matfree_coarse=coarse or "amg",
+                         matfree_interface_sweeps=interface_sweeps, block_cg=block_cg,
+                         # no particle patches (session 14): the multigrid as measured here
+                         patch_shell_voxels=None)
+    t0 = time.perf_counter()
+    r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver=solver, tol_magnetic=1e-6,
+                            options=opts)
+    sec = time.perf_counter() - t0
     it = r.iterations
     return {"rve_voxels": rve_voxels, "voxels": voxels, "n_particles": int(rve.n),
             "mean_radius_voxels": 2.5 * voxels / rve_voxels, "solver": solver,

@@ -131,6 +131,39 @@ class PatchedCycle:
         return X
 
 
+class PatchedVCycle:
+    """The matrix-free solver's V-cycle (``vcycle``) with the fine level of :class:`PatchedCycle`
+    in its place; the coarser levels are the solver's. What the cell solver reads of its
+    preconditioner is the V-cycle's."""
+
+    def __init__(self, vcycle, patched: PatchedCycle):
+        self.vcycle, self.patched = vcycle, patched
+        self.levels, self.interface_sweeps = vcycle.levels, vcycle.interface_sweeps
+        self.ml, self.shape = vcycle.ml, vcycle.shape
+
+    def __matmul__(self, B):
+        B = np.ascontiguousarray(B, dtype=np.float64)
+        one = B.ndim == 1
+        X = self.patched(self.vcycle, 0, B[:, None] if one else B, type(self.vcycle)._cycle)
+        return X[:, 0] if one else X
+
+    __call__ = __matmul__
+
+    def release(self):
+        self.vcycle.release()
+
+
+def options(patched: PatchedCycle | None = None):
+    """The solver of session 13 (this script's own Python patches against it): mapsim's particle
+    patches (homogenize._patches, the default since session 14) off; with ``patched``, the
+    V-cycle's fine level replaced by it (SolverOptions.preconditioner)."""
+    from homogenize.solvers import SolverOptions
+    opts = SolverOptions(patch_shell_voxels=None)
+    if patched is None:
+        return opts
+    return opts.replace(preconditioner=lambda st: PatchedVCycle(st.vcycle, patched))
+
+
 def geometry_row(rve_voxels: int, voxels: int) -> dict:
     from homogenize.bench.cell import _rve
     rve = _rve(rve_voxels, 1)
@@ -143,26 +176,18 @@ def geometry_row(rve_voxels: int, voxels: int) -> dict:
 
 
 def run_rve(rve_voxels: int, voxels: int) -> list:
-    from unittest import mock
-
     import homogenize.cell as cell
-    from homogenize import _matfree as mf
     from homogenize.bench.cell import _rve
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
-    orig = mf.GeometricVCycle._cycle
     rows = [geometry_row(rve_voxels, voxels)]
     ref = None
     for variant, tol in VARIANTS:
-        patched = PatchedCycle(rve, DELTA)
-        ctx = (mock.patch.object(mf.GeometricVCycle, "_cycle",
-                                 lambda self, i, B: patched(self, i, B, orig))
-               if variant == "patches" else mock.patch.object(cell, "MATFREE_BLOCK_CG",
-                                                              cell.MATFREE_BLOCK_CG))
-        with ctx:
-            t0 = time.perf_counter()
-            r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", tol=tol)
-            sec = time.perf_counter() - t0
+        opts = options(PatchedCycle(rve, DELTA) if variant == "patches" else None)
+        t0 = time.perf_counter()
+        r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", tol=tol,
+                                options=opts)
+        sec = time.perf_counter() - t0
         sm = np.asarray(r.stress_mag_Pa)
         if variant == "reference":
             ref = (r.E_eff_Pa, sm)
@@ -182,20 +207,16 @@ def run_patches_only(rve_voxels: int, voxels: int, tol: float, delta: float = DE
     """The patches alone at one tol (no reference, no errors): the 128^3 bench RVE, whose
     default solve is in results/bench/cell.json (70-94 / 190 iterations at tol 1e-6)."""
     import resource
-    from unittest import mock
 
     import homogenize.cell as cell
-    from homogenize import _matfree as mf
     from homogenize.bench.cell import _rve
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
-    orig = mf.GeometricVCycle._cycle
     patched = PatchedCycle(rve, delta)
-    with mock.patch.object(mf.GeometricVCycle, "_cycle",
-                           lambda self, i, B: patched(self, i, B, orig)):
-        t0 = time.perf_counter()
-        r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", tol=tol)
-        sec = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    r = cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", tol=tol,
+                            options=options(patched))
+    sec = time.perf_counter() - t0
     it = r.iterations
     sizes = np.array([p[0].size for p in patched.patches])
     return [{"variant": "patches", "tol": tol, "rve_voxels": rve_voxels, "voxels": voxels,
@@ -211,10 +232,7 @@ def run_patches_only(rve_voxels: int, voxels: int, tol: float, delta: float = DE
 def check_symmetry(rve_voxels: int = 64, voxels: int = 32) -> dict:
     """x^T M y against y^T M x for the patched V-cycle M on random x, y (the cycle must stay a
     symmetric preconditioner for CG), next to the same for the plain V-cycle."""
-    from unittest import mock
-
     import homogenize.cell as cell
-    from homogenize import _matfree as mf
     from homogenize.bench.cell import _rve
     from homogenize.mesh import voxelize
     from micro.materials import FE, PDMS, elastic
@@ -222,17 +240,13 @@ def check_symmetry(rve_voxels: int = 64, voxels: int = 32) -> dict:
     mesh = voxelize(rve, voxels, method="composite")
     lam, mu, comp = cell._composite_fields(mesh, elastic(PDMS), elastic(FE))
     s = cell._CellSolver(mesh, lam, mu, deflate=True, stiff_mask=mesh.fraction >= 0.5,
-                         tol=1e-6, maxiter=10, solver="matrix-free", composite=comp)
+                         tol=1e-6, maxiter=10, solver="matrix-free", composite=comp,
+                         options=options(PatchedCycle(rve, DELTA)))
     rng = np.random.default_rng(5)
     x, y = rng.normal(size=(2, 3 * voxels ** 3, 1))
     out = {}
-    orig = mf.GeometricVCycle._cycle
-    patched = PatchedCycle(rve, DELTA)
-    for name, ctx in (("plain", mock.patch.object(cell, "MATFREE_SWEEPS", cell.MATFREE_SWEEPS)),
-                      ("patches", mock.patch.object(mf.GeometricVCycle, "_cycle",
-                                                    lambda self, i, B: patched(self, i, B, orig)))):
-        with ctx:
-            a, b = float((x[:, 0] @ (s.M @ y))[0]), float((y[:, 0] @ (s.M @ x))[0])
+    for name, M in (("plain", s.M.vcycle), ("patches", s.M)):
+        a, b = float((x[:, 0] @ (M @ y))[0]), float((y[:, 0] @ (M @ x))[0])
         out[name] = abs(a - b) / abs(a)
     return out
 
@@ -244,10 +258,8 @@ FULL_CASES = [(128, 128, 1e-8, 1.0), (128, 64, 1e-8, 0.5), (128, 64, 1e-8, 2.0)]
 
 
 def main() -> None:
-    import homogenize.cell as cell
     # this script's own (Python) patches against the solver of session 13: mapsim's particle
-    # patches (homogenize._patches, the default since session 14) stay off in its processes
-    cell.MATFREE_PATCH_SHELL = None
+    # patches (homogenize._patches, the default since session 14) stay off (options())
     if sys.argv[1:2] == ["--one"]:
         print(json.dumps(run_rve(int(sys.argv[2]), int(sys.argv[3]))))
         return

@@ -36,15 +36,13 @@ ITERATIONS = {"default": 60, "patches": 35}
 
 
 def run(rve_voxels: int, voxels: int, variant: str) -> dict:
-    from unittest import mock
-
     import homogenize.cell as cell
-    from homogenize import _amg
     from homogenize.bench.cell import _rve
+    from homogenize.solvers import SolverOptions, coupled_block_cg
     rve = _rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     rec = {}
-    orig = _amg.coupled_block_cg
+    orig = coupled_block_cg
 
     def instrumented(A, M, F, *, tol, maxiter, deflation=None, callback=None, groups=None):
         Xref, _ = orig(A, M, F, tol=1e-12, maxiter=400, deflation=deflation, groups=groups)
@@ -72,9 +70,11 @@ def run(rve_voxels: int, voxels: int, variant: str) -> dict:
         rec.update(residual=res, natural=nat[1:], error=err)
         return Xref, [[0.0]] * F.shape[1]
 
-    cell.MATFREE_PATCH_SHELL = MATFREE_PATCH_SHELL_STUDY if variant == "patches" else None
-    with mock.patch.object(cell, "coupled_block_cg", instrumented):
-        cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", tol=1e-6)
+    # the instrumented block CG in place of the solver's (SolverOptions.krylov)
+    opts = SolverOptions(krylov=instrumented, patch_shell_voxels=(
+        MATFREE_PATCH_SHELL_STUDY if variant == "patches" else None))
+    cell.homogenize_rve(rve, voxels, forces_N=forces, solver="matrix-free", tol=1e-6,
+                        options=opts)
     return {"rve_voxels": rve_voxels, "voxels": voxels, "n_particles": int(rve.n),
             "variant": variant, "shell_voxels": (MATFREE_PATCH_SHELL_STUDY
                                                  if variant == "patches" else None),

@@ -5,10 +5,10 @@ The bench RVE of `mapsim bench` (homogenize.bench.cell._rve) at 64^3 (100 partic
 ~2.5 voxels, composite voxels), the solver built exactly as homogenize_mesh builds it; for
 k = 1..8 right-hand sides (random, fixed seed) the median of 5 timings of: the fine-level product
 K u, one 8-colour block Gauss-Seidel sweep on the fine level, one sweep over the interface nodes
-only (since session 11, homogenize.cell.MATFREE_INTERFACE_SWEEPS), and one whole V-cycle (all
-sweeps, the residual, the transfers and the assembled 32^3 grid's AMG cycle). Also the share of
-fine nodes that read their own stencil row (next to a cut voxel or a phase boundary) and the
-share of interface nodes (those grown by MATFREE_INTERFACE_HALO nodes).
+only (since session 11, homogenize.solvers.SolverOptions.matfree_interface_sweeps), and one
+whole V-cycle (all sweeps, the residual, the transfers and the assembled 32^3 grid's AMG
+cycle). Also the share of fine nodes that read their own stencil row (next to a cut voxel or a phase boundary) and the
+share of interface nodes (those grown by SolverOptions.matfree_interface_halo nodes).
 Since session 13 also the pre-smoothing sweep from zero, plain and skipping the neighbours that
 are still zero (``MatFreeOperator.gauss_seidel_from_zero``, both after zeroing the block), and the
 V-cycle with the plain first sweep (as before session 13) next to the present one; these two
@@ -27,6 +27,7 @@ import numpy as np
 
 from homogenize import cell
 from homogenize.bench.cell import _rve
+from homogenize.solvers import SolverOptions
 from homogenize.mesh import voxelize
 from micro.materials import FE, PDMS, elastic
 
@@ -69,11 +70,11 @@ def main():
     args = ap.parse_args()
     n = args.voxels
     # the V-cycle of session 13, without particle patches (the default since session 14)
-    cell.MATFREE_PATCH_SHELL = None
+    opts = SolverOptions(patch_shell_voxels=None)
     mesh = voxelize(_rve(n), n, method="composite")
     lam, mu, comp = cell._composite_fields(mesh, elastic(PDMS), elastic(FE))
     s = cell._CellSolver(mesh, lam, mu, deflate=True, stiff_mask=mesh.fraction >= 0.5, tol=1e-6,
-                         maxiter=2000, solver="matrix-free", composite=comp)
+                         maxiter=2000, solver="matrix-free", composite=comp, options=opts)
     op, M = s.matvec, s.M
     fine = M.levels[0]
     rng = np.random.default_rng(0)
@@ -107,7 +108,7 @@ def main():
     out = {"voxels": n, "n_particles": int(mesh.n_particles),
            "own_stencil_row_share": op.own_share,
            "interface_share": fine.interface_share,
-           "interface_sweeps_per_side": cell.MATFREE_INTERFACE_SWEEPS, "rows": rows,
+           "interface_sweeps_per_side": opts.matfree_interface_sweeps, "rows": rows,
            "command": "results/cell/per_iteration_costs.py --voxels %d" % n,
            "note": "medians of 5; random right-hand sides; run alone (timings follow the load)"}
     args.out.write_text(json.dumps(out, indent=1) + "\n")
