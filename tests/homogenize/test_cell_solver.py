@@ -30,15 +30,37 @@ def _spd_system(n, k, seed, shift):
     return A, np.diag(1.0 / np.diag(A)), rng.normal(size=(n, k))
 
 
+def _same_recursion(h, g):
+    """Two relative residual histories of the same CG recursion run through different block
+    widths or code paths (other BLAS kernels and sums, so not bitwise equal on every CPU): equal
+    to round-off step by step (measured: up to 4e-13 of ||f|| in the last steps, where the
+    residual is ~1e-12), and the same iteration count but for a last residual that the round-off
+    moves across the tolerance. A different recursion (the coupled block Krylov space) differs
+    by 4-16 % of ||f|| in the first steps."""
+    k = min(len(h), len(g))
+    return abs(len(h) - len(g)) <= 1 and np.allclose(h[:k], g[:k], rtol=1e-3, atol=1e-11)
+
+
+def _within_tol(X, Y, A, tol):
+    """Two solutions that both stop at ||f - A x|| <= tol ||f||: each is within cond(A) tol of
+    the exact one (2-norm, per column), so they differ by at most 2 cond(A) tol (x 1.5 margin for
+    the drift of the recursive residual). The guaranteed bound on any CPU; measured 3e-16 to
+    5e-13 relative."""
+    X, Y = np.atleast_2d(X.T).T, np.atleast_2d(Y.T).T
+    bound = 3.0 * tol * np.linalg.cond(A) * np.linalg.norm(Y, axis=0)
+    return bool(np.all(np.linalg.norm(X - Y, axis=0) <= bound))
+
+
 def test_block_cg_equals_single_column_cg():
     A, D, F = _spd_system(60, 3, 0, 1.0)
     X, hist = block_cg(lambda Y: A @ Y, lambda Y: D @ Y, F, tol=1e-12, maxiter=200)
     assert np.allclose(A @ X, F, rtol=0, atol=1e-10 * np.abs(F).max())
     for c in range(3):
         x1, h1 = block_cg(lambda Y: A @ Y, lambda Y: D @ Y, F[:, [c]], tol=1e-12, maxiter=200)
-        # the same recursion per column: same iterates to round-off, same iteration count
-        assert len(h1[0]) == len(hist[c])
-        assert np.allclose(x1[:, 0], X[:, c], rtol=0, atol=1e-12 * np.abs(X).max())
+        # the same recursion per column: same iterates to round-off, same iteration count (A @ Y
+        # of width 1 and 3 runs other BLAS kernels: equal only to round-off, hence the bounds)
+        assert _same_recursion(h1[0], hist[c])
+        assert _within_tol(x1[:, 0], X[:, c], A, 1e-12)
 
 
 
@@ -64,9 +86,10 @@ def test_coupled_block_cg_one_column_is_cg_and_survives_dependent_columns():
     A, D, F = _spd_system(n, 2, 0, 1.0)
     x1, h1 = coupled_block_cg(lambda Y: A @ Y, lambda Y: D @ Y, F[:, [0]], tol=1e-12, maxiter=200)
     x0, h0 = block_cg(lambda Y: A @ Y, lambda Y: D @ Y, F[:, [0]], tol=1e-12, maxiter=200)
-    # one column: the same recursion as CG (same iterates to round-off)
-    assert len(h1[0]) == len(h0[0])
-    assert np.allclose(x1, x0, rtol=0, atol=1e-12 * np.abs(x0).max())
+    # one column: the same recursion as CG (same iterates to round-off: chunked Gram sums
+    # against the column dots)
+    assert _same_recursion(h1[0], h0[0])
+    assert _within_tol(x1, x0, A, 1e-12)
     # duplicate, scaled and zero columns and per-column tolerances: no breakdown (the dependent
     # directions are dropped from the step), each column at its own tolerance
     G = np.column_stack([F[:, 0], F[:, 1], F[:, 0], 3.0 * F[:, 1], np.zeros(n)])
@@ -76,6 +99,7 @@ def test_coupled_block_cg_one_column_is_cg_and_survives_dependent_columns():
         assert hist[c][-1] <= t
         r = np.linalg.norm(G[:, c] - A @ X[:, c])
         assert r <= 10.0 * t * max(np.linalg.norm(G[:, c]), 1.0)
+    # both duplicates stop at 1e-12 (cond(A) ~ 5): 2 cond tol |x|_2 <= 8e-11 max|x| (n = 60)
     assert np.allclose(X[:, 2], X[:, 0], rtol=0, atol=1e-10 * np.abs(X).max())
     assert not np.any(X[:, 4])
     assert len(hist[3]) < len(hist[1])
@@ -89,13 +113,13 @@ def test_coupled_block_cg_groups():
     mat, pre = (lambda Y: A @ Y), (lambda Y: D @ Y)
     X0, h0 = block_cg(mat, pre, F, tol=1e-11, maxiter=200)
     X1, h1 = coupled_block_cg(mat, pre, F, tol=1e-11, maxiter=200, groups=[0, 1, 2, 3])
-    assert [len(h) for h in h1] == [len(h) for h in h0]
-    assert np.allclose(X1, X0, rtol=0, atol=1e-10 * np.abs(X0).max())
+    assert len(h1) == len(h0) and all(map(_same_recursion, h1, h0))
+    assert _within_tol(X1, X0, A, 1e-11)
     X2, h2 = coupled_block_cg(mat, pre, F, tol=1e-11, maxiter=200, groups=[5, 5, 9, 9])
     Xa, ha = coupled_block_cg(mat, pre, F[:, :2], tol=1e-11, maxiter=200)
     Xb, hb = coupled_block_cg(mat, pre, F[:, 2:], tol=1e-11, maxiter=200)
-    assert [len(h) for h in h2] == [len(h) for h in ha + hb]
-    assert np.allclose(X2, np.hstack([Xa, Xb]), rtol=0, atol=1e-10 * np.abs(X0).max())
+    assert len(h2) == 4 and all(map(_same_recursion, h2, ha + hb))
+    assert _within_tol(X2, np.hstack([Xa, Xb]), A, 1e-11)
     with pytest.raises(ValueError, match="one label per column"):
         coupled_block_cg(mat, pre, F, tol=1e-11, maxiter=200, groups=[0, 1])
 
@@ -138,8 +162,10 @@ def test_block_vcycle_is_symmetric_positive_definite():
     # <u, M v> = <M u, v> to round-off; <u, M u> > 0
     assert abs(U[:, 0] @ MU[:, 1] - MU[:, 0] @ U[:, 1]) < 1e-10 * abs(U[:, 0] @ MU[:, 1])
     assert np.all(np.einsum("ij,ij->j", U, MU) > 0)
-    # column by column = block
-    assert np.allclose(M @ U[:, 0], MU[:, 0], rtol=1e-13, atol=0)
+    # column by column = block, to round-off: the coarsest level's dense Cholesky solve runs
+    # LAPACK/BLAS kernels chosen by the block width (round-off up to ~eps cond(A_coarse), cond
+    # ~4e6 here; measured 1e-16 of the largest entry), so no elementwise or bitwise equality
+    assert np.allclose(M @ U[:, 0], MU[:, 0], rtol=0, atol=1e-10 * np.abs(MU[:, 0]).max())
 
 
 def test_variational_stiffness_error_is_quadratic_in_the_solution_error():
@@ -183,8 +209,15 @@ def test_magnetic_column_at_the_strain_tolerance_where_its_field_or_strains_are_
     assert loose.settings["tol_magnetic"] == 1e-3 and kept.settings["tol_magnetic"] == 1e-6
     assert 1e-6 < loose.residuals["magnetic"] <= 1e-3 and kept.residuals["magnetic"] <= 1e-6
     assert loose.iterations["magnetic"] < kept.iterations["magnetic"]
-    # the same strain columns; the stress differs by the product of the two solution errors
-    assert np.allclose(loose.C_eff_Pa, kept.C_eff_Pa, rtol=1e-10, atol=0)
+    # the same strain columns; the stress differs by the product of the two solution errors.
+    # Not bitwise: the block's width changes when the magnetic column leaves it (iteration 13
+    # against 24), and width-dependent BLAS kernels round off differently on other CPUs (1e-13
+    # of the largest entry with OpenBLAS's Haswell kernels, where rtol 1e-10 failed on an
+    # entry 1e-5 of the largest). Both strain solves stop at 1e-6
+    # and C_eff is variational: each within ~2e-8 of the converged one (measured), so 1e-6 of
+    # the largest entry holds even if an iteration count differs; strain columns polluted by
+    # the magnetic column's 1e-3 would be off by ~2e-3 (measured at tol 1e-3).
+    assert np.abs(loose.C_eff_Pa - kept.C_eff_Pa).max() <= 1e-6 * np.abs(kept.C_eff_Pa).max()
     s = np.abs(kept.stress_mag_Pa).max()
     assert 0 < np.abs(loose.stress_mag_Pa - kept.stress_mag_Pa).max() < 1e-7 * s
     from homogenize.mesh import voxelize
