@@ -54,11 +54,11 @@ def cell_memory_bytes(voxels: int, solver: str = "fast", n_cases: int = 7) -> in
     (:func:`homogenize.mesh.estimate_memory_bytes`, measured within 30 % at 32^3-64^3).
     "matrix-free": no fine matrix; work vectors, diagonal blocks, element types and cut-voxel
     matrices, the assembled (n/2)^3 Galerkin matrix with its AMG hierarchy
-    (:func:`homogenize._matfree.memory_estimate_bytes`).
+    (:func:`homogenize.solvers._matfree.memory_estimate_bytes`).
     """
     n = int(voxels)
     if solver == "matrix-free":
-        from homogenize._matfree import memory_estimate_bytes
+        from homogenize.solvers._matfree import memory_estimate_bytes
         return memory_estimate_bytes(n, n_cases)
     from homogenize.mesh import estimate_memory_bytes
     return estimate_memory_bytes(n, "composite", n_cases)

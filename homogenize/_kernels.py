@@ -28,7 +28,7 @@ PARALLEL_MIN_ROWS = 50_000
 def block_acc(M, r0, c0, R, C, x, q, y, p, k, sign):
     """y[p, r, m] += sign * sum_c M[r0 + r, c0 + c] x[q, c, m] for the R x C block of the 2-D
     matrix M at (r0, c0) and the k columns m (the one block product of the BSR kernels here and
-    of the matrix-free operator, homogenize._matfree). 3x3 blocks (the voxel grid's) are read
+    of the matrix-free operator, homogenize.solvers._matfree). 3x3 blocks (the voxel grid's) are read
     once into scalars (measured 1.3-1.5x over one loop per matrix entry); other block sizes (the
     6-mode aggregates of smoothed aggregation) read each entry once and apply it to all k columns
     (the column loop innermost), except for one column, where a scalar sum per row is faster
@@ -151,7 +151,7 @@ def _typed_stencil_blocks(n, rows, etype, Ktab, tab, axis_order, indices, data):
     (27 len(rows), 3, 3). Block of node p at slot s = sum_a Ktab[type of the voxel with corner a
     at p][3 a:, 3 tab[a, s]:]. Serves the assembled solver (one type per (lambda, mu) pair,
     homogenize._assembly.assemble_bsr) and the matrix-free levels' assembled rows
-    (homogenize._matfree.typed_rows_bsr).
+    (homogenize.solvers._matfree.typed_rows_bsr).
     """
     for t in nb.prange(rows.shape[0]):
         p = rows[t]

@@ -29,12 +29,12 @@ DEFLATED by the six rigid-body modes of every stiff particle. Plain AMG-CG needs
 iterations at Fe/PDMS contrast (1e5) than at contrast 1, because each stiff particle adds six
 near-zero modes (its rigid motions in the soft matrix); deflation removes exactly those (Vuik,
 Segal & Meijerink 1999). ``solver="matrix-free"`` replaces the assembled fine matrix and its AMG
-by the matrix-free operator and geometric multigrid of :mod:`homogenize._matfree`, and couples
+by the matrix-free operator and geometric multigrid of :mod:`homogenize.solvers._matfree`, and couples
 the six strain cases in one deflated block CG (:attr:`SolverOptions.block_cg`): every strain column
 steps in the span of all their search directions; the magnetic column keeps its own recursion.
 On RVEs of many or small particles (:func:`use_patches`) its V-cycle also solves every particle
 with a shell of matrix exactly in the fine level (:attr:`SolverOptions.patch_shell_voxels`,
-:mod:`homogenize._patches`). Every solver setting is a field of the frozen
+:mod:`homogenize.solvers._patches`). Every solver setting is a field of the frozen
 :class:`homogenize.solvers.SolverOptions` passed as ``options=``.
 """
 from __future__ import annotations
@@ -53,8 +53,8 @@ from micro.rve import minimum_image
 
 from . import _assembly as asm
 from . import _budget
-from . import _matfree as mf
-from ._patches import ParticlePatches
+from .solvers import _matfree as mf
+from .solvers._patches import ParticlePatches
 from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
 from .mesh import METHODS, VoxelMesh, voxelize
@@ -252,7 +252,7 @@ class _CellSolver:
 
     def _init_matrix_free(self, lam, mu, composite, stiff_mask):
         """``solver="matrix-free"``: stencil-row operator, geometric multigrid down to the
-        assembled (n/2)^3 (or coarser) grid with pyamg below it (:mod:`homogenize._matfree`)."""
+        assembled (n/2)^3 (or coarser) grid with pyamg below it (:mod:`homogenize.solvers._matfree`)."""
         n = self.n
         if n % 2 or n < 8:
             raise InputError(f"solver='matrix-free' needs an even number of voxels >= 8 per edge "
@@ -839,7 +839,7 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         "matrix-free" (even voxel counts >= 8): no assembled fine matrix -- products from one
         27-block stencil row per node (shared by the nodes inside one phase), geometric
         multigrid (trilinear transfer, element-wise Galerkin coarse operators) down to <= 64^3,
-        pyamg below (:mod:`homogenize._matfree`); a fraction of the memory, for grids whose
+        pyamg below (:mod:`homogenize.solvers._matfree`); a fraction of the memory, for grids whose
         assembled matrix does not fit ("fast" switches to it then).
         Same C_eff to the solver tolerance. "fast" stays the default: its iteration count does
         not depend on the microstructure, while the trilinear coarse level of "matrix-free"

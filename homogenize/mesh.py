@@ -221,7 +221,7 @@ def check_memory(voxels: int, method: str = "composite", n_cases: int = 7) -> in
     else assembled); the solver actually chosen is checked again by the cell solve."""
     need = estimate_memory_bytes(voxels, method, n_cases)
     if int(voxels) % 2 == 0 and int(voxels) >= 8:
-        from homogenize._matfree import memory_estimate_bytes
+        from homogenize.solvers._matfree import memory_estimate_bytes
         need = min(need, memory_estimate_bytes(int(voxels), n_cases))
     have = machine_memory_bytes()
     if need > have:

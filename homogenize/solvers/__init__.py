@@ -5,6 +5,12 @@ voxels (:mod:`homogenize.cut`), the conforming meshes and the macro FEM all take
 smoothed-aggregation hierarchies (:func:`smoothed_aggregation`, near-null space from
 :func:`rigid_body_modes`), V-cycles and block CG from here. Settings are frozen objects passed in
 (:class:`SolverOptions`, :class:`AMGOptions`), never module globals.
+
+Modules: ``options`` (the settings), ``amg`` (smoothed aggregation, its block V-cycle, the BSR
+operator), ``krylov`` (block CG, coupled block CG, deflation), and the private ``_matfree`` (the
+matrix-free voxel operator and its geometric multigrid) and ``_patches`` (the particle patches
+of its fine level). Numba kernels: :mod:`homogenize._kernels`, and (not yet moved there) the
+node-operator, transfer and patch kernels inside ``_matfree`` and ``_patches``.
 """
 from .amg import (SA_SMOOTH, BlockVCycle, BSROp, greedy_colours, grid_colours,
                   grid_node_coordinates, rigid_body_modes, smoothed_aggregation)

@@ -234,7 +234,7 @@ class _Level:
         self._op = None
 
     def use_operator(self, op):
-        """Smooth and take residuals with ``op`` (a :class:`homogenize._matfree.MatFreeOperator`
+        """Smooth and take residuals with ``op`` (a :class:`homogenize.solvers._matfree.MatFreeOperator`
         of this level's matrix, the same colours) instead of the assembled blocks, and drop
         those: a geometric coarse grid handed to smoothed aggregation keeps only its transfer."""
         self._op = op

@@ -144,7 +144,7 @@ class SolverOptions:
         ``solver="fast"`` keeps independent columns: its smoothed aggregation leaves no such
         outliers (the same iterations coupled, 64^3 bench RVE).
     patch_shell_voxels : float >= 0 or None -- matrix-free solver: particle patches
-        (homogenize._patches): the fine nodes within r + this many voxels of each particle's
+        (homogenize.solvers._patches): the fine nodes within r + this many voxels of each particle's
         centre solved exactly in the fine level of the V-cycle (None: never), built when
         :func:`homogenize.cell.use_patches` says so. A 1-voxel shell took 188 s but 6.1 GB at
         128^3 (18 / 35 iterations), half a voxel 213-219 s and 5.8 GB (35 / 36)

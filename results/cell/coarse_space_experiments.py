@@ -52,7 +52,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 import homogenize._assembly as asm
-import homogenize._matfree as mf
+import homogenize.solvers._matfree as mf
 import homogenize.cell as cell
 from homogenize.solvers import (BlockVCycle, SolverOptions, grid_node_coordinates,
                                 rigid_body_modes, smoothed_aggregation)

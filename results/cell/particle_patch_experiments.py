@@ -3,7 +3,7 @@ the numbers behind "Particle patches" in results/cell/README.md.
 
 One patch per particle: the fine-grid nodes within r + delta voxels of its centre (periodic; the
 pinned node left out). The patch's principal submatrix of K, assembled from the operator's own
-stencil rows (homogenize._matfree.node_stencils), is factorized densely (Cholesky). In the V-cycle
+stencil rows (homogenize.solvers._matfree.node_stencils), is factorized densely (Cholesky). In the V-cycle
 the patches are solved one after the other (multiplicative Schwarz):
 - after the fine level's pre-smoothing, in particle order;
 - before its post-smoothing, in reverse order.
@@ -107,7 +107,7 @@ class PatchedCycle:
             Xv[nodes] += cho_solve(fac, r.reshape(-1, k)).reshape(-1, 3, k)
 
     def __call__(self, vcycle, i, B, _orig):
-        from homogenize import _matfree as mf
+        from homogenize.solvers import _matfree as mf
         if i != 0:
             return _orig(vcycle, i, B)
         L = vcycle.levels[0]
@@ -155,7 +155,7 @@ class PatchedVCycle:
 
 def options(patched: PatchedCycle | None = None):
     """The solver of session 13 (this script's own Python patches against it): mapsim's particle
-    patches (homogenize._patches, the default since session 14) off; with ``patched``, the
+    patches (homogenize.solvers._patches, the default since session 14) off; with ``patched``, the
     V-cycle's fine level replaced by it (SolverOptions.preconditioner)."""
     from homogenize.solvers import SolverOptions
     opts = SolverOptions(patch_shell_voxels=None)
@@ -259,7 +259,7 @@ FULL_CASES = [(128, 128, 1e-8, 1.0), (128, 64, 1e-8, 0.5), (128, 64, 1e-8, 2.0)]
 
 def main() -> None:
     # this script's own (Python) patches against the solver of session 13: mapsim's particle
-    # patches (homogenize._patches, the default since session 14) stay off (options())
+    # patches (homogenize.solvers._patches, the default since session 14) stay off (options())
     if sys.argv[1:2] == ["--one"]:
         print(json.dumps(run_rve(int(sys.argv[2]), int(sys.argv[3]))))
         return

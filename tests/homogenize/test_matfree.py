@@ -1,4 +1,4 @@
-"""The matrix-free cell solver (homogenize._matfree, solver="matrix-free").
+"""The matrix-free cell solver (homogenize.solvers._matfree, solver="matrix-free").
 
 Operator equal to the assembled one to round-off (matrix, particle and composite voxels, periodic
 wrap, pinned node); Gauss-Seidel sweep equal to the assembled sweep; the trilinear transfer
@@ -19,7 +19,7 @@ import pytest
 
 from homogenize import _assembly as asm
 from homogenize import _budget
-from homogenize import _matfree as mf
+from homogenize.solvers import _matfree as mf
 from homogenize import cell as C
 from homogenize.solvers import AMGOptions, SolverOptions, grid_colours
 from homogenize.solvers.amg import _Level

@@ -1,4 +1,4 @@
-"""Particle patches in the matrix-free V-cycle (homogenize._patches).
+"""Particle patches in the matrix-free V-cycle (homogenize.solvers._patches).
 
 Patch nodes against a brute-force distance test (periodic wrap, pinned node left out); the
 colouring never puts two coupled patches in one colour (brute force over the stencil
@@ -14,8 +14,8 @@ import types
 import numpy as np
 import pytest
 
-from homogenize import _matfree as mf
-from homogenize import _patches as pt
+from homogenize.solvers import _matfree as mf
+from homogenize.solvers import _patches as pt
 from homogenize import cell as C
 from homogenize.solvers import AMGOptions, SolverOptions
 

@@ -23,7 +23,7 @@ import numba as nb
 from micro._numba import parallel_and_serial
 from micro.rve import minimum_image
 
-from ._kernels import block_acc
+from .._kernels import block_acc
 
 __all__ = ["ParticlePatches", "patch_nodes", "patch_colours", "patch_factor_bytes",
            "select_patches", "MAX_NODES", "BYTES_PER_NODE"]
@@ -335,7 +335,7 @@ solve_colour, solve_colour_serial = parallel_and_serial(_solve_colour)
 
 
 class ParticlePatches:
-    """The particle patches of one matrix-free fine operator (:class:`homogenize._matfree.
+    """The particle patches of one matrix-free fine operator (:class:`homogenize.solvers._matfree.
     MatFreeOperator`): ``forward(X, B)`` / ``backward(X, B)`` apply one multiplicative Schwarz
     sweep over them in place in X (colours in order / in reverse).
 

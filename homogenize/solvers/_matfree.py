@@ -32,10 +32,10 @@ import scipy.sparse as sp
 
 from micro._numba import parallel_and_serial
 
-from . import _assembly as asm
-from . import _kernels as kn
+from .. import _assembly as asm
+from .. import _kernels as kn
 from . import _patches
-from ._kernels import block_acc
+from .._kernels import block_acc
 
 __all__ = ["ElementField", "element_field", "MatFreeOperator", "coarsen", "GeometricVCycle",
            "child_prolongations", "prolongation_matrix", "typed_bsr", "memory_estimate_bytes"]
@@ -330,7 +330,7 @@ class MatFreeOperator:
     @property
     def dinv(self) -> np.ndarray:
         if self._dinv is None:
-            from .solvers.amg import _block_inverse
+            from .amg import _block_inverse
             self._dinv = np.ascontiguousarray(_block_inverse(self.diag))
         return self._dinv
 
@@ -523,7 +523,7 @@ def coarsen(field: ElementField, chunk: int = 4096) -> ElementField:
 
 
 def grid_colours(n: int) -> list[np.ndarray]:
-    from .solvers.amg import grid_colours as gc
+    from .amg import grid_colours as gc
     return gc(n)
 
 
@@ -569,7 +569,7 @@ class GeometricVCycle:
     a phase boundary, grown by ``interface_halo`` nodes): extra sweeps confined to where the
     error the trilinear coarse grid cannot take is ("local relaxation", as Brandt & Livne,
     Multigrid Techniques, 2nd ed. 2011, use it near singularities).
-    patches : None or a :class:`homogenize._patches.ParticlePatches` of the fine operator: its
+    patches : None or a :class:`homogenize.solvers._patches.ParticlePatches` of the fine operator: its
     forward sweep after the fine pre-smoothing, its backward sweep before the fine post-smoothing.
     Pre-smoothing: the full sweeps, then the interface ones (then the patches); post-smoothing: the
     same in reverse order and colours, so the cycle stays symmetric.
@@ -579,8 +579,7 @@ class GeometricVCycle:
                  amg_options, assembled_max: int = 64, fine_op: MatFreeOperator | None = None,
                  sweeps: int = 1, coarse: str = "amg", interface_sweeps: int = 0,
                  interface_halo: int = 1, patches=None):
-        from .solvers.amg import (BlockVCycle, grid_node_coordinates, rigid_body_modes,
-                                  smoothed_aggregation)
+        from .amg import BlockVCycle, grid_node_coordinates, rigid_body_modes, smoothed_aggregation
         if coarse not in ("amg", "lu"):
             raise ValueError(f"coarse must be 'amg' or 'lu', got {coarse!r}")
         self.levels = []
@@ -695,7 +694,7 @@ def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0
     half as many on the coarse one; the operator's own stencil rows, ~2 nodes of 1.9 kB per cut
     voxel, replace them once the hierarchy is built); the assembled (n/2)^3 Galerkin matrix with
     its pyamg hierarchy (3 x 27 blocks of 72 B per coarse node); the particle patches' factors
-    at their limit (:data:`homogenize._patches.BYTES_PER_NODE` per node); plus the Python/numba
+    at their limit (:data:`homogenize.solvers._patches.BYTES_PER_NODE` per node); plus the Python/numba
     base (0.6 GB).
     Measured peak RSS (bench, 7 load cases, _rve(n) with cut voxels ~5 %): 0.32 GB at 32^3
     (model 0.71), 0.93 GB at 64^3 (model 1.50), 5.35 GB at 128^3 (model 7.8): the model is an
