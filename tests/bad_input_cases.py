@@ -223,6 +223,11 @@ def C(*argv, code=2, words=(), creates=(), subprocess=False, note=""):
     return Case(argv[0], tuple(argv), code, tuple(words), tuple(creates), subprocess, note)
 
 
+# a quick cylinder for `mapsim specimen` (each bad case changes one option)
+_SPEC = ("specimen", "--shape", "cylinder", "--radius-m", "1e-3", "--length-m", "1.6e-3",
+         "--law", "froehlich-kennelly", "--chi0", "2", "--Ms-A-per-m", "1e5",
+         "--shear-modulus-Pa", "1e5")
+
 _EXPORT = ("export", "--to", "abaqus", "--body-force-N-m3", "4e4", "--E-Pa", "2e6", "--nu",
            "0.45", "--density-kg-m3", "1210")
 
@@ -491,6 +496,43 @@ CASES = [
     C("relax", "rve.h5", "--boundary", "strain", "--mean-strain", "0.5,0,0,0,0,0", "--json",
       "o.json", words=("mean_strain", "0.1")),
     C("relax", "rve.h5", "--json", "rve.h5", words=("--json", "input")),
+    # ------------------------------------------------------------------ specimen
+    C(*_SPEC, "--B", "0.5,0.2", words=("--B", "increase strictly")),
+    C(*_SPEC, "--B", "-0.1", words=("--B", ">= 0")),
+    C(*_SPEC, "--B", "0:1:x", words=("--B", "START:STOP:COUNT")),
+    C(*_SPEC, "--B", "0:100:3", words=("--B", "50 T")),
+    C(*_SPEC, "--model", "magic", words=("--model",)),
+    C(*_SPEC, "--model", "affine", words=("--model affine", "--phi")),
+    C(*_SPEC, "--model", "relaxed", words=("--kappa", "relax tables")),
+    C(*_SPEC, "--kappa", "0.2", words=("--kappa", "relaxed")),
+    C(*_SPEC, "--phi", "0.1", words=("--phi", "affine")),
+    C(*_SPEC, "--radius-m", "0", words=("--radius-m", "(0, 10]")),
+    C(*_SPEC, "--radius-m=-1e-3", words=("--radius-m",)),
+    C(*_SPEC, "--length-m", "0", words=("--length-m",)),
+    C(*_SPEC, "--nu", "0.5", words=("--nu", "(-1, 0.5)")),
+    C(*_SPEC, "--nu=-1", words=("--nu", "(-1, 0.5)")),
+    C(*_SPEC, "--matrix-E-Pa", "1e6", words=("--shear-modulus-Pa", "--matrix-E-Pa")),
+    C(*_SPEC, "--n-mesh", "1", words=("--n-mesh", "[2, 64]")),
+    C(*_SPEC, "--n-boundary", "8", words=("--n-boundary", "[16, 1024]")),
+    C(*_SPEC, "--json", "adir", words=("--json", "directory")),
+    C(*_SPEC, "--png", "fifo", words=("--png", "not a regular file")),
+    C(*_SPEC, "--json", "s.json", "--vtu", "s.json", words=("--vtu", "also given")),
+    C("specimen", "--shape", "cube", "--radius-m", "1e-3", "--law", "linear", "--chi", "1",
+      "--shear-modulus-Pa", "1e5", words=("--shape",)),
+    C("specimen", "--shape", "sphere", "--radius-m", "1e-3", "--law", "magic", "--chi", "1",
+      "--shear-modulus-Pa", "1e5", words=("--law",)),
+    C("specimen", "--shape", "sphere", "--radius-m", "1e-3", "--law", "langevin", "--chi0",
+      "2", "--shear-modulus-Pa", "1e5", words=("--law langevin", "--Ms-A-per-m")),
+    C("specimen", "--shape", "sphere", "--radius-m", "1e-3", "--law", "linear", "--chi0", "2",
+      "--shear-modulus-Pa", "1e5", words=("--law linear", "--chi")),
+    C("specimen", "--shape", "sphere", "--radius-m", "1e-3", "--length-m", "2e-3", "--law",
+      "linear", "--chi", "1", "--shear-modulus-Pa", "1e5", words=("--length-m", "sphere")),
+    C("specimen", "--shape", "cylinder", "--radius-m", "1e-3", "--law", "linear", "--chi",
+      "1", "--shear-modulus-Pa", "1e5", words=("--length-m", "cylinder")),
+    C("specimen", "--shape", "sphere", "--radius-m", "1e-3", "--law", "linear", "--chi", "1",
+      words=("--shear-modulus-Pa", "--matrix-E-Pa")),
+    C(*_SPEC, "--B", "0.2", "--n-mesh", "4", "--n-boundary", "24", "--json", "s.json",
+      "--quiet", code=0, creates=("s.json",)),
 ]
 
 # Every key of every table of a study file, each with one bad value (the rve evaluator, which

@@ -22,13 +22,13 @@ import sys
 
 from micro._validate import EXIT_CONVERGENCE, EXIT_INPUT, ConvergenceError, InputError
 
-from homogenize.cli import bench, cell, experiments, macro, relax, rve, tables
+from homogenize.cli import bench, cell, experiments, macro, relax, rve, specimen, tables
 from homogenize.cli._common import Formatter, check_output_dir, check_outputs
 
 __all__ = ["main", "build_parser"]
 
 # Command groups, in the order their commands appear in --help.
-_GROUPS = (macro, rve, cell, relax, tables, experiments, bench)
+_GROUPS = (macro, specimen, rve, cell, relax, tables, experiments, bench)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,299 @@
+"""``mapsim specimen``: the change of length of a finite specimen (sphere, spheroid, cylinder)
+in a uniform applied field, at finite strain (:func:`homogenize.macro.specimen.solve_specimen`)."""
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import numpy as np
+
+from micro._io import atomic_path, manifest, write_json
+from micro._validate import ConvergenceError, InputError
+
+from homogenize.cli._common import config_of, float_in, int_in
+from homogenize.cli.relax import _steps as _field_steps   # the project's --B syntax
+
+__all__ = ["register"]
+
+_DOC = """\
+The specimen in its field: what a magnetostriction experiment measures, the change of LENGTH
+of a finite body between its end faces (or poles), not the volume-mean strain of an RVE. The
+field in and around the body (axisymmetric FEM, exact exterior by the Kelvin transformation,
+the composite's law M(H) by Newton) and the finite-strain, nearly incompressible neo-Hookean
+body (Taylor-Hood u-p) are solved in turn on the DEFORMED body until the change of length
+stops changing, field step after field step. Magnetic loads: Kelvin's, as the traction
+[(mu0/2)(M.n)^2 + psi] n on the current surface plus the stress psi I, psi = mu0 int_0^H M dh.
+
+Models: continuum -- the Kelvin loads only (the continuum models of Lefevre, Danas &
+Lopez-Pamies 2017, Stewart & Anand 2025); affine -- plus the particles' microstructural stress
+kappa mu0 |M|^2 (mm - I/3) of randomly dispersed particles moving with the matrix, kappa(phi,
+m = |M|/(phi Ms)) from the project's cell FEM (needs --phi and --particle-Ms-A-per-m);
+relaxed -- the same stress with the kappa of RVEs whose particles restructure in the field:
+give it with --kappa; it must come from relax tables (`mapsim relax`), this command does not
+compute it.
+
+The law parameters (--chi, or --chi0 with --Ms-A-per-m) are those of the COMPOSITE (its M(H)
+measured or from `mapsim homogenize`), not of the particles. The body's elasticity: its shear
+modulus, or Young's modulus with Poisson's ratio (default 0.499: nearly incompressible,
+K = 500 G; 0.5 itself is not accepted).
+
+Verification (tests/homogenize/macro/test_specimen.py): Lamb's sphere, pole strain 5/57 and
+mean strain 1/15 of mu0 M^2/G within 1 %; a cylinder L/D = 0.8, mean strain against the
+virtual work of its demagnetizing energy within 1.5 % at 128 boundary segments, converging at
+first order in the field mesh. Axisymmetric only: no 3D specimen exists yet.
+
+Prints one line per field step and writes (each optional) --json (per step: B_applied_T,
+M_mean_A_per_m, H_mean_A_per_m, demag_factor, changes of length and strains on the axis and
+between the end-face means, diameter change and lateral strain, volume-mean axial strain,
+staggered and Newton iterations; a manifest), --png (strains against B) and --vtu (the
+deformed mechanics mesh of the last step with displacement and mean stress, for ParaView)."""
+
+_LAWS = ("linear", "froehlich-kennelly", "langevin", "tanh")
+
+# Ranges (exit 2 at parse time): wide enough for any real specimen and composite, narrow
+# enough that a typo (a 1e30 Pa modulus, a 1 km specimen) is caught before meshing.
+_SIZE = float_in("--radius-m", 0.0, 10.0, "m", lo_open=True)
+_LEN = float_in("--length-m", 0.0, 10.0, "m", lo_open=True)
+_CHI = float_in("--chi", 0.0, 1e6)
+_CHI0 = float_in("--chi0", 0.0, 1e6, lo_open=True)
+_MS = float_in("--Ms-A-per-m", 0.0, 1e7, "A/m", lo_open=True)
+_G = float_in("--shear-modulus-Pa", 1.0, 1e12, "Pa")
+_E = float_in("--matrix-E-Pa", 1.0, 1e12, "Pa")
+_NU = float_in("--nu", -1.0, 0.5, lo_open=True, hi_open=True)
+_PHI = float_in("--phi", 0.0, 0.74, lo_open=True)
+_PMS = float_in("--particle-Ms-A-per-m", 0.0, 1e7, "A/m", lo_open=True)
+_KAPPA = float_in("--kappa", -100.0, 100.0)
+_TOL = float_in("--tol", 0.0, 0.1, lo_open=True)
+_RELAX = float_in("--relaxation", 0.0, 1.0, lo_open=True)
+#: the largest applied field accepted [T]: beyond any laboratory magnet; a larger value is a
+#: typo (mT given as T)
+_B_MAX_T = 50.0
+
+
+def _steps(text: str) -> np.ndarray:
+    """--B (one value or START:STOP:COUNT or comma-separated) -> increasing steps [T]."""
+    B = _field_steps(text)
+    if B.size > 1000:
+        raise InputError(f"--B: at most 1000 field steps, got {B.size}")
+    if not np.all(np.isfinite(B)) or B[0] < 0.0 or B[-1] > _B_MAX_T or np.any(np.diff(B) <= 0):
+        raise InputError(f"--B: the applied field steps mu0 H0 must be finite, >= 0 T, at most "
+                         f"{_B_MAX_T:g} T and increase strictly, got {text!r}")
+    return B
+
+
+def _law(args):
+    from homogenize.macro import magnetostatics as ms
+    given = {"--chi": args.chi, "--chi0": args.chi0, "--Ms-A-per-m": args.Ms_A_per_m}
+    need = ("--chi",) if args.law == "linear" else ("--chi0", "--Ms-A-per-m")
+    missing = [k for k in need if given[k] is None]
+    if missing:
+        raise InputError(f"--law {args.law} needs {' and '.join(need)} (the composite's law "
+                         f"parameters); missing {', '.join(missing)}")
+    extra = [k for k, v in given.items() if v is not None and k not in need]
+    if extra:
+        raise InputError(f"--law {args.law} takes {' and '.join(need)}, not "
+                         f"{', '.join(extra)}")
+    if args.law == "linear":
+        return ms.linear(args.chi)
+    make = {"froehlich-kennelly": ms.froehlich_kennelly, "langevin": ms.langevin,
+            "tanh": ms.tanh}[args.law]
+    return make(args.chi0, args.Ms_A_per_m)
+
+
+def _solid(args):
+    from homogenize.macro import finite_strain as fs
+    if (args.shear_modulus_Pa is None) == (args.matrix_E_Pa is None):
+        raise InputError("give the body's stiffness: --shear-modulus-Pa [Pa] or --matrix-E-Pa "
+                         "[Pa] (with --nu), one of them")
+    G = (args.shear_modulus_Pa if args.shear_modulus_Pa is not None
+         else args.matrix_E_Pa / (2.0 * (1.0 + args.nu)))
+    return fs.NeoHookeanSolid.from_poisson(G, args.nu)
+
+
+def _kappa(args):
+    if args.model != "affine" and (args.phi is not None or args.particle_Ms_A_per_m is not None):
+        raise InputError(f"--phi and --particle-Ms-A-per-m belong to --model affine, not "
+                         f"--model {args.model}")
+    if args.model != "relaxed" and args.kappa is not None:
+        raise InputError(f"--kappa belongs to --model relaxed, not --model {args.model}")
+    if args.model == "affine":
+        if args.phi is None or args.particle_Ms_A_per_m is None:
+            raise InputError("--model affine needs --phi (particle volume fraction, (0, 0.74]) "
+                             "and --particle-Ms-A-per-m (the particles' saturation, A/m)")
+        from homogenize.macro.specimen import affine_kappa
+        return affine_kappa(args.phi, args.particle_Ms_A_per_m)
+    if args.model == "relaxed":
+        if args.kappa is None:
+            raise InputError("--model relaxed needs --kappa [-], the microstructural stress "
+                             "coefficient of relaxed RVEs: it must come from relax tables "
+                             "(`mapsim relax`), this command does not compute it")
+        return args.kappa
+    return None
+
+
+def _specimen(args):
+    from homogenize.macro.specimen import Specimen
+    if args.shape == "sphere" and args.length_m is not None:
+        raise InputError("--length-m is not taken for --shape sphere (its length is 2 R); use "
+                         "--shape spheroid for another length")
+    if args.shape != "sphere" and args.length_m is None:
+        raise InputError(f"--shape {args.shape} needs --length-m [m] (its length along the "
+                         "field)")
+    return Specimen(args.shape, args.radius_m, args.length_m, n_mesh=args.n_mesh,
+                    n_boundary=args.n_boundary)
+
+
+def _json_ready(obj):
+    """NaN/inf -> None (JSON has no NaN): e.g. the end-face mean of a sphere, N at B = 0."""
+    if isinstance(obj, dict):
+        return {k: _json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_ready(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def _f(v, width: int) -> str:
+    """``v`` in ``width`` columns, ``-`` where it is undefined (None, NaN)."""
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return format("-", f">{width}")
+    return format(v, f"{width}.4e")
+
+
+def _cmd(args) -> int:
+    from homogenize.macro.specimen import solve_specimen
+    # everything checked before any work
+    B = _steps(args.B)
+    spec = _specimen(args)
+    law = _law(args)
+    solid = _solid(args)
+    kappa = _kappa(args)
+    t0 = time.perf_counter()
+
+    def progress(i, n, b):
+        if not args.quiet:
+            print(f"[specimen] field step {i}/{n} at {b:.4g} T done "
+                  f"({time.perf_counter() - t0:.1f} s)", file=sys.stderr, flush=True)
+
+    try:
+        res = solve_specimen(spec, law, solid, B, model=args.model, kappa=kappa, tol=args.tol,
+                             max_stagger=args.max_stagger, relaxation=args.relaxation,
+                             load_steps=args.load_steps, progress=progress)
+    except ConvergenceError as exc:
+        hist = ", ".join(f"{h:.3g}" for h in exc.residual_history) or "-"
+        print(f"mapsim specimen: residual history (relative): {hist}", file=sys.stderr)
+        raise
+    seconds = time.perf_counter() - t0
+    out = _json_ready(res.to_dict())
+    out["solid"] = {"shear_modulus_Pa": solid.G_Pa, "bulk_modulus_Pa": solid.K_Pa,
+                    "poisson_ratio": args.nu,
+                    "from": "--shear-modulus-Pa" if args.shear_modulus_Pa is not None
+                    else "--matrix-E-Pa"}
+    if args.model == "relaxed":
+        out["kappa"] = {"value": args.kappa, "source": "given (--kappa; from relax tables)"}
+    elif args.model == "affine":
+        out["kappa"] = {"phi": args.phi, "particle_Ms_A_per_m": args.particle_Ms_A_per_m,
+                        "source": "affine_kappa: cell FEM of dispersed particles"}
+    out["seconds"] = seconds
+    out["manifest"] = manifest(config_of(args), None)
+    written = []
+    if args.json:
+        write_json(args.json, out)
+        written.append(args.json)
+    if args.png:
+        from homogenize.macro._specimen_output import plot_specimen_strains
+        fig = plot_specimen_strains(out)
+        with atomic_path(args.png) as tmp:
+            fig.savefig(tmp, format="png", dpi=120)
+        written.append(args.png)
+    if args.vtu:
+        from homogenize.macro._specimen_output import write_specimen_vtu
+        write_specimen_vtu(args.vtu, res)
+        written.append(args.vtu)
+    print(f"{'B [T]':>8} {'<M> [A/m]':>11} {'axis strain':>12} {'end-mean':>11} "
+          f"{'lateral':>11} {'mean e_zz':>11} {'stagger':>7} {'newton':>6}")
+    for s in out["steps"]:
+        print(f"{s['B_applied_T']:8.4g} {s['M_mean_A_per_m']:11.5g} "
+              f"{_f(s['strain_axis'], 12)} {_f(s['strain_end_mean'], 11)} "
+              f"{_f(s['lateral_strain'], 11)} {_f(s['mean_strain_zz'], 11)} "
+              f"{s['stagger_iterations']:7d} {s['newton_iterations']:6d}")
+    last = res.steps[-1]
+    print(f"{spec.shape} L/D = {spec.aspect_ratio:.4g}, model {args.model}, {res.law}, "
+          f"G = {solid.G_Pa:.4g} Pa, nu = {args.nu:g}: strain on the axis "
+          f"{last.strain_axis:.4e} at {last.B_applied_T:g} T; {len(res.steps)} field steps in "
+          f"{seconds:.1f} s" + (f"; wrote {', '.join(map(str, written))}" if written else ""))
+    return 0
+
+
+def register(sub, formatter) -> None:
+    """Add the ``specimen`` command."""
+    from homogenize.macro.specimen import MODELS, SHAPES
+    p = sub.add_parser("specimen", formatter_class=formatter, description=_DOC,
+                       help="change of length of a finite specimen in a uniform field "
+                            "(finite strain, axisymmetric)")
+    g = p.add_argument_group("specimen")
+    g.add_argument("--shape", required=True, choices=SHAPES, help="body of revolution about "
+                   "the field axis")
+    g.add_argument("--radius-m", dest="radius_m", type=_SIZE, required=True,
+                   help="radius R (equatorial radius of a spheroid) [m]")
+    g.add_argument("--length-m", dest="length_m", type=_LEN, default=None,
+                   help="length along the field, end face to end face or pole to pole [m] "
+                        "(spheroid, cylinder; not for a sphere)")
+    g = p.add_argument_group("material (the composite)")
+    g.add_argument("--law", required=True, choices=_LAWS,
+                   help="the composite's magnetization law M(H)")
+    g.add_argument("--chi", type=_CHI, default=None,
+                   help="susceptibility [-] of --law linear (M = chi H)")
+    g.add_argument("--chi0", type=_CHI0, default=None,
+                   help="initial susceptibility [-] of the saturating laws")
+    g.add_argument("--Ms-A-per-m", dest="Ms_A_per_m", type=_MS, default=None,
+                   help="saturation magnetization of the composite [A/m] (saturating laws)")
+    g.add_argument("--shear-modulus-Pa", dest="shear_modulus_Pa", type=_G, default=None,
+                   help="shear modulus G of the body [Pa]")
+    g.add_argument("--matrix-E-Pa", dest="matrix_E_Pa", type=_E, default=None,
+                   help="instead of G: Young's modulus of the body [Pa] (G = E / 2(1 + nu); "
+                        "taken as the body's modulus, no stiffening by the particles is added)")
+    g.add_argument("--nu", type=_NU, default=0.499,
+                   help="Poisson's ratio [-] in (-1, 0.5); 0.499 = nearly incompressible "
+                        "(K = 500 G)")
+    g = p.add_argument_group("field and model")
+    g.add_argument("--B", default="0:1.2:13",
+                   help="applied field mu0 H0 along the axis [T]: one value, START:STOP:COUNT "
+                        "or comma-separated; >= 0 and strictly increasing")
+    g.add_argument("--model", choices=MODELS, default="continuum",
+                   help="continuum (Kelvin loads only), affine (+ microstructural stress of "
+                        "dispersed particles: --phi, --particle-Ms-A-per-m), relaxed (+ the "
+                        "stress of relaxed RVEs: --kappa from relax tables)")
+    g.add_argument("--phi", type=_PHI, default=None,
+                   help="particle volume fraction [-] (--model affine)")
+    g.add_argument("--particle-Ms-A-per-m", dest="particle_Ms_A_per_m", type=_PMS,
+                   default=None, help="saturation magnetization of the particles [A/m] "
+                                      "(--model affine: m = |M| / (phi Ms))")
+    g.add_argument("--kappa", type=_KAPPA, default=None,
+                   help="microstructural stress coefficient [-] of --model relaxed; must come "
+                        "from relax tables (`mapsim relax`)")
+    g = p.add_argument_group("discretization and iteration")
+    g.add_argument("--n-mesh", dest="n_mesh", type=int_in("--n-mesh", 2, 64), default=8,
+                   help="elements along the radius of the mechanics mesh (quarter section)")
+    g.add_argument("--n-boundary", dest="n_boundary", type=int_in("--n-boundary", 16, 1024),
+                   default=48, help="segments of the field mesh along the body's meridian "
+                                    "profile (the Kelvin loads converge at first order in it)")
+    g.add_argument("--tol", type=_TOL, default=1e-4,
+                   help="relative change of the change of length at which a field step's "
+                        "field-mechanics iteration stops [-]")
+    g.add_argument("--max-stagger", dest="max_stagger", type=int_in("--max-stagger", 1, 200),
+                   default=30, help="field-mechanics iterations per field step before exit 3")
+    g.add_argument("--relaxation", type=_RELAX, default=1.0,
+                   help="under-relaxation of the magnetic loads between iterations, (0, 1]")
+    g.add_argument("--load-steps", dest="load_steps", type=int_in("--load-steps", 1, 64),
+                   default=2, help="load increments of each mechanics (Newton) solve")
+    g = p.add_argument_group("output")
+    g.add_argument("--json", default=None, help="results per field step and a manifest (JSON)")
+    g.add_argument("--png", default=None, help="figure of the strains against the applied "
+                                               "field")
+    g.add_argument("--vtu", default=None, help="the deformed mechanics mesh of the last field "
+                                               "step (VTU: displacement, mean stress)")
+    g.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=_cmd, outputs=("json", "png", "vtu"))

@@ -1,0 +1,139 @@
+"""``mapsim specimen`` end to end on coarse meshes: the JSON keys, the PNG, the VTU read back
+with meshio (deformed half section of the body), refusals (exit 2, nothing written) and a
+field-mechanics iteration that does not converge (exit 3, residual history, no file).
+
+The physics (Lamb's sphere, the cylinder's virtual work) is tested in
+tests/homogenize/macro/test_specimen.py; here only what the command adds."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from homogenize.cli import main
+
+R, L = 1e-3, 1.6e-3
+# coarse meshes (seconds): --n-mesh 4 --n-boundary 24; the Froehlich-Kennelly composite with
+# G = 1e5 Pa strains the cylinder by ~0.6 % at 0.8 T (converges in 2-3 staggered iterations)
+CYL = ["specimen", "--shape", "cylinder", "--radius-m", str(R), "--length-m", str(L),
+       "--law", "froehlich-kennelly", "--chi0", "2", "--Ms-A-per-m", "1e5",
+       "--shear-modulus-Pa", "1e5", "--n-mesh", "4", "--n-boundary", "24"]
+
+
+@pytest.fixture(scope="module")
+def cylinder_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("specimen")
+    rc = main(CYL + ["--B", "0:0.8:3", "--json", str(d / "s.json"), "--png", str(d / "s.png"),
+                     "--vtu", str(d / "s.vtu"), "--quiet"])
+    return rc, d
+
+
+def test_cylinder_json(cylinder_run):
+    rc, d = cylinder_run
+    assert rc == 0
+    out = json.loads((d / "s.json").read_text())
+    assert {"specimen", "model", "shear_modulus_Pa", "bulk_modulus_Pa", "law", "steps", "solid",
+            "seconds", "manifest"} <= set(out)
+    assert out["model"] == "continuum" and out["specimen"]["shape"] == "cylinder"
+    assert out["specimen"]["aspect_ratio_L_over_D"] == pytest.approx(0.8)
+    # --nu default 0.499: K = 2 G (1 + nu) / (3 (1 - 2 nu)) = 499.67 G
+    assert out["bulk_modulus_Pa"] / out["shear_modulus_Pa"] == pytest.approx(499.666, rel=1e-4)
+    steps = out["steps"]
+    assert [s["B_applied_T"] for s in steps] == pytest.approx([0.0, 0.4, 0.8])
+    keys = {"B_applied_T", "M_mean_A_per_m", "H_mean_A_per_m", "demag_factor",
+            "length_change_axis_m", "length_change_mean_m", "strain_axis", "strain_end_mean",
+            "diameter_change_m", "lateral_strain", "mean_strain_zz", "stagger_iterations",
+            "newton_iterations", "stagger_history"}
+    assert all(keys <= set(s) for s in steps)
+    assert steps[0]["demag_factor"] is None               # undefined at B = 0 (NaN -> null)
+    last = steps[-1]
+    # the body lengthens along the field and narrows across it, by less than 10 %
+    assert 0 < last["strain_axis"] < 0.1 and -0.1 < last["lateral_strain"] < 0
+    # a cylinder's volume-mean axial strain is its end-face mean (divergence theorem)
+    assert last["mean_strain_zz"] == pytest.approx(last["strain_end_mean"], rel=1e-6)
+    assert last["strain_axis"] == pytest.approx(last["length_change_axis_m"] / L)
+
+
+def test_cylinder_png(cylinder_run):
+    _, d = cylinder_run
+    assert (d / "s.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_cylinder_vtu_opens_with_meshio(cylinder_run):
+    import meshio
+    _, d = cylinder_run
+    m = meshio.read(d / "s.vtu")
+    assert [c.type for c in m.cells] == ["triangle6"]
+    u = m.point_data["displacement_m"]
+    assert u.shape == (len(m.points), 3) and "mean_stress_Pa" in m.point_data
+    X = m.points - u                                          # the reference half section
+    assert np.allclose(X[:, 1], 0.0) and X[:, 0].min() >= 0.0
+    assert X[:, 0].max() == pytest.approx(R) and X[:, 2].max() == pytest.approx(L / 2)
+    assert X[:, 2].min() == pytest.approx(-L / 2)            # mirrored about the mid-plane
+    out = json.loads((d / "s.json").read_text())
+    # the top end's axial displacement on the axis is half the change of length
+    top = np.argmin(np.hypot(X[:, 0], X[:, 2] - L / 2))
+    assert u[top, 2] == pytest.approx(0.5 * out["steps"][-1]["length_change_axis_m"], rel=1e-9)
+    # every triangle counter-clockwise in the (x, z) plane
+    t = m.cells[0].data
+    a = ((X[t[:, 1], 0] - X[t[:, 0], 0]) * (X[t[:, 2], 2] - X[t[:, 0], 2])
+         - (X[t[:, 1], 2] - X[t[:, 0], 2]) * (X[t[:, 2], 0] - X[t[:, 0], 0]))
+    assert np.all(a > 0)
+
+
+def test_sphere_relaxed_model(tmp_path, capsys):
+    """A sphere (no --length-m), linear law, --model relaxed with the given --kappa: the end-
+    face mean is null in the JSON (a sphere has poles), the kappa's source is recorded."""
+    rc = main(["specimen", "--shape", "sphere", "--radius-m", str(R), "--law", "linear",
+               "--chi", "0.5", "--matrix-E-Pa", "3e5", "--nu", "0.45", "--B", "0.3",
+               "--model", "relaxed", "--kappa", "0.2", "--n-mesh", "4", "--n-boundary", "24",
+               "--json", str(tmp_path / "s.json")])
+    assert rc == 0
+    out = json.loads((tmp_path / "s.json").read_text())
+    assert out["model"] == "relaxed" and out["kappa"]["value"] == 0.2
+    assert out["shear_modulus_Pa"] == pytest.approx(3e5 / (2 * 1.45))
+    st = out["steps"][0]
+    assert st["strain_end_mean"] is None and math.isfinite(st["strain_axis"])
+    printed = capsys.readouterr().out.splitlines()
+    assert len(printed) == 3 and printed[-1].startswith("sphere L/D = 1")   # header, step, end
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--B", "0.5,0.2"], ("--B", "increase strictly")),
+    (["--B", "-0.1"], ("--B", ">= 0")),
+    (["--model", "magic"], ("--model",)),
+    (["--law", "linear", "--chi0", "2"], ("--law linear", "--chi")),
+    (["--shape", "sphere"], ("--length-m", "sphere")),
+    (["--nu", "0.5"], ("--nu", "(-1, 0.5)")),
+    (["--radius-m", "0"], ("--radius-m",)),
+    (["--model", "relaxed"], ("--kappa", "relax tables")),
+    (["--model", "affine", "--phi", "0.1"], ("--particle-Ms-A-per-m",)),
+])
+def test_bad_input_exit_2_nothing_written(extra, words, tmp_path, capsys):
+    j = tmp_path / "s.json"
+    argv = list(CYL)
+    for opt, val in zip(extra[::2], extra[1::2]):
+        if opt in argv:
+            argv[argv.index(opt) + 1] = val
+        else:
+            argv += [opt, val]
+    if "--law" in extra and "linear" in extra:
+        i = argv.index("--Ms-A-per-m")
+        del argv[i:i + 2]
+    assert main(argv + ["--json", str(j)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_no_convergence_exit_3_with_history_and_no_file(tmp_path, capsys):
+    """Two staggered iterations to a tolerance of 1e-12 (the first change of the length is
+    ~1e-3): exit 3, the residual history and the message on stderr, no JSON."""
+    j = tmp_path / "s.json"
+    rc = main(CYL + ["--B", "0.4", "--max-stagger", "2", "--tol", "1e-12", "--json", str(j),
+                     "--quiet"])
+    assert rc == 3
+    err = capsys.readouterr().err
+    assert "residual history (relative): " in err and "did not converge" in err
+    assert "B = 0.4 T" in err and "residual history (relative): -" not in err
+    assert not j.exists() and list(tmp_path.iterdir()) == []
