@@ -3,7 +3,7 @@
 Patch nodes against a brute-force distance test (periodic wrap, pinned node left out); the
 colouring never puts two coupled patches in one colour (brute force over the stencil
 neighbourhoods); one patch solve equals the dense solve of the assembled principal submatrix;
-the parallel sweep equals the serial one bit for bit; many columns at once equal one column at a
+the parallel sweep equals the serial one to round-off; many columns at once equal one column at a
 time; the patched V-cycle is symmetric positive definite and cuts the CG iterations; C_eff and
 the magnetic stress equal to the assembled solver's.
 """
@@ -120,7 +120,10 @@ def test_parallel_sweep_equals_serial_and_columns_equal_one_at_a_time():
         P.forward(X, B)
         P.backward(X, B)
         out[name] = X
-    assert np.array_equal(out["parallel"], out["serial"])
+    # two compilations of fastmath kernels (reassociated sums: vector width and order are the
+    # compiler's choice for each), so equal to round-off like the column paths below, not
+    # bitwise on every CPU (measured: bitwise here); a race inside a colour would be O(update)
+    assert np.abs(out["parallel"] - out["serial"]).max() <= 1e-10 * np.abs(out["serial"]).max()
     for c in (0, 4, 6):                       # the 8-wide, 4-wide and single-column paths
         X = np.ascontiguousarray(X0[:, [c]])
         P.forward(X, np.ascontiguousarray(B[:, [c]]))
