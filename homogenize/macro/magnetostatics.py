@@ -105,7 +105,8 @@ from micro._validate import ConvergenceError, InputError, check_choice, check_fi
     check_positive
 
 __all__ = ["ConvergenceError", "LinearLaw", "FroehlichKennellyLaw", "LangevinLaw", "TanhLaw",
-           "linear", "froehlich_kennelly", "langevin", "tanh", "check_law",
+           "TableLaw", "check_table_range", "linear", "froehlich_kennelly", "langevin", "tanh",
+           "check_law",
            "Sphere", "Spheroid", "Cylinder", "Profile", "MeshOptions", "BodyMesh",
            "axisymmetric_mesh", "ball_mesh_3d", "uniform_applied_gradient_field",
            "applied_field", "MagnetostaticResult", "solve_axisymmetric", "solve_3d", "field_at",
@@ -236,6 +237,73 @@ def langevin(chi0: float, Ms_A_per_m: float) -> LangevinLaw:
 def tanh(chi0: float, Ms_A_per_m: float) -> TanhLaw:
     """Hyperbolic-tangent law (chi0 [-], Ms [A/m])."""
     return TanhLaw(float(chi0), float(Ms_A_per_m))
+
+
+@dataclass(frozen=True, eq=False)
+class TableLaw:
+    """A tabulated composite law ``|M|(|H|)`` [A/m], e.g. ``M_eff`` of random RVEs against their
+    internal field: monotone cubic (PCHIP) through ``(0, 0)`` and the nodes, its derivative for
+    Newton's tangent. It is not extrapolated: :attr:`H_max_A_per_m` is the largest tabulated
+    field, and a solver that needs more must refuse (:func:`check_table_range`); inside a Newton
+    iteration a trial field beyond it sees the last value (zero slope), so that the iteration
+    can come back.
+
+    H_nodes_A_per_m, M_nodes_A_per_m : nodes [A/m], H strictly increasing and > 0, M >= 0 and
+        non-decreasing
+    source : where the table comes from (reported with results)
+    """
+    H_nodes_A_per_m: tuple
+    M_nodes_A_per_m: tuple
+    source: str = ""
+
+    def __post_init__(self):
+        from scipy.interpolate import PchipInterpolator
+        H = np.asarray(check_finite("H_nodes_A_per_m", self.H_nodes_A_per_m, "A/m"),
+                       float).ravel()
+        M = np.asarray(check_finite("M_nodes_A_per_m", self.M_nodes_A_per_m, "A/m"),
+                       float).ravel()
+        if H.size < 2 or H.shape != M.shape:
+            raise InputError(f"a table law needs >= 2 nodes of H and M of the same length, got "
+                             f"{H.size} and {M.size}")
+        if H[0] <= 0 or np.any(np.diff(H) <= 0):
+            raise InputError("the table law's H_nodes_A_per_m must be > 0 and strictly "
+                             "increasing")
+        if M[0] < 0 or np.any(np.diff(M) < 0):
+            raise InputError("the table law's M_nodes_A_per_m must be >= 0 and non-decreasing")
+        f = PchipInterpolator(np.concatenate([[0.0], H]), np.concatenate([[0.0], M]))
+        object.__setattr__(self, "H_nodes_A_per_m", tuple(H.tolist()))
+        object.__setattr__(self, "M_nodes_A_per_m", tuple(M.tolist()))
+        object.__setattr__(self, "_f", f)
+        object.__setattr__(self, "_df", f.derivative())
+
+    @property
+    def H_max_A_per_m(self) -> float:
+        """The largest tabulated field [A/m]."""
+        return self.H_nodes_A_per_m[-1]
+
+    def M_A_per_m(self, H_A_per_m):
+        """|M| [A/m] at field magnitudes ``H`` [A/m] (held at the last node beyond it)."""
+        return self._f(np.clip(np.asarray(H_A_per_m, float), 0.0, self.H_max_A_per_m))
+
+    def dM_dH(self, H_A_per_m):
+        """d|M|/d|H| [-] (zero beyond the last node)."""
+        h = np.asarray(H_A_per_m, float)
+        return np.where(h < self.H_max_A_per_m,
+                        self._df(np.clip(h, 0.0, self.H_max_A_per_m)), 0.0)
+
+
+def check_table_range(result, what: str = "the table law") -> None:
+    """Refuse a solution whose internal field leaves the range of a :class:`TableLaw`
+    (never extrapolated): :class:`InputError` naming the largest field needed and the range."""
+    law = result.law
+    if not isinstance(law, TableLaw):
+        return
+    H = np.linalg.norm(result.H_A_per_m[:, result.geometry.body_elements], axis=0)
+    if H.max() > law.H_max_A_per_m * (1 + 1e-9):
+        raise InputError(f"{what} ({law.source or 'tabulated M(H)'}) covers |H| up to "
+                         f"{law.H_max_A_per_m:.4g} A/m (mu0 H = {MU0 * law.H_max_A_per_m:.3g} T) "
+                         f"but the body's internal field reaches {H.max():.4g} A/m "
+                         f"({MU0 * H.max():.3g} T): extend the table; it is not extrapolated")
 
 
 def _check_law(law):

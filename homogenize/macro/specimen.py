@@ -83,12 +83,17 @@ class Specimen:
         ``2 R``, given or not)
     n_mesh : elements along the radius of the mechanics mesh (quarter section) [-]
     n_boundary : segments of the field mesh along the body's meridian profile [-]
+    edge_radius_m : a cylinder's rim rounded with this radius [m] (default ``0.1 R``; 0: a sharp
+        edge). At a sharp edge the field, hence the Kelvin loads, are singular and the rubber
+        strains without bound at finite field; a cast or cut specimen's edge has some radius,
+        and the results' sensitivity to it is part of their model error.
     """
     shape: str
     radius_m: float
     length_m: float | None = None
     n_mesh: int = 8
     n_boundary: int = 48
+    edge_radius_m: float | None = None
 
     def __post_init__(self):
         check_choice("shape", self.shape, SHAPES)
@@ -105,6 +110,18 @@ class Specimen:
             v = getattr(self, name)
             if int(v) != v or v < lo:
                 raise InputError(f"{name} must be an integer >= {lo}, got {v!r}")
+        if self.shape != "cylinder":
+            if self.edge_radius_m not in (None, 0, 0.0):
+                raise InputError(f"edge_radius_m is for a cylinder's rim, not a {self.shape}")
+            object.__setattr__(self, "edge_radius_m", 0.0)
+        elif self.edge_radius_m is None:
+            object.__setattr__(self, "edge_radius_m", 0.1 * R)
+        else:
+            rho = check_positive("edge_radius_m", self.edge_radius_m, "m", allow_zero=True)
+            if rho >= 0.5 * min(R, 0.5 * L):
+                raise InputError(f"edge_radius_m = {rho:g} m must be below half the radius "
+                                 f"({0.5 * R:g} m) and half the half-length "
+                                 f"({0.25 * L:g} m)")
 
     @property
     def aspect_ratio(self) -> float:
@@ -118,7 +135,25 @@ class Specimen:
             return fs.sphere_body(R, n)
         if self.shape == "spheroid":
             return fs.spheroid_body(R, c, n)
-        return fs.cylinder_body(R, self.length_m, n)
+        body = fs.cylinder_body(R, self.length_m, n)
+        rho = float(self.edge_radius_m)
+        if rho == 0.0:
+            return body
+        # round the rim: the corner square of side rho mapped onto a quarter disk
+        # (a' = a sqrt(1 - b^2 / 2 rho^2), b' = b sqrt(1 - a^2 / 2 rho^2) in the square's
+        # coordinates from the fillet's centre); its edges a = 0 and b = 0 stay in place
+        mesh = body.mesh
+        p = mesh.p.copy()
+        a, b = p[0] - (R - rho), p[1] - (c - rho)
+        sel = (a > 0) & (b > 0)
+        an, bn = a[sel] / rho, b[sel] / rho
+        p[0, sel] = R - rho + rho * an * np.sqrt(1.0 - 0.5 * bn * bn)
+        p[1, sel] = c - rho + rho * bn * np.sqrt(1.0 - 0.5 * an * an)
+        bnd = dict(mesh.boundaries)
+        flat = np.all(np.abs(p[1, mesh.facets[:, bnd["end"]]] - c) <= 1e-12 * c, axis=0)
+        bnd["end"] = bnd["end"][flat]                     # the flat part of the end face
+        return fs.AxisymmetricBody(MeshTri(p, mesh.t, _boundaries=bnd), "cylinder", R, c,
+                                   True)
 
 
 def affine_kappa(phi: float, Ms_particle_A_per_m: float):
@@ -132,7 +167,7 @@ def affine_kappa(phi: float, Ms_particle_A_per_m: float):
 
     def kappa(M_abs):
         m = np.clip(np.asarray(M_abs, float) / (phi * Ms), 0.0, 1.0)
-        return np.asarray(microstructure_stress_coefficient(np.full(m.shape, phi), m.ravel()),
+        return np.asarray(microstructure_stress_coefficient(np.full(m.size, phi), m.ravel()),
                           float).reshape(m.shape)
     return kappa
 
@@ -210,7 +245,13 @@ def _field_shape(specimen: Specimen):
         return ms.Sphere(R)
     if specimen.shape == "spheroid":
         return ms.Spheroid(c, R)
-    return ms.Cylinder(R, specimen.length_m)
+    rho = float(specimen.edge_radius_m)
+    if rho == 0.0:
+        return ms.Cylinder(R, specimen.length_m)
+    t = np.linspace(0.0, 0.5 * np.pi, 17)
+    arc = np.column_stack([R - rho + rho * np.sin(t), c - rho + rho * np.cos(t)])
+    upper = np.vstack([[0.0, c], arc])
+    return ms.Profile(np.vstack([upper, upper[::-1] * np.array([1.0, -1.0])]))
 
 
 def _moved_geometry(g0: ms.BodyMesh, sol) -> ms.BodyMesh:
@@ -318,7 +359,8 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
     tol : relative change of the change of length between two staggered iterations at which
         a field step is converged [-]
     max_stagger : staggered iterations per step before :class:`ConvergenceError`
-    relaxation : under-relaxation of the magnetic loads between iterations, (0, 1]
+    relaxation : the first relaxation factor of the magnetic loads in each field step, (0, 1];
+        later ones follow Aitken's rule (Irons & Tuck), clipped to [0.05, 1]
     load_steps : load steps of each mechanics solve (Newton from the undeformed body)
     progress : callable ``progress(i, n, B)`` after each field step, or None
 
@@ -329,8 +371,10 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
 
     Raises
     ------
-    InputError -- bad input (before any work); ConvergenceError -- a field step whose
-    staggered iteration or Newton failed (``residual_history`` holds the relative changes)
+    InputError -- bad input (before any work), or a :class:`TableLaw` whose range the body's
+    internal field leaves (never extrapolated); ConvergenceError -- a field step whose
+    staggered iteration or Newton failed (``residual_history``: the relative changes or
+    residuals; ``steps_converged``: the :class:`SpecimenStep` s before it)
     """
     if not isinstance(specimen, Specimen):
         raise InputError(f"specimen must be a Specimen, got {type(specimen).__name__}")
@@ -357,12 +401,13 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
                               ms.MeshOptions(n_boundary=int(specimen.n_boundary)))
     L0 = specimen.length_m
     sol, res, steps = None, None, []
-    prev_loads = None
     for i, b in enumerate(B):
         H0 = b / MU0
-        hist, newton, dl_prev = [], 0, None
+        hist, newton, dl_prev, w = [], 0, None, relaxation
+        x_prev = r_prev = None
         for it in range(1, max_stagger + 1):
             res = ms.solve_axisymmetric(None, law, H0, geometry=_moved_geometry(g0, sol))
+            ms.check_table_range(res, "the composite's magnetization table")
             if sol is None:
                 xf, nf = fs.facet_points(body)
             else:
@@ -377,14 +422,34 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
                 * np.eye(3)
             if kappa is not None:
                 S = S + _prescribed_stress(Me, kappa)
-            if prev_loads is not None and relaxation < 1.0:
-                w = relaxation
-                t = w * t + (1 - w) * prev_loads[0]
-                S = w * S + (1 - w) * prev_loads[1]
-            prev_loads = (t, S)
+            g = np.concatenate([t.ravel(), S.ravel()])
+            if x_prev is None:                # the step's first iteration: the loads as they are
+                x = g
+            else:
+                # Aitken's dynamic relaxation (Irons & Tuck) of the load vector: the staggered
+                # iteration is a fixed point x = g(x) that contracts slowly where the body's
+                # elongation and its magnetization feed each other
+                r = g - x_prev
+                if r_prev is not None:
+                    dr = r - r_prev
+                    den = float(dr @ dr)
+                    if den > 0.0:
+                        w = float(np.clip(-w * float(r_prev @ dr) / den, 0.05, 1.0))
+                x = x_prev + w * r
+                r_prev = r
+            x_prev = x
+            t = x[:t.size].reshape(t.shape)
+            S = x[t.size:].reshape(S.shape)
             loads = fs.Loads((fs.Traction(t, "surface", follower=True),),
                              prescribed_stress_Pa=S)
-            sol = fs.solve_axisymmetric(body, solid, loads, load_steps=load_steps)
+            try:
+                sol = fs.solve_axisymmetric(body, solid, loads, load_steps=load_steps)
+            except ConvergenceError as exc:
+                err = ConvergenceError(
+                    f"the mechanics did not converge at B = {b:g} T (staggered iteration "
+                    f"{it}): {exc}", getattr(exc, "residual_history", ()))
+                err.steps_converged = tuple(steps)
+                raise err from None
             newton += sol.newton_iterations
             dl = fs.length_change_m(sol)[0]
             if dl_prev is not None:
@@ -401,11 +466,13 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
                 break
             dl_prev = dl
         else:
-            raise ConvergenceError(
+            err = ConvergenceError(
                 f"the field-mechanics iteration did not converge at B = {b:g} T in "
                 f"{max_stagger} iterations (relative changes of the length "
                 f"{', '.join(f'{h:.2g}' for h in hist[-5:])}); try relaxation < 1 or smaller "
                 "field steps", hist)
+            err.steps_converged = tuple(steps)
+            raise err
         dl_axis, dl_mean = fs.length_change_m(sol)
         dd = fs.diameter_change_m(sol)
         steps.append(SpecimenStep(
