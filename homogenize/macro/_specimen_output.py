@@ -120,6 +120,8 @@ def plot_specimen_strains(result_dict: dict):
     shape = spec["shape"]
     geo = (f"R = {1e3 * spec['radius_m']:.3g} mm" if shape == "sphere" else
            f"L/D = {spec['aspect_ratio_L_over_D']:.3g}, D = {2e3 * spec['radius_m']:.3g} mm")
+    if shape == "cylinder" and spec.get("edge_radius_m") is not None:
+        geo += f", rim radius {1e3 * spec['edge_radius_m']:.3g} mm"
     G = result_dict["shear_modulus_Pa"]
     ax.set_title(f"{shape} ({geo}), model: {result_dict['model']}\n{result_dict['law']}, "
                  f"G = {G:.3g} Pa", fontsize=9)

@@ -36,6 +36,7 @@ def test_cylinder_json(cylinder_run):
             "seconds", "manifest"} <= set(out)
     assert out["model"] == "continuum" and out["specimen"]["shape"] == "cylinder"
     assert out["specimen"]["aspect_ratio_L_over_D"] == pytest.approx(0.8)
+    assert out["specimen"]["edge_radius_m"] == pytest.approx(0.1 * R)     # the default rim
     # --nu default 0.499: K = 2 G (1 + nu) / (3 (1 - 2 nu)) = 499.67 G
     assert out["bulk_modulus_Pa"] / out["shear_modulus_Pa"] == pytest.approx(499.666, rel=1e-4)
     steps = out["steps"]
@@ -49,8 +50,9 @@ def test_cylinder_json(cylinder_run):
     last = steps[-1]
     # the body lengthens along the field and narrows across it, by less than 10 %
     assert 0 < last["strain_axis"] < 0.1 and -0.1 < last["lateral_strain"] < 0
-    # a cylinder's volume-mean axial strain is its end-face mean (divergence theorem)
-    assert last["mean_strain_zz"] == pytest.approx(last["strain_end_mean"], rel=1e-6)
+    # a sharp-edged cylinder's volume-mean axial strain is its end-face mean (divergence
+    # theorem); with a rounded rim the end-face mean covers the flat part only (-2 % here)
+    assert last["mean_strain_zz"] == pytest.approx(last["strain_end_mean"], rel=0.05)
     assert last["strain_axis"] == pytest.approx(last["length_change_axis_m"] / L)
 
 
