@@ -306,15 +306,9 @@ def _material_options(p):
                    help="gravity along the body force [m/s^2]; 0 = no self-weight")
 
 
-def register(sub, formatter) -> None:
-    """Add the ``paper``, ``export``, ``beam`` and ``channel`` commands."""
-    p = sub.add_parser(
-        "paper", formatter_class=formatter, help="reproduce and examine the seed paper",
-        description="Reproduce the seed paper (body force, cantilever, Abaqus/Elmer gap, large "
-                    "deformation, self-weight, channel study). Writes summary.md, paper.json, "
-                    "PNG figures and manifest.json to --out. Takes a few minutes.")
-    p.add_argument("--out", default="results/paper", help="output directory")
-    p.add_argument("--json", default=None, help="also write the JSON results to this file")
+def _paper_options(p, out: str) -> None:
+    """The options ``paper`` and ``paper-calculix`` share."""
+    p.add_argument("--out", default=out, help="output directory")
     p.add_argument("--width-m", dest="width_m", type=_length("--width-m", 1.0), default=5e-3,
                    help="assumed strip width [m]")
     p.add_argument("--thickness-m", dest="thickness_m", type=_length("--thickness-m", 1.0),
@@ -322,6 +316,17 @@ def register(sub, formatter) -> None:
     p.add_argument("--quick", action="store_true",
                    help="small meshes and sweeps (seconds; for tests, numbers indicative)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def register(sub, formatter) -> None:
+    """Add the ``paper``, ``export``, ``beam`` and ``channel`` commands."""
+    p = sub.add_parser(
+        "paper", formatter_class=formatter, help="reproduce and examine the seed paper",
+        description="Reproduce the seed paper (body force, cantilever, Abaqus/Elmer gap, large "
+                    "deformation, self-weight, channel study). Writes summary.md, paper.json, "
+                    "PNG figures and manifest.json to --out. Takes a few minutes.")
+    p.add_argument("--json", default=None, help="also write the JSON results to this file")
+    _paper_options(p, "results/paper")
     p.set_defaults(func=_paper, outputs=("json",), output_dirs=("out",))
 
     p = sub.add_parser(
@@ -332,14 +337,7 @@ def register(sub, formatter) -> None:
                     "its scikit-fem twin. Needs CalculiX's ccx on the PATH (`make peers` "
                     "installs it and runs this command). Writes calculix.md, calculix.json and "
                     "manifest.json to --out.")
-    p.add_argument("--out", default="results/peers", help="output directory")
-    p.add_argument("--width-m", dest="width_m", type=_length("--width-m", 1.0), default=5e-3,
-                   help="assumed strip width [m]")
-    p.add_argument("--thickness-m", dest="thickness_m", type=_length("--thickness-m", 1.0),
-                   default=1e-3, help="assumed strip thickness [m]")
-    p.add_argument("--quick", action="store_true",
-                   help="small meshes and sweeps (for tests, numbers indicative)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _paper_options(p, "results/peers")
     p.set_defaults(func=_paper_calculix, output_dirs=("out",))
 
     p = sub.add_parser(
