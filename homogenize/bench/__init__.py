@@ -12,13 +12,13 @@ from __future__ import annotations
 import sys
 import time
 
-from homogenize.bench import cell, dipoles, macro, particles, relax, tables
+from homogenize.bench import cell, dipoles, macro, particles, relax, specimen, tables
 
 __all__ = ["PROVIDERS", "run"]
 
 #: Providers by name, in the order they run.
 PROVIDERS = {"particles": particles, "dipoles": dipoles, "cell": cell, "macro": macro,
-             "tables": tables, "relax": relax}
+             "tables": tables, "relax": relax, "specimen": specimen}
 
 
 def run(quick: bool = False, only: str | None = None) -> list[dict]:

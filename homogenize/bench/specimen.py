@@ -1,0 +1,174 @@
+"""Benchmark of the specimen in its field (:func:`homogenize.macro.specimen.solve_specimen`,
+``mapsim bench --only specimen``).
+
+Records (``bench_records(quick)``, format of :mod:`homogenize.bench`):
+
+* ``specimen/cylinder ...``: an axisymmetric cylinder of L/D = 0.8 (R = 1 mm, its rim rounded
+  with the library's default radius 0.1 R), Froehlich-Kennelly composite (chi0 = 2,
+  Ms = 2e5 A/m), neo-Hookean G = 1e5 Pa, nu = 0.499, through the 13 field steps 0:1.2:13 T at
+  finite strain (about 2 % strain on the axis at 1.2 T), at three mesh sizes (n_mesh,
+  n_boundary) = (4, 24), (8, 48), (12, 96) (quick: the first two). Each size runs in its own
+  process (after a warm-up solve on a tiny mesh, timed apart, so imports and compilation are
+  not counted); a run under the target is repeated once and the faster kept (the shared
+  machine's load only ever adds time): wall time of the 13 steps (and CPU time, less
+  sensitive to the load), peak RSS of the process (``getrusage`` maxrss: interpreter and
+  imports included), their growth against the previous size, staggered and Newton
+  iterations. ``reference`` is the issue's target "13 field steps in at most 1 min"
+  (``reference_seconds`` 60, ``ratio`` > 1: met; ``target_met``); ``max_rel_error`` is the
+  relative difference of the strain on the axis at 1.2 T from the finest size's (the
+  discretization, not an error against an exact value).
+* ``specimen/3D``: no figures -- no 3D specimen exists: there is no 3D field-mechanics
+  coupling (:mod:`homogenize.macro.finite_strain` has 3D bodies, the specimen solver is
+  axisymmetric only).
+
+Timings of the same case vary up to 7x between processes on the shared machine, and the CPU
+time with them (so not the load alone): (8, 48) took 18 s in one process and 124 s in the
+committed run. A profile of a slow (4, 24) run put 85 % of its time in the motion of the
+field mesh (``specimen._moved_geometry``): the first query of its scipy
+``LinearNDInterpolator`` took 1.5 s in some processes and 1 ms in others on the same points
+(building the ``Delaunay`` explicitly and passing it in was always fast); the cause is not
+found.
+
+With a SHARP rim (``edge_radius_m = 0``) the same runs fail: the mechanics Newton of
+:func:`solve_specimen` exhausts its step cuts at 1.0-1.1 T on the (8, 48) mesh for Ms =
+1.5e5-2e5 A/m, and on the (12, 96) mesh even for Ms = 1.2e5 A/m (about 1 % strain); the
+record ``limit_note`` says so, and results/bench/specimen_sharp_rim.json keeps the sharp-rim
+timings of a weaker composite (Ms = 1.2e5 A/m) on the meshes where it converges.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+__all__ = ["bench_records", "CASE"]
+
+#: the benchmarked specimen and material (SI)
+CASE = {"shape": "cylinder", "radius_m": 1e-3, "length_m": 1.6e-3, "law": "froehlich-kennelly",
+        "chi0": 2.0, "Ms_A_per_m": 2e5, "G_Pa": 1e5, "nu": 0.499,
+        "B_applied_T": "0:1.2:13", "model": "continuum", "load_steps": 2, "tol": 1e-4}
+SIZES = ((4, 24), (8, 48), (12, 96))
+QUICK_SIZES = SIZES[:2]
+TARGET_SECONDS = 60.0
+
+
+def _solve(n_mesh: int, n_boundary: int, B):
+    from homogenize.macro import finite_strain as fs
+    from homogenize.macro import magnetostatics as ms
+    from homogenize.macro.specimen import Specimen, solve_specimen
+    spec = Specimen(CASE["shape"], CASE["radius_m"], CASE["length_m"], n_mesh=n_mesh,
+                    n_boundary=n_boundary)
+    return solve_specimen(spec, ms.froehlich_kennelly(CASE["chi0"], CASE["Ms_A_per_m"]),
+                          fs.NeoHookeanSolid.from_poisson(CASE["G_Pa"], CASE["nu"]), B,
+                          model=CASE["model"], tol=CASE["tol"], load_steps=CASE["load_steps"])
+
+
+def _worker(n_mesh: int, n_boundary: int, out: str) -> None:
+    """One size in this (child) process: warm-up, then the 13 timed steps; JSON to ``out``."""
+    import resource
+    t0 = time.perf_counter()
+    _solve(4, 16, [0.1])                        # imports, numba and skfem set-up, not timed
+    warm = time.perf_counter() - t0
+    B = np.linspace(0.0, 1.2, 13)
+    t0, c0 = time.perf_counter(), time.process_time()
+    try:
+        res = _solve(n_mesh, n_boundary, B)
+    except Exception as exc:                    # recorded, not raised: the other sizes go on
+        rec = {"error": f"{type(exc).__name__}: {exc}",
+               "seconds_to_failure": time.perf_counter() - t0}
+    else:
+        sec = time.perf_counter() - t0
+        cpu = time.process_time() - c0
+        sol, fr = res.solution, res.field_result
+        last = res.steps[-1]
+        rec = {"seconds": sec, "cpu_seconds": cpu, "warmup_seconds": warm,
+               # the rim: 0 = sharp (a Specimen without edge_radius_m has a sharp rim)
+               "edge_radius_m": float(getattr(res.specimen, "edge_radius_m", 0.0) or 0.0),
+               "mechanics_dof": int(sol.u_m.size + sol.p_Pa.size),
+               "mechanics_elements": int(sol.body.mesh.t.shape[1]),
+               "field_nodes": int(fr.mesh.p.shape[1]),
+               "stagger_iterations": [s.stagger_iterations for s in res.steps],
+               "newton_iterations_total": int(sum(s.newton_iterations for s in res.steps)),
+               "strain_axis_at_1p2T": last.strain_axis,
+               "strain_end_mean_at_1p2T": last.strain_end_mean,
+               "lateral_strain_at_1p2T": last.lateral_strain,
+               "M_mean_at_1p2T_A_per_m": last.M_mean_A_per_m}
+    rec["peak_rss_GB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6   # kB
+    with open(out, "w") as fh:
+        json.dump(rec, fh)
+
+
+def _run(n_mesh: int, n_boundary: int) -> dict:
+    """:func:`_worker` in a fresh process (its own peak memory); its JSON."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "specimen.json")
+        code = (f"from homogenize.bench.specimen import _worker; "
+                f"_worker({n_mesh}, {n_boundary}, {out!r})")
+        p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+        if p.returncode != 0 or not os.path.exists(out):
+            tail = p.stderr.strip().splitlines()
+            return {"error": tail[-1] if tail else f"exit {p.returncode}"}
+        with open(out) as fh:
+            return json.load(fh)
+
+
+def _best_of(n_mesh: int, n_boundary: int, repeats: int) -> dict:
+    """The fastest of up to ``repeats`` runs (each in its own process; the shared machine's
+    load only ever adds time; a run over the target is not repeated), with all their wall
+    times and the largest peak RSS."""
+    runs = [_run(n_mesh, n_boundary)]
+    while len(runs) < repeats and runs[-1].get("seconds", math.inf) <= TARGET_SECONDS:
+        runs.append(_run(n_mesh, n_boundary))
+    ok = [r for r in runs if "error" not in r]
+    if not ok:
+        return runs[-1]
+    best = dict(min(ok, key=lambda r: r["seconds"]))
+    best["seconds_all_runs"] = [r.get("seconds") for r in runs]
+    best["peak_rss_GB"] = max(r["peak_rss_GB"] for r in ok)
+    return best
+
+
+def bench_records(quick: bool) -> list[dict]:
+    """The specimen records (see the module docstring)."""
+    sizes = QUICK_SIZES if quick else SIZES
+    runs = [(nm, nb, _best_of(nm, nb, 1 if quick else 2)) for nm, nb in sizes]
+    ok = [r for _, _, r in runs if "error" not in r]
+    finest = ok[-1]["strain_axis_at_1p2T"] if ok else None
+    out, prev = [], None
+    for nm, nb, r in runs:
+        rec = {"name": f"specimen/cylinder L/D 0.8, 13 field steps, n_mesh {nm} n_boundary {nb}",
+               "n": r.get("mechanics_dof"), "seconds": r.get("seconds"),
+               "reference": "issue target: 13 field steps in at most 1 min",
+               "reference_seconds": TARGET_SECONDS,
+               "ratio": TARGET_SECONDS / r["seconds"] if "seconds" in r else None,
+               "target_met": bool(r["seconds"] <= TARGET_SECONDS) if "seconds" in r else False,
+               "max_rel_error": (abs(r["strain_axis_at_1p2T"] / finest - 1.0)
+                                 if "seconds" in r and finest else None),
+               "max_rel_error_means": "strain on the axis at 1.2 T against the finest size's",
+               "n_mesh": nm, "n_boundary": nb, "case": CASE, **r,
+               "load_average_1_5_15min": list(os.getloadavg()), "cpu_count": os.cpu_count()}
+        if "seconds" in r:
+            if prev is not None:
+                rec["growth_vs"] = (f"n_mesh {prev['n_mesh']} n_boundary {prev['n_boundary']} "
+                                    f"(x{r['mechanics_dof'] / prev['mechanics_dof']:.3g} "
+                                    f"mechanics DOF)")
+                rec["time_growth"] = r["seconds"] / prev["seconds"]
+                rec["memory_growth"] = r["peak_rss_GB"] / prev["peak_rss_GB"]
+            prev = {"n_mesh": nm, "n_boundary": nb, **r}
+        out.append(rec)
+    out.append({"name": "specimen/3D", "n": None, "seconds": None, "reference": None,
+                "reference_seconds": None, "ratio": None, "max_rel_error": None,
+                "note": "not available: no 3D specimen exists (no 3D field-mechanics "
+                        "coupling; solve_specimen is axisymmetric)"})
+    out[0]["limit_note"] = (
+        "with a SHARP rim (edge_radius_m = 0) the mechanics Newton fails (step cuts "
+        "exhausted at a load factor ~0.95): at 1.0-1.1 T on the (8, 48) mesh for Ms = "
+        "1.5e5-2e5 A/m, and on the (12, 96) mesh even for Ms = 1.2e5 A/m (~1 % strain); "
+        "the rounded rim (default 0.1 R) is what makes these runs converge")
+    return out
