@@ -23,11 +23,13 @@ Records (``bench_records(quick)``, format of :mod:`homogenize.bench`):
 
 Timings of the same case vary up to 7x between processes on the shared machine, and the CPU
 time with them (so not the load alone): (8, 48) took 18 s in one process and 124 s in the
-committed run. A profile of a slow (4, 24) run put 85 % of its time in the motion of the
-field mesh (``specimen._moved_geometry``): the first query of its scipy
-``LinearNDInterpolator`` took 1.5 s in some processes and 1 ms in others on the same points
-(building the ``Delaunay`` explicitly and passing it in was always fast); the cause is not
-found.
+committed run. The time goes into the motion of the field mesh (``specimen._moved_geometry``,
+85 % of a slow (4, 24) run): the query of its scipy ``LinearNDInterpolator`` (441 field
+vertices, 32 of them outside the mechanics mesh's hull) takes 0.5 ms in most calls and 1.5 s in
+some, at the larger deformations, and in one process 12 s in all while 0.05 s in another with
+the same inputs (a ``Delaunay`` built explicitly and passed in does not change that). Locating
+the vertices without that query would likely bring all three sizes under the target: the
+(8, 48) run without the slow queries took 18 s.
 
 With a SHARP rim (``edge_radius_m = 0``) the same runs fail: the mechanics Newton of
 :func:`solve_specimen` exhausts its step cuts at 1.0-1.1 T on the (8, 48) mesh for Ms =
