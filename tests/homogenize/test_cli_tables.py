@@ -178,16 +178,20 @@ def test_chain_reduced_real_rves(scheduler, tmp_path):
     t_tab = read_table(out / "table.h5")
     for c in res["curves"]:
         for g in c["grid"]:
+            # chain.json holds 6 significant digits (micro._io.RESULT_DIGITS): each value is
+            # within 5e-7 (relative) of the computed one, a ratio of two within 1e-6
             # EB deflection is 4 mm x f / 43.79 kN/m^3 (linear, geometry-independent) ...
-            assert np.isclose(g["deflection_eb_m"], 4e-3 * g["f_eff_N_m3"] / 43.79e3, rtol=1e-9)
+            assert np.isclose(g["deflection_eb_m"], 4e-3 * g["f_eff_N_m3"] / 43.79e3, rtol=2e-6)
             # ... the elastica is below it (a dead load bends less at large rotation) ...
-            assert g["deflection_elastica_m"] <= g["deflection_eb_m"] * (1 + 1e-9)
+            assert g["deflection_elastica_m"] <= g["deflection_eb_m"] * (1 + 2e-6)
             # ... and the force at a grid point is that point's mean in the table
             i = t_tab.select(f"phi={c['phi']!r},B_T={g['B_internal_T']!r}")
             assert np.isclose(g["f_eff_N_m3"], t_tab.values["f_eff_N_m3"][i, :, 2].mean())
             # ... and the applied field exceeds the internal one by mu0 N M_eff (strip demag)
+            # (a difference of two rounded values: absolute error <= 5e-7 (|B_a| + |B_in|))
             assert np.isclose(g["B_applied_T"] - g["B_internal_T"],
-                              mu_0 * res["demag_factor"] * g["M_eff_A_per_m"], rtol=1e-9)
+                              mu_0 * res["demag_factor"] * g["M_eff_A_per_m"], rtol=2e-6,
+                              atol=1e-6 * (g["B_applied_T"] + g["B_internal_T"]))
         # the magnet experiment: the closer the magnet, the larger the deflection
         tips = [r["deflection_elastica_m"] for r in c["magnet_sweep"] if "outside_table" not in r]
         assert len(tips) >= 3 and all(a > b for a, b in zip(tips, tips[1:]))

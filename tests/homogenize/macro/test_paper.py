@@ -69,7 +69,8 @@ def test_paper_numbers_are_physical(quick):
     assert nl["nonlinear_over_linear"] == pytest.approx(nl["elastica_over_eb"], rel=0.01)
     g = res["gravity"]
     assert g["rho_eff_kg_m3"] == pytest.approx(0.965 * 1210 + 0.035 * 7870)
-    assert g["sag_linear_m"] == pytest.approx(4e-3 * g["self_weight_N_m3"] / 40e3, rel=1e-9)
+    # paper.json holds 6 significant digits: a ratio of two rounded values within 1e-6
+    assert g["sag_linear_m"] == pytest.approx(4e-3 * g["self_weight_N_m3"] / 40e3, rel=2e-6)
     # EB check of the converged compliance at the inferred length: within the plate/beam band
     eb = cf.eb_tip_deflection_m(40e3, b["inferred_length_m"], b["width_m"], b["thickness_m"], 2e6)
     assert eb * (1 - 0.45**2) < 4e-3 < eb
