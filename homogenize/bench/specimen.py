@@ -31,6 +31,13 @@ the same inputs (a ``Delaunay`` built explicitly and passed in does not change t
 the vertices without that query would likely bring all three sizes under the target: the
 (8, 48) run without the slow queries took 18 s.
 
+The cause: ``Delaunay.transform`` (the barycentric transforms, one LAPACK ``dgetrf`` and
+``dgecon`` per 2x2 simplex) takes 1.5 s for 194 simplices when OpenBLAS runs its default two
+threads on the loaded machine (its threads' hand-over per tiny call). Each record therefore
+also holds ``one_blas_thread``: the same run in a process with OPENBLAS_NUM_THREADS (and OMP,
+MKL) = 1: in the committed run 5.8 s, 15 s and 56 s for the three sizes (default threads:
+16 s, 38 s, 248 s), the same strains (bit for bit at the two smaller sizes).
+
 With a SHARP rim (``edge_radius_m = 0``) the same runs fail: the mechanics Newton of
 :func:`solve_specimen` exhausts its step cuts at 1.0-1.1 T on the (8, 48) mesh for Ms =
 1.5e5-2e5 A/m, and on the (12, 96) mesh even for Ms = 1.2e5 A/m (about 1 % strain); the
@@ -106,13 +113,19 @@ def _worker(n_mesh: int, n_boundary: int, out: str) -> None:
         json.dump(rec, fh)
 
 
-def _run(n_mesh: int, n_boundary: int) -> dict:
-    """:func:`_worker` in a fresh process (its own peak memory); its JSON."""
+#: the environment that limits BLAS/LAPACK (OpenBLAS, MKL, OpenMP) to one thread
+ONE_THREAD = {k: "1" for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+
+
+def _run(n_mesh: int, n_boundary: int, env: dict | None = None) -> dict:
+    """:func:`_worker` in a fresh process (its own peak memory), with ``env`` added to the
+    environment; its JSON."""
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "specimen.json")
         code = (f"from homogenize.bench.specimen import _worker; "
                 f"_worker({n_mesh}, {n_boundary}, {out!r})")
-        p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+        p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           env={**os.environ, **(env or {})})
         if p.returncode != 0 or not os.path.exists(out):
             tail = p.stderr.strip().splitlines()
             return {"error": tail[-1] if tail else f"exit {p.returncode}"}
@@ -155,6 +168,13 @@ def bench_records(quick: bool) -> list[dict]:
                "max_rel_error_means": "strain on the axis at 1.2 T against the finest size's",
                "n_mesh": nm, "n_boundary": nb, "case": CASE, **r,
                "load_average_1_5_15min": list(os.getloadavg()), "cpu_count": os.cpu_count()}
+        one = _run(nm, nb, ONE_THREAD)
+        rec["one_blas_thread"] = {k: one.get(k) for k in ("seconds", "cpu_seconds",
+                                                          "peak_rss_GB", "error")}
+        rec["one_blas_thread"]["target_met"] = bool(one.get("seconds", math.inf)
+                                                    <= TARGET_SECONDS)
+        rec["one_blas_thread"]["same_strain_axis"] = (one.get("strain_axis_at_1p2T")
+                                                      == r.get("strain_axis_at_1p2T"))
         if "seconds" in r:
             if prev is not None:
                 rec["growth_vs"] = (f"n_mesh {prev['n_mesh']} n_boundary {prev['n_boundary']} "
