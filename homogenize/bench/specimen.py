@@ -55,6 +55,9 @@ import tempfile
 import time
 
 import numpy as np
+from homogenize.macro import finite_strain as fs
+from homogenize.macro import magnetostatics as ms
+from homogenize.macro.specimen import Specimen, solve_specimen
 
 __all__ = ["bench_records", "CASE"]
 
@@ -68,9 +71,6 @@ TARGET_SECONDS = 60.0
 
 
 def _solve(n_mesh: int, n_boundary: int, B):
-    from homogenize.macro import finite_strain as fs
-    from homogenize.macro import magnetostatics as ms
-    from homogenize.macro.specimen import Specimen, solve_specimen
     spec = Specimen(CASE["shape"], CASE["radius_m"], CASE["length_m"], n_mesh=n_mesh,
                     n_boundary=n_boundary)
     return solve_specimen(spec, ms.froehlich_kennelly(CASE["chi0"], CASE["Ms_A_per_m"]),

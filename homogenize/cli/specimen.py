@@ -12,6 +12,11 @@ from micro._io import atomic_path, manifest, write_json
 from micro._validate import ConvergenceError, InputError
 
 from homogenize.cli._common import config_of, float_in, int_in
+from homogenize.experiments.tables import affine_kappa
+from homogenize.macro import finite_strain as fs
+from homogenize.macro import magnetostatics as ms
+from homogenize.macro._specimen_output import plot_specimen_strains, write_specimen_vtu
+from homogenize.macro.specimen import MODELS, SHAPES, Specimen, solve_specimen
 from homogenize.cli.relax import _steps as _field_steps   # the project's --B syntax
 
 __all__ = ["register"]
@@ -89,7 +94,6 @@ def _steps(text: str) -> np.ndarray:
 
 
 def _law(args):
-    from homogenize.macro import magnetostatics as ms
     given = {"--chi": args.chi, "--chi0": args.chi0, "--Ms-A-per-m": args.Ms_A_per_m}
     need = ("--chi",) if args.law == "linear" else ("--chi0", "--Ms-A-per-m")
     missing = [k for k in need if given[k] is None]
@@ -108,7 +112,6 @@ def _law(args):
 
 
 def _solid(args):
-    from homogenize.macro import finite_strain as fs
     if (args.shear_modulus_Pa is None) == (args.matrix_E_Pa is None):
         raise InputError("give the body's stiffness: --shear-modulus-Pa [Pa] or --matrix-E-Pa "
                          "[Pa] (with --nu), one of them")
@@ -127,7 +130,6 @@ def _kappa(args):
         if args.phi is None or args.particle_Ms_A_per_m is None:
             raise InputError("--model affine needs --phi (particle volume fraction, (0, 0.74]) "
                              "and --particle-Ms-A-per-m (the particles' saturation, A/m)")
-        from homogenize.macro.specimen import affine_kappa
         return affine_kappa(args.phi, args.particle_Ms_A_per_m)
     if args.model == "relaxed":
         if args.kappa is None:
@@ -139,7 +141,6 @@ def _kappa(args):
 
 
 def _specimen(args):
-    from homogenize.macro.specimen import Specimen
     if args.shape == "sphere" and args.length_m is not None:
         raise InputError("--length-m is not taken for --shape sphere (its length is 2 R); use "
                          "--shape spheroid for another length")
@@ -176,7 +177,6 @@ def _f(v, width: int) -> str:
 
 
 def _cmd(args) -> int:
-    from homogenize.macro.specimen import solve_specimen
     # everything checked before any work
     B = _steps(args.B)
     spec = _specimen(args)
@@ -222,13 +222,11 @@ def _cmd(args) -> int:
         write_json(args.json, out)
         written.append(args.json)
     if args.png:
-        from homogenize.macro._specimen_output import plot_specimen_strains
         fig = plot_specimen_strains(out)
         with atomic_path(args.png) as tmp:
             fig.savefig(tmp, format="png", dpi=120)
         written.append(args.png)
     if args.vtu:
-        from homogenize.macro._specimen_output import write_specimen_vtu
         write_specimen_vtu(args.vtu, res)
         written.append(args.vtu)
     print(f"{'B [T]':>8} {'<M> [A/m]':>11} {'axis strain':>12} {'end-mean':>11} "
@@ -249,7 +247,6 @@ def _cmd(args) -> int:
 
 def register(sub, formatter) -> None:
     """Add the ``specimen`` command."""
-    from homogenize.macro.specimen import MODELS, SHAPES
     p = sub.add_parser("specimen", formatter_class=formatter, description=_DOC,
                        help="change of length of a finite specimen in a uniform field "
                             "(finite strain, axisymmetric)")

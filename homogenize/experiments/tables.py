@@ -66,7 +66,7 @@ from micro.particles import Monodisperse, generate_rve
 from types import SimpleNamespace
 from homogenize.cell import bulk_shear, eshelby_dilute, young_poisson
 from micro.dipoles import solve
-from micro._validate import InputError
+from micro._validate import InputError, check_positive
 from micro._io import atomic_write_text, manifest, write_json
 from tqdm import tqdm
 from scipy.interpolate import PchipInterpolator
@@ -76,7 +76,8 @@ __all__ = ["STIFFNESS_PHIS", "STIFFNESS_SEEDS", "STIFFNESS_VOXELS", "RADIUS_VOXE
            "filler_stiffness_ratio", "stiffness_table_path",
            "STRESS_PHIS", "STRESS_SEEDS", "STRESS_N", "STRESS_FIELDS", "stress_point",
            "build_stress_table", "stress_table", "stress_table_path",
-           "microstructure_stress_coefficient", "LORENTZ_STRESS", "cell_stress_point",
+           "microstructure_stress_coefficient", "affine_kappa", "LORENTZ_STRESS",
+           "cell_stress_point",
            "build_cell_stress_table", "cell_stress_factor", "cell_factor_nodes", "cell_stress_path"]
 
 
@@ -340,6 +341,22 @@ def microstructure_stress_coefficient(phi, m_reduced, cell: bool = True):
     if cell:
         out = out * cell_stress_factor(p)
     return out if np.ndim(phi) or np.ndim(m_reduced) else float(out[0])
+
+
+def affine_kappa(phi: float, Ms_particle_A_per_m: float):
+    """``kappa(|M|)`` [-] of the affine specimen model (:mod:`homogenize.macro.specimen`): the
+    microstructural stress coefficient of randomly dispersed particles at volume fraction
+    ``phi`` [-] (:func:`microstructure_stress_coefficient`, the dipole virial times the cell
+    FEM's share), as a function of the composite's magnetization ``|M|`` [A/m] through
+    ``m = |M| / (phi Ms)`` (clipped to [0, 1])."""
+    phi = check_positive("phi", phi)
+    Ms = check_positive("Ms_particle_A_per_m", Ms_particle_A_per_m, "A/m")
+
+    def kappa(M_abs):
+        m = np.clip(np.asarray(M_abs, float) / (phi * Ms), 0.0, 1.0)
+        return np.asarray(microstructure_stress_coefficient(np.full(m.size, phi), m.ravel()),
+                          float).reshape(m.shape)
+    return kappa
 
 
 # ------------------------------------------------------------------------------------------

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from homogenize._cell_output import _finish_xml, _text
 from micro._io import atomic_path
 
 __all__ = ["write_specimen_vtu", "specimen_vtu_arrays", "plot_specimen_strains",
@@ -72,7 +73,6 @@ def write_specimen_vtu(path, result) -> None:
     ``model``, ``law``, ``shape``, ``configuration`` (text as UTF-8 bytes,
     ``bytes(a).decode()``) and ``units``."""
     import meshio
-    from homogenize._cell_output import _finish_xml, _text
 
     if result.solution is None:
         raise ValueError("the result holds no mechanics solution (no field step was solved)")

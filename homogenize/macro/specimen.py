@@ -39,8 +39,8 @@ Models (``model=``), so that three descriptions can be compared on the same spec
   (J. Mech. Phys. Solids 194, 105934, 2025) assume;
 * ``"affine"`` -- plus ``sigma_mag`` of randomly dispersed particles moving affinely with the
   matrix, ``kappa(phi, m)`` from the project's cell FEM
-  (:func:`homogenize.experiments.tables.microstructure_stress_coefficient`, reduced
-  magnetization ``m = |M| / (phi Ms)``);
+  (:func:`homogenize.experiments.tables.affine_kappa`, reduced magnetization
+  ``m = |M| / (phi Ms)``);
 * ``"relaxed"`` -- plus ``sigma_mag`` of RVEs whose particles restructure in the field; its
   ``kappa(|M|)`` comes from relax tables and is passed in by the caller (``kappa=``).
 
@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.constants import mu_0 as MU0
-from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+from scipy.spatial import cKDTree
 from skfem import MeshTri
 
 from homogenize.macro import finite_strain as fs
@@ -67,7 +67,7 @@ from homogenize.macro import magnetostatics as ms
 from micro._validate import ConvergenceError, InputError, check_choice, check_positive
 
 __all__ = ["MODELS", "SHAPES", "Specimen", "SpecimenStep", "SpecimenResult", "solve_specimen",
-           "affine_kappa", "magnetic_pressure_Pa"]
+           "magnetic_pressure_Pa"]
 
 MODELS = ("continuum", "affine", "relaxed")
 SHAPES = ("sphere", "spheroid", "cylinder")
@@ -156,22 +156,6 @@ class Specimen:
                                    True)
 
 
-def affine_kappa(phi: float, Ms_particle_A_per_m: float):
-    """``kappa(|M|)`` [-] of the affine model: the cell FEM's microstructural stress coefficient
-    of randomly dispersed particles at volume fraction ``phi`` [-], as a function of the
-    composite's magnetization ``|M|`` [A/m] through ``m = |M| / (phi Ms)``
-    (:func:`homogenize.experiments.tables.microstructure_stress_coefficient`)."""
-    from homogenize.experiments.tables import microstructure_stress_coefficient
-    phi = check_positive("phi", phi)
-    Ms = check_positive("Ms_particle_A_per_m", Ms_particle_A_per_m, "A/m")
-
-    def kappa(M_abs):
-        m = np.clip(np.asarray(M_abs, float) / (phi * Ms), 0.0, 1.0)
-        return np.asarray(microstructure_stress_coefficient(np.full(m.size, phi), m.ravel()),
-                          float).reshape(m.shape)
-    return kappa
-
-
 @dataclass(frozen=True)
 class SpecimenStep:
     """The converged state at one applied field (SI).
@@ -254,32 +238,51 @@ def _field_shape(specimen: Specimen):
     return ms.Profile(np.vstack([upper, upper[::-1] * np.array([1.0, -1.0])]))
 
 
+def _vertex_displacement(sol, x) -> np.ndarray:
+    """The mechanics displacement [m] at points ``x`` (2, n) of the whole section: the quarter's
+    vertex displacements interpolated linearly in the triangle holding each point (mirrored
+    about z = 0), or extrapolated from the nearest triangle for a point just outside the
+    quarter's polygon (the exact profile bulges past the inscribed mesh). Plain numpy: scipy's
+    Delaunay-based interpolators make one small LAPACK call per triangle, which multithreaded
+    BLAS slows by orders of magnitude."""
+    mesh = sol.body.mesh
+    nv = mesh.p.shape[1]
+    xq = np.vstack([x[0], np.abs(x[1])])
+    P = mesh.p[:, mesh.t]                                       # (2, 3, ne)
+    cent = P.mean(axis=1).T
+    k = min(8, mesh.t.shape[1])
+    _, cand = cKDTree(cent).query(xq.T, k=k)
+    cand = cand.reshape(x.shape[1], k)
+    a, b, c = P[:, 0][:, cand], P[:, 1][:, cand], P[:, 2][:, cand]   # (2, n, k)
+    det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])
+    dx, dy = xq[0][:, None] - a[0], xq[1][:, None] - a[1]
+    l1 = (dx * (c[1] - a[1]) - (c[0] - a[0]) * dy) / det
+    l2 = ((b[0] - a[0]) * dy - dx * (b[1] - a[1])) / det
+    lam = np.stack([1.0 - l1 - l2, l1, l2])                     # (3, n, k)
+    best = np.argmax(lam.min(axis=0), axis=1)
+    rows = np.arange(x.shape[1])
+    el = cand[rows, best]
+    w = lam[:, rows, best]                                      # (3, n)
+    u = sol.u_m[:, :nv][:, mesh.t[:, el]]                       # (2, 3, n)
+    out = np.einsum("ivn,vn->in", u, w)
+    out[1] *= np.sign(x[1]) + (x[1] == 0)
+    return out
+
+
 def _moved_geometry(g0: ms.BodyMesh, sol) -> ms.BodyMesh:
     """The field mesh ``g0`` of the undeformed body moved with the body: its body vertices by
-    the mechanics displacement (the quarter's solution mirrored about z = 0, interpolated
-    linearly between its P2 nodes; nearest node just outside their hull, where the exact
-    profile lies outside the mechanics polygon), the air vertices by the displacement of the
+    the mechanics displacement (:func:`_vertex_displacement`), the air vertices by the displacement of the
     body surface on their ray, blended linearly to zero at the domain sphere (whose Kelvin
     exterior stays as it is). Moving one mesh instead of meshing the deformed body anew keeps
     the field a smooth function of the deformation: the staggered iteration then converges to
     its tolerance, not to the noise of re-meshing."""
     if sol is None:
         return g0
-    P, U = sol.doflocs_m, sol.u_m
-    up = P[1] > 0.0
-    Pf = np.hstack([P, P[:, up] * np.array([[1.0], [-1.0]])])
-    Uf = np.hstack([U, U[:, up] * np.array([[1.0], [-1.0]])])
-    lin = LinearNDInterpolator(Pf.T, Uf.T)
-    near = NearestNDInterpolator(Pf.T, Uf.T)
     mesh = g0.mesh
     p = mesh.p
     body_v = np.unique(mesh.t[:, g0.body_elements])
     d = np.zeros_like(p)
-    db = lin(p[:, body_v].T)
-    miss = np.isnan(db[:, 0])
-    if np.any(miss):
-        db[miss] = near(p[:, body_v[miss]].T)
-    d[:, body_v] = db.T
+    d[:, body_v] = _vertex_displacement(sol, p[:, body_v])
     # air: the body surface's displacement along each ray, to zero at the domain sphere
     c = g0.center_m.reshape(2, 1)
     y = p - c
@@ -355,7 +358,8 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
     B_applied_T : increasing applied fields ``mu0 H0`` [T], >= 0
     model : "continuum" | "affine" | "relaxed" (module docstring)
     kappa : callable ``kappa(|M| [A/m]) -> [-]`` (or a number) -- the microstructural stress
-        coefficient; required by "affine" (e.g. :func:`affine_kappa`) and "relaxed"
+        coefficient; required by "affine" (e.g.
+        :func:`homogenize.experiments.tables.affine_kappa`) and "relaxed"
     tol : relative change of the change of length between two staggered iterations at which
         a field step is converged [-]
     max_stagger : staggered iterations per step before :class:`ConvergenceError`
@@ -387,7 +391,7 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
         kappa = None
     elif kappa is None:
         raise InputError(f"model {model!r} needs kappa (the microstructural stress "
-                         "coefficient): affine_kappa(phi, Ms) for 'affine', one from relax "
+                         "coefficient): experiments.tables.affine_kappa(phi, Ms) for 'affine', one from relax "
                          "tables for 'relaxed'")
     elif not callable(kappa):
         k0 = float(kappa)

@@ -20,7 +20,7 @@ falling branch). Every input below comes from a source independent of that curve
   self-consistent dipoles (:func:`micro.dipoles.solve`, metallic boundary: the internal field),
   three realizations, tabulated as a :class:`homogenize.macro.magnetostatics.TableLaw`;
 * the microstructural stress coefficient kappa(phi, m) of the affine model: the project's dipole
-  virial times the cell FEM's share (:func:`homogenize.macro.specimen.affine_kappa`).
+  virial times the cell FEM's share (:func:`homogenize.experiments.tables.affine_kappa`).
 
 Not used: the shear modulus 230 kPa (E = 0.69 MPa), susceptibility 2.5 and Ms = 0.40 MA/m that
 Stewart & Anand (J. Mech. Phys. Solids 194, 105934, 2025) FITTED to these data with a continuum
@@ -45,10 +45,11 @@ from pathlib import Path
 import numpy as np
 from scipy.constants import mu_0 as MU0
 
-from homogenize.experiments.tables import filler_stiffness_ratio, stiffness_table
+from homogenize.experiments.tables import (affine_kappa, filler_stiffness_ratio,
+                                           stiffness_table)
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
-from homogenize.macro.specimen import Specimen, affine_kappa, solve_specimen
+from homogenize.macro.specimen import Specimen, solve_specimen
 from micro._io import atomic_write_text, data_digest, round_floats, save_png, write_json
 from micro._validate import ConvergenceError
 from micro.dipoles import solve
