@@ -21,28 +21,17 @@ Records (``bench_records(quick)``, format of :mod:`homogenize.bench`):
   coupling (:mod:`homogenize.macro.finite_strain` has 3D bodies, the specimen solver is
   axisymmetric only).
 
-Timings of the same case vary up to 7x between processes on the shared machine, and the CPU
-time with them (so not the load alone): (8, 48) took 18 s in one process and 124 s in the
-committed run. The time goes into the motion of the field mesh (``specimen._moved_geometry``,
-85 % of a slow (4, 24) run): the query of its scipy ``LinearNDInterpolator`` (441 field
-vertices, 32 of them outside the mechanics mesh's hull) takes 0.5 ms in most calls and 1.5 s in
-some, at the larger deformations, and in one process 12 s in all while 0.05 s in another with
-the same inputs (a ``Delaunay`` built explicitly and passed in does not change that). Locating
-the vertices without that query would likely bring all three sizes under the target: the
-(8, 48) run without the slow queries took 18 s.
-
-The cause: ``Delaunay.transform`` (the barycentric transforms, one LAPACK ``dgetrf`` and
-``dgecon`` per 2x2 simplex) takes 1.5 s for 194 simplices when OpenBLAS runs its default two
-threads on the loaded machine (its threads' hand-over per tiny call). Each record therefore
-also holds ``one_blas_thread``: the same run in a process with OPENBLAS_NUM_THREADS (and OMP,
-MKL) = 1: in the committed run 5.8 s, 15 s and 56 s for the three sizes (default threads:
-16 s, 38 s, 248 s), the same strains (bit for bit at the two smaller sizes).
+Each record also holds ``one_blas_thread``: the same run in a process with
+OPENBLAS_NUM_THREADS (and OMP, MKL) = 1. The first version of the field mesh's motion
+(scipy's ``LinearNDInterpolator``, one LAPACK call per simplex) made the default-threaded runs
+up to 7x slower than the single-threaded ones; since the motion is plain numpy both agree:
+committed run 6.0 s / 14.2 s / 63.6 s with the default threads, 6.2 s / 14.6 s / 57.1 s with
+one (the strains equal), so the 1 min target is met at the two smaller sizes.
 
 With a SHARP rim (``edge_radius_m = 0``) the same runs fail: the mechanics Newton of
 :func:`solve_specimen` exhausts its step cuts at 1.0-1.1 T on the (8, 48) mesh for Ms =
 1.5e5-2e5 A/m, and on the (12, 96) mesh even for Ms = 1.2e5 A/m (about 1 % strain); the
-record ``limit_note`` says so, and results/bench/specimen_sharp_rim.json keeps the sharp-rim
-timings of a weaker composite (Ms = 1.2e5 A/m) on the meshes where it converges.
+record ``limit_note`` says so.
 """
 from __future__ import annotations
 
