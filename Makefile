@@ -7,11 +7,10 @@ STAMP  := $(VENV)/.installed
 LOCK   := .ci/constraints.txt
 # newest versions that pyproject.toml allows, without the lock (for `make lock`, `make test-latest`)
 LATEST := .venv-latest
-# pytest workers (pytest-xdist). Measured on a fresh clone of the same commit on the 2-core
-# machine, without CalculiX: one process 6 min 08 s (8.0 min CPU), -n 2 6 min 11 s (11.4 min
-# CPU): two workers do not pay, because the numba kernels, the Dask tests and BLAS already use
-# both cores. So one process by default; PYTEST_WORKERS=2 make test runs two.
-PYTEST_WORKERS ?= 0
+# pytest workers (pytest-xdist): both cores. Fresh clones, new venv, cold numba cache (as on a
+# fresh machine), 2 cores: one process 7 min 45 s (with CalculiX), two workers 6 min 11 s
+# (without its 4 tests); with a warm cache one process took 6 min 08 s. PYTEST_WORKERS=0: one.
+PYTEST_WORKERS ?= 2
 
 .PHONY: run test venv bench clean peers lock latest test-latest
 
