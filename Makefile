@@ -8,8 +8,8 @@ LOCK   := .ci/constraints.txt
 # newest versions that pyproject.toml allows, without the lock (for `make lock`, `make test-latest`)
 LATEST := .venv-latest
 # pytest workers (pytest-xdist): both cores. Fresh clones, new venv, cold numba cache (as on a
-# fresh machine), 2 cores: one process 7 min 45 s (with CalculiX), two workers 6 min 11 s
-# (without its 4 tests); with a warm cache one process took 6 min 08 s. PYTEST_WORKERS=0: one.
+# fresh machine), 2 cores, CalculiX installed: one process 7 min 45 s, two workers 5 min 54 s
+# (with a warm cache one process took 6 min 08 s). PYTEST_WORKERS=0: one process.
 PYTEST_WORKERS ?= 2
 
 .PHONY: run test venv bench clean peers lock latest test-latest
