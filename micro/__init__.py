@@ -5,11 +5,17 @@ Public API is what ``__all__`` lists; modules starting with ``_`` are private.
 # first: chooses a writable numba cache before numba is imported (micro/_numba_cache.py)
 from . import _numba_cache  # noqa: F401
 from ._validate import ConvergenceError, InputError
+# result files (the commands' and the studies' in results/): atomic writes, floats rounded to
+# RESULT_DIGITS, figures re-drawn only when their data digest changes
+from ._io import (RESULT_DIGITS, atomic_write_text, data_digest, round_floats, save_png,
+                  write_json)
 from .rve import RVE
 from .particles import (CoreShell, Histogram, LogNormal, Monodisperse, default_distribution,
                         describe, generate_rve)
 
 __all__ = ["InputError", "ConvergenceError"]
+__all__ += ["atomic_write_text", "write_json", "round_floats", "data_digest", "save_png",
+            "RESULT_DIGITS"]
 __all__ += ["RVE", "generate_rve", "describe", "LogNormal", "Histogram", "Monodisperse",
             "CoreShell", "default_distribution"]
 from .particles import ParticleConfig, place

@@ -24,6 +24,7 @@ from homogenize.cell import Material, homogenize_mesh
 from homogenize.mesh import estimate_memory_bytes, voxelize
 import numba
 
+__all__ = ["bench_records", "bench_rve", "SOLVER_CONFIG"]
 
 SOLVER_CONFIG = ("CG, relative residual tol 1e-8, deflated by the 6 rigid-body modes of every stiff "
                  "particle; preconditioner: one symmetric AMG V-cycle on a pyamg smoothed-"
@@ -81,15 +82,17 @@ def _residual_fields(r) -> dict:
             "tol_magnetic": r.settings["tol_magnetic"]}
 
 
-def _rve(voxels: int, seed: int = 1):
-    # seed-paper distribution (mean 25 nm in [10, 50] nm) at 3.5 vol%; the number of particles
-    # is chosen so that the mean particle radius is ~2.5 voxels
+def bench_rve(voxels: int, seed: int = 1):
+    """The benchmark RVE of ``mapsim bench`` (and of the solver studies in ``results/cell``): the
+    seed paper's size distribution (mean 25 nm in [10, 50] nm) at 3.5 vol%, with the number of
+    particles chosen so that the mean particle radius is ~2.5 voxels on a ``voxels``^3 grid;
+    ``seed``: the placement's random seed. Returns a :class:`micro.RVE`."""
     n_part = max(8, int(round(0.035 * (voxels / 2.5) ** 3 / (4.0 / 3.0 * np.pi) / 1.4)))
     return generate_rve(0.035, n_part, seed)
 
 
 def _full_record(voxels: int) -> dict:
-    rve = _rve(voxels)
+    rve = bench_rve(voxels)
     rng = np.random.default_rng(2)
     forces = None
     virial = None
@@ -116,7 +119,7 @@ def _full_record(voxels: int) -> dict:
 
 
 def _contrast_records(voxels: int) -> list[dict]:
-    rve = _rve(voxels, seed=3)
+    rve = bench_rve(voxels, seed=3)
     mesh = voxelize(rve, voxels)
     out = []
     base = None
@@ -251,7 +254,7 @@ def _voxel_moduli(voxels: int, seed: int):
     bulk and shear moduli) -- exactly the stiffness field of ``method="composite"``."""
     from micro.materials import FE, PDMS, elastic
     from homogenize._effective_media import bulk_shear
-    mesh = voxelize(_rve(voxels, seed), voxels, method="composite")
+    mesh = voxelize(bench_rve(voxels, seed), voxels, method="composite")
     f = mesh.fraction
     Km, Gm = bulk_shear(*(elastic(PDMS).E_Pa, elastic(PDMS).nu))
     Kp, Gp = bulk_shear(*(elastic(FE).E_Pa, elastic(FE).nu))
@@ -296,7 +299,7 @@ def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
             from homogenize.solvers import SolverOptions
             options = SolverOptions(patch_shell_voxels=None)
             solver = "matrix-free"
-        rve = _rve(voxels, seed)
+        rve = bench_rve(voxels, seed)
         forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
         t0 = time.perf_counter()
         r = homogenize_rve(rve, voxels, forces_N=forces, solver=solver, options=options)
@@ -307,7 +310,7 @@ def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
                                                    "tol_cg")},
                  **_residual_fields(r)}
     elif tool.startswith("full-"):               # 6 strains + magnetic load, given method
-        rve = _rve(voxels, seed)
+        rve = bench_rve(voxels, seed)
         forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
         t0 = time.perf_counter()
         r = homogenize_rve(rve, voxels, forces_N=forces, method=tool[5:])

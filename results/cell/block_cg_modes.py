@@ -2,7 +2,7 @@
 (homogenize.solvers.SolverOptions.block_cg): the numbers behind results/cell/block_cg_modes.json
 and the "Coupled block CG" section of results/cell/README.md.
 
-Bench RVEs (homogenize.bench.cell._rve: the seed paper's size distribution at 3.5 vol%), 6 unit
+Bench RVEs (homogenize.bench.cell.bench_rve: the seed paper's size distribution at 3.5 vol%), 6 unit
 strains + random particle forces, the default tolerances (strains 1e-6, magnetic column
 magnetic_tol = 1e-3), solver="matrix-free", each case in its OWN process (so that its peak RSS is
 its own), the three modes of one RVE one after the other:
@@ -36,9 +36,9 @@ def one(rve_voxels: int, voxels: int, mode: str) -> dict:
     import numpy as np
 
     import homogenize.cell as cell
-    from homogenize.bench.cell import _rve
+    from homogenize.bench.cell import bench_rve
     from homogenize.solvers import SolverOptions
-    rve = _rve(rve_voxels, 1)
+    rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     # no particle patches (session 14): the block CG modes as measured in session 12
     opts = SolverOptions(block_cg=mode, patch_shell_voxels=None)
@@ -60,8 +60,8 @@ def main() -> None:
         print(json.dumps(one(a, b, mode)))
         return
     sys.path.insert(0, str(HERE))
-    import _resumable
-    out, rows = _resumable.parse(__doc__, JSON)
+    import resumable
+    out, rows = resumable.parse(__doc__, JSON)
     key = ("rve_voxels", "voxels", "block_cg")
     have = {tuple(r[k] for k in key) for r in rows}
     for case in PLAN:
@@ -72,7 +72,7 @@ def main() -> None:
         rows.append(json.loads(res.stdout.strip().splitlines()[-1]))
         print(rows[-1], flush=True)
         rows.sort(key=lambda r: PLAN.index(tuple(r[k] for k in key)))
-        _resumable.write(out, rows, "results/cell/block_cg_modes.py",
+        resumable.write(out, rows, "results/cell/block_cg_modes.py",
                          "each case in its own process, the three modes of one RVE one after "
                          "the other; seconds: wall time of homogenize_rve; peak_rss_GB: the "
                          "process's peak resident set size")

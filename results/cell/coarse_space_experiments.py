@@ -2,7 +2,7 @@
 behind results/cell/coarse_space_experiments.json and the section "Coarse-space experiments" of
 results/cell/README.md.
 
-RVE family and load as `mapsim bench` and multigrid_robustness.py (homogenize.bench.cell._rve,
+RVE family and load as `mapsim bench` and multigrid_robustness.py (homogenize.bench.cell.bench_rve,
 6 unit strains + random particle forces, tol 1e-6); mostly the case "100 particles of 1.25 voxels
 mean radius at 32^3" (rve_voxels 64, voxels 32), where solver="matrix-free" needs 45 / 82
 (strain / magnetic) iterations and solver="fast" 20 / 30.
@@ -56,10 +56,10 @@ import homogenize.solvers._matfree as mf
 import homogenize.cell as cell
 from homogenize.solvers import (BlockVCycle, SolverOptions, grid_node_coordinates,
                                 rigid_body_modes, smoothed_aggregation)
-from homogenize.bench.cell import _rve
+from homogenize.bench.cell import bench_rve
 from micro.materials import PDMS
 
-import _resumable
+import resumable
 
 HERE = Path(__file__).resolve().parent
 JSON = HERE / "coarse_space_experiments.json"
@@ -350,7 +350,7 @@ def options_for(case: dict) -> SolverOptions:
 
 
 def run(case: dict) -> dict:
-    rve = _rve(case["rve_voxels"], 1)
+    rve = bench_rve(case["rve_voxels"], 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     kw = dict(matrix_nu=case.get("nu", PDMS.nu), method=case.get("method", "composite"))
     if case.get("homogeneous"):
@@ -406,7 +406,7 @@ def plan() -> list[dict]:
 
 
 def main() -> None:
-    out, rows = _resumable.parse(__doc__, JSON)
+    out, rows = resumable.parse(__doc__, JSON)
     for case in plan():
         if any(all(r.get(k) == v for k, v in case.items()) and set(case) == set(r) - set(RESULT)
                for r in rows):
@@ -416,7 +416,7 @@ def main() -> None:
                                         "cap", "sweeps", "max_strain_iterations",
                                         "magnetic_iterations", "seconds") if k in rows[-1]},
               flush=True)
-        _resumable.write(out, rows, "results/cell/coarse_space_experiments.py",
+        resumable.write(out, rows, "results/cell/coarse_space_experiments.py",
                          "iterations of the deflated block CG to relative residual 1e-6 (max over "
                          "the six strains / the magnetic column); seconds: wall time, not a "
                          "benchmark")

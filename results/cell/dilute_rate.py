@@ -6,7 +6,7 @@ phi = 0.01 (simple cubic array), the shear coefficient c = (G / G_m - 1) / phi w
 array's shear modulus C44 = C55 = C66 (mean of the three diagonal shear entries, Voigt, Pa).
 
 1. Reference: curved (isoparametric) P2 tetrahedra on conforming gmsh meshes
-   (homogenize._conforming.homogenize_conforming, geometry_order=2, deflated block CG, tol 1e-10)
+   (homogenize.homogenize_conforming, geometry_order=2, deflated block CG, tol 1e-10)
    in one family: mesh size hs [box] and sphere-surface size 2 pi a / ce scaled together
    (hs * ce = 4.8, scale s = hs / 0.2). Its limit is a Richardson extrapolation in s through the
    three finest meshes; its error estimate is the spread of the limits for orders 2 and 3 around
@@ -24,7 +24,7 @@ Solvers: voxels use solver="matrix-free" (same C_eff as the default "fast" to th
 checked on two grids and recorded in the JSON; 2-5x faster here). The P2 runs (the JSON's) gave
 pyamg's smoothed aggregation coarse_solver="splu" instead of its default "pinv" (a dense SVD of
 the coarsest level, 2.5k-12k rows on these meshes: 45 of 63 s at 23k DOF, 9 GB at 118k DOF),
-C_eff the same to 5e-11 relative; homogenize._conforming now does so itself.
+C_eff the same to 5e-11 relative; homogenize_conforming now does so itself.
 
 Run:  .venv/bin/python results/cell/dilute_rate.py            (full, ~20-25 min on 2 cores,
                                                                  peak ~3.3 GB in the finest P2)
@@ -84,7 +84,7 @@ def shear_coefficients(C) -> list[float]:
 def p2_run(hs: float, ce: int) -> dict:
     import resource
 
-    from homogenize._conforming import homogenize_conforming
+    from homogenize import homogenize_conforming
     t0 = time.perf_counter()
     got = homogenize_conforming(1.0, [[0.5, 0.5, 0.5]], [RADIUS], hs,
                                 matrix=(MATRIX.E_Pa, MATRIX.nu),

@@ -20,7 +20,7 @@ rows: every column to 1e-6, 100 particles of 1.25 voxels at 32^3). Variants of t
   coupled among themselves, the strains as in "strains"; the solutions summed.
 
 Iterations are deterministic (max over the strains / the magnetic column); seconds are those of
-the machine at the time (each case in its own process). RVEs: homogenize.bench.cell._rve with
+the machine at the time (each case in its own process). RVEs: homogenize.bench.cell.bench_rve with
 (rve_voxels, voxels) = (64, 32): 100 particles of 1.25 voxels mean radius at 32^3, (128, 64): 801
 at 64^3, (128, 128): the 128^3 bench RVE (~10-14 min per case: only with --full).
 
@@ -172,9 +172,9 @@ def one(variant: str, rve_voxels: int, voxels: int) -> dict:
     import numpy as np
 
     import homogenize.cell as cell
-    from homogenize.bench.cell import _rve
+    from homogenize.bench.cell import bench_rve
     from homogenize.solvers import SolverOptions, coupled_block_cg
-    rve = _rve(rve_voxels, 1)
+    rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     mode = "strains" if variant in ("strains", "history", "split3", "split6") else "coupled"
     solver = {"keep": _keep_block_cg, "coupled+restart": _restart_block_cg,
@@ -212,8 +212,8 @@ def main() -> None:
         print(json.dumps(one(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
         return
     sys.path.insert(0, str(HERE))
-    import _resumable
-    out, rows, full = _resumable.parse(__doc__, JSON, with_full=True)
+    import resumable
+    out, rows, full = resumable.parse(__doc__, JSON, with_full=True)
     key = ("variant", "rve_voxels", "voxels")
     plan = PLAN + (FULL_PLAN if full else [])
     have = {tuple(r[k] for k in key) for r in rows}
@@ -226,7 +226,7 @@ def main() -> None:
         rows.append(json.loads(res.stdout.strip().splitlines()[-1]))
         print({k: v for k, v in rows[-1].items() if k != "residual_histories"}, flush=True)
         rows.sort(key=lambda r: order.index(tuple(r[k] for k in key)))
-        _resumable.write(out, rows, "results/cell/magnetic_column_experiments.py"
+        resumable.write(out, rows, "results/cell/magnetic_column_experiments.py"
                          + (" --full" if full else ""),
                          "each case in its own process; iterations deterministic, seconds "
                          "the machine's at the time; variants are drop-ins for "

@@ -13,7 +13,7 @@ and the wall time, for magnetic tolerances 1e-6 (every column alike, the solver 
 settings["stress_mag_linear_error_rel"], which the solver reports (relative to the largest
 component of the total magnetic stress, like "stress_error_rel").
 
-RVEs: the bench family (homogenize.bench.cell._rve: seed-paper sizes at 3.5 vol%, mean radius
+RVEs: the bench family (homogenize.bench.cell.bench_rve: seed-paper sizes at 3.5 vol%, mean radius
 ~2.5 voxels) at 32^3 and 64^3, solver="matrix-free"; loads: the dipole forces of the seed
 paper's field (micro.dipoles.solve at 0.1 T, 1.78 T/m gradient, Froehlich-Kennelly Fe) with
 their virial stress, and random particle forces (the bench's load).
@@ -27,12 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from homogenize.bench.cell import _rve
+from homogenize.bench.cell import bench_rve
 from homogenize.cell import homogenize_rve, tensor_to_voigt
 from homogenize.solvers import SolverOptions
 from micro.dipoles import solve
 
-import _resumable
+import resumable
 
 HERE = Path(__file__).resolve().parent
 JSON = HERE / "magnetic_tolerance.json"
@@ -52,7 +52,7 @@ OPTIONS = SolverOptions(matfree_interface_sweeps=0, block_cg="independent",
 
 
 def study(voxels: int, solver: str = "matrix-free") -> list[dict]:
-    rve = _rve(voxels)
+    rve = bench_rve(voxels)
     st = solve(rve, 0.1, 1.78, "frohlich-kennelly")
     loads = {"dipole": (st.total_force_N, np.asarray(st.virial_stress_Pa)),
              "random": (np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15, None)}
@@ -91,7 +91,7 @@ def main() -> None:
     for n in ((16, 24) if args.quick else (32, 64)):
         rows += study(n)
         # rewritten after every grid: an interrupted study keeps the grids done
-        _resumable.write(args.out, rows, "results/cell/magnetic_tolerance.py"
+        resumable.write(args.out, rows, "results/cell/magnetic_tolerance.py"
                          + (" --quick" if args.quick else ""),
                          "strain columns at relative residual 1e-6, the magnetic column at "
                          "tol_magnetic; errors relative to the largest component of the "

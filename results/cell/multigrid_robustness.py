@@ -2,7 +2,7 @@
 default: the numbers behind results/cell/multigrid_robustness.json and the "multigrid
 robustness" section of results/cell/README.md.
 
-Same RVE family and load as `mapsim bench` (homogenize.bench.cell._rve: the seed paper's size
+Same RVE family and load as `mapsim bench` (homogenize.bench.cell.bench_rve: the seed paper's size
 distribution at 3.5 vol%, particle count chosen for a mean radius of 2.5 voxels at `rve_voxels`;
 6 unit strains + random particle forces, tol 1e-6 for every column: the magnetic one too, as
 when the JSON was made, although since session 10 it stops at homogenize.cell.magnetic_tol by
@@ -32,9 +32,9 @@ import numpy as np
 
 import homogenize.cell as cell
 from homogenize.solvers import SolverOptions
-from homogenize.bench.cell import _rve
+from homogenize.bench.cell import bench_rve
 
-import _resumable
+import resumable
 
 HERE = Path(__file__).resolve().parent
 JSON = HERE / "multigrid_robustness.json"
@@ -60,7 +60,7 @@ PLAN = ([(32, 32, "matrix-free", "amg", 0, _I), (48, 48, "matrix-free", "amg", 0
 
 def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int,
         block_cg: str) -> dict:
-    rve = _rve(rve_voxels, 1)
+    rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     opts = SolverOptions(matfree_coarse=coarse or "amg",
                          matfree_interface_sweeps=interface_sweeps, block_cg=block_cg,
@@ -81,7 +81,7 @@ def run(rve_voxels: int, voxels: int, solver: str, coarse, interface_sweeps: int
 
 
 def main() -> None:
-    out, rows = _resumable.parse(__doc__, JSON)
+    out, rows = resumable.parse(__doc__, JSON)
     for r in rows:      # rows made before session 11: no interface sweeps; before 12: independent
         r.setdefault("interface_sweeps", 0)
         r.setdefault("block_cg", "independent")
@@ -93,7 +93,7 @@ def main() -> None:
         rows.append(run(*case))
         print(rows[-1], flush=True)
         rows.sort(key=lambda r: [PLAN.index(tuple(r[k] for k in key))])
-        _resumable.write(out, rows, "results/cell/multigrid_robustness.py",
+        resumable.write(out, rows, "results/cell/multigrid_robustness.py",
                          "iterations of the deflated block CG to relative residual 1e-6; seconds: "
                          "wall time, not a benchmark (see results/bench/cell.json for timed runs)")
 

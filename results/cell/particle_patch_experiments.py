@@ -25,7 +25,7 @@ A `geometry` row per RVE gives the patch sizes (nodes) and the memory of the den
 (3 nodes)^2 x 8 B per patch. The (128, 128) row is geometry only: the 128^3 bench RVE, which
 this script does not solve.
 
-RVEs: homogenize.bench.cell._rve(rve_voxels) on `voxels`^3, random particle forces:
+RVEs: homogenize.bench.cell.bench_rve(rve_voxels) on `voxels`^3, random particle forces:
 (64, 32): 100 particles of 1.25 voxels mean radius; (128, 64): 801 of 1.25 voxels (the hard
 case of multigrid_robustness); (64, 64): the 64^3 bench RVE, 100 particles of ~2.5 voxels.
 
@@ -165,8 +165,8 @@ def options(patched: PatchedCycle | None = None):
 
 
 def geometry_row(rve_voxels: int, voxels: int) -> dict:
-    from homogenize.bench.cell import _rve
-    rve = _rve(rve_voxels, 1)
+    from homogenize.bench.cell import bench_rve
+    rve = bench_rve(rve_voxels, 1)
     sizes = np.array([p.size for p in patch_nodes(rve, voxels, DELTA)])
     return {"variant": "geometry", "rve_voxels": rve_voxels, "voxels": voxels,
             "n_particles": int(rve.n), "delta_voxels": DELTA,
@@ -177,8 +177,8 @@ def geometry_row(rve_voxels: int, voxels: int) -> dict:
 
 def run_rve(rve_voxels: int, voxels: int) -> list:
     import homogenize.cell as cell
-    from homogenize.bench.cell import _rve
-    rve = _rve(rve_voxels, 1)
+    from homogenize.bench.cell import bench_rve
+    rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     rows = [geometry_row(rve_voxels, voxels)]
     ref = None
@@ -209,8 +209,8 @@ def run_patches_only(rve_voxels: int, voxels: int, tol: float, delta: float = DE
     import resource
 
     import homogenize.cell as cell
-    from homogenize.bench.cell import _rve
-    rve = _rve(rve_voxels, 1)
+    from homogenize.bench.cell import bench_rve
+    rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     patched = PatchedCycle(rve, delta)
     t0 = time.perf_counter()
@@ -233,10 +233,10 @@ def check_symmetry(rve_voxels: int = 64, voxels: int = 32) -> dict:
     """x^T M y against y^T M x for the patched V-cycle M on random x, y (the cycle must stay a
     symmetric preconditioner for CG), next to the same for the plain V-cycle."""
     import homogenize.cell as cell
-    from homogenize.bench.cell import _rve
+    from homogenize.bench.cell import bench_rve
     from homogenize.mesh import voxelize
     from micro.materials import FE, PDMS, elastic
-    rve = _rve(rve_voxels, 1)
+    rve = bench_rve(rve_voxels, 1)
     mesh = voxelize(rve, voxels, method="composite")
     lam, mu, comp = cell._composite_fields(mesh, elastic(PDMS), elastic(FE))
     s = cell._CellSolver(mesh, lam, mu, deflate=True, stiff_mask=mesh.fraction >= 0.5,
@@ -271,8 +271,8 @@ def main() -> None:
                                           float(sys.argv[4]), float(sys.argv[5]))))
         return
     sys.path.insert(0, str(HERE))
-    import _resumable
-    out, rows, full = _resumable.parse(__doc__, JSON, with_full=True)
+    import resumable
+    out, rows, full = resumable.parse(__doc__, JSON, with_full=True)
     have = {(r["rve_voxels"], r["voxels"]) for r in rows}
     for a, b in GEOMETRY_ONLY:
         if (a, b) not in have:
@@ -290,7 +290,7 @@ def main() -> None:
                                                "E_eff_error_rel", "stress_mag_error_rel",
                                                "patch_nodes_mean", "dense_factors_GB")},
                   flush=True)
-        _resumable.write(out, rows, "results/cell/particle_patch_experiments.py",
+        resumable.write(out, rows, "results/cell/particle_patch_experiments.py",
                          "iterations deterministic; seconds not comparable (the patch loop is "
                          "Python); errors against the default solver at tol 1e-10")
     for a, b, tol, delta in (FULL_CASES if full else []):
@@ -308,7 +308,7 @@ def main() -> None:
             new[0]["E_eff_error_rel"] = abs(new[0]["E_eff_Pa"] - e_ref) / e_ref
         rows.extend(new)
         print({k: v for k, v in rows[-1].items() if k != "iterations"}, flush=True)
-        _resumable.write(out, rows, "results/cell/particle_patch_experiments.py --full",
+        resumable.write(out, rows, "results/cell/particle_patch_experiments.py --full",
                          "iterations deterministic; seconds not comparable (the patch loop is "
                          "Python); errors against the default solver at tol 1e-10 (none for "
                          "the 128^3 patches-only row)")

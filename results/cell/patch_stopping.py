@@ -15,7 +15,7 @@ leaves the block):
   / V), since the fluctuation energy f^T x is below V C_aa.
 for the default matrix-free solver and for the patches (shell MATFREE_PATCH_SHELL_STUDY voxels).
 
-RVEs: homogenize.bench.cell._rve(rve_voxels) on `voxels`^3, random particle forces: (64, 32): 100
+RVEs: homogenize.bench.cell.bench_rve(rve_voxels) on `voxels`^3, random particle forces: (64, 32): 100
 particles of 1.25 voxels mean radius; (128, 64): 801 of 1.25 voxels (the hard case); (64, 64):
 the 64^3 bench RVE, 100 particles of ~2.5 voxels.
 
@@ -37,9 +37,9 @@ ITERATIONS = {"default": 60, "patches": 35}
 
 def run(rve_voxels: int, voxels: int, variant: str) -> dict:
     import homogenize.cell as cell
-    from homogenize.bench.cell import _rve
+    from homogenize.bench.cell import bench_rve
     from homogenize.solvers import SolverOptions, coupled_block_cg
-    rve = _rve(rve_voxels, 1)
+    rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     rec = {}
     orig = coupled_block_cg
@@ -100,8 +100,8 @@ def main() -> None:
         print(json.dumps(run(int(sys.argv[2]), int(sys.argv[3]), sys.argv[4])))
         return
     sys.path.insert(0, str(HERE))
-    import _resumable
-    out, rows = _resumable.parse(__doc__, JSON)
+    import resumable
+    out, rows = resumable.parse(__doc__, JSON)
     have = {(r["rve_voxels"], r["voxels"], r["variant"]) for r in rows}
     for a, b in RVES:
         for variant in ("default", "patches"):
@@ -118,7 +118,7 @@ def main() -> None:
                 print(a, b, variant, quantity, tol, max(t["iterations"][:6]),
                       t["iterations"][6], "%.1e %.1e" % (max(t["error"][:6]), t["error"][6]),
                       flush=True)
-            _resumable.write(out, rows, "results/cell/patch_stopping.py",
+            resumable.write(out, rows, "results/cell/patch_stopping.py",
                              "per CG iteration and column: residual, natural norm, error energy")
 
 

@@ -1,7 +1,7 @@
 """Where one CG iteration of solver="matrix-free" spends its time: the numbers behind "Session 8"
 in results/cell/README.md (section "Matrix-free solver: what was tried ...").
 
-The bench RVE of `mapsim bench` (homogenize.bench.cell._rve) at 64^3 (100 particles, mean radius
+The bench RVE of `mapsim bench` (homogenize.bench.cell.bench_rve) at 64^3 (100 particles, mean radius
 ~2.5 voxels, composite voxels), the solver built exactly as homogenize_mesh builds it; for
 k = 1..8 right-hand sides (random, fixed seed) the median of 5 timings of: the fine-level product
 K u, one 8-colour block Gauss-Seidel sweep on the fine level, one sweep over the interface nodes
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from homogenize import cell
-from homogenize.bench.cell import _rve
+from homogenize.bench.cell import bench_rve
 from homogenize.solvers import SolverOptions
 from homogenize.mesh import voxelize
 from micro.materials import FE, PDMS, elastic
@@ -71,7 +71,7 @@ def main():
     n = args.voxels
     # the V-cycle of session 13, without particle patches (the default since session 14)
     opts = SolverOptions(patch_shell_voxels=None)
-    mesh = voxelize(_rve(n), n, method="composite")
+    mesh = voxelize(bench_rve(n), n, method="composite")
     lam, mu, comp = cell._composite_fields(mesh, elastic(PDMS), elastic(FE))
     s = cell._CellSolver(mesh, lam, mu, deflate=True, stiff_mask=mesh.fraction >= 0.5, tol=1e-6,
                          maxiter=2000, solver="matrix-free", composite=comp, options=opts)

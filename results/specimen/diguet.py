@@ -50,8 +50,8 @@ from homogenize.experiments.tables import (affine_kappa, filler_stiffness_ratio,
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
 from homogenize.macro.specimen import Specimen, solve_specimen
-from micro._io import atomic_write_text, data_digest, round_floats, save_png, write_json
-from micro._validate import ConvergenceError
+from micro import (ConvergenceError, atomic_write_text, data_digest, round_floats, save_png,
+                   write_json)
 from micro.dipoles import solve
 from micro.particles import CoreShell, Monodisperse, generate_rve
 

@@ -17,7 +17,7 @@ def test_quick_study(load_script, tmp_path, monkeypatch):
     """Reduced but real version of the study (16^3, 24^3): errors fall as the magnetic column is
     tightened, the error at the default (1e-3) stays far below 1e-4 of the stress, and the
     reported linear-formula error is larger than the variational error everywhere."""
-    monkeypatch.syspath_prepend(str(SCRIPT.parent))     # the script's own _resumable helper
+    monkeypatch.syspath_prepend(str(SCRIPT.parent))     # the script's own resumable helper
     mt = load_script(SCRIPT)
     out = tmp_path / "mt.json"
     monkeypatch.setattr("sys.argv", ["magnetic_tolerance.py", "--quick", "--out", str(out)])

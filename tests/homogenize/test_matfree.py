@@ -349,9 +349,9 @@ def test_interface_sweeps_cut_iterations():
     against none on the 32^3 bench RVE: fewer CG iterations in every load case that needs more
     than a handful, the same C_eff to the solver tolerance (results/cell/multigrid_robustness.json
     holds the bigger RVEs)."""
-    from homogenize.bench.cell import _rve
+    from homogenize.bench.cell import bench_rve
     opts = SolverOptions(patch_shell_voxels=None)       # the sweeps alone
-    rve = _rve(32)
+    rve = bench_rve(32)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     out = {}
     for sweeps in (0, 1):
