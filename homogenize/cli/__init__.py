@@ -23,7 +23,7 @@ import sys
 from micro._validate import EXIT_CONVERGENCE, EXIT_INPUT, ConvergenceError, InputError
 
 from homogenize.cli import bench, cell, experiments, macro, relax, rve, specimen, tables
-from homogenize.cli._common import Formatter, check_output_dir, check_outputs
+from homogenize.cli._common import Formatter, Parser, check_output_dir, check_outputs
 
 __all__ = ["main", "build_parser"]
 
@@ -32,7 +32,7 @@ _GROUPS = (macro, specimen, rve, cell, relax, tables, experiments, bench)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="mapsim", formatter_class=Formatter,
         description="Particle-resolved micromechanics of magnetic active polymers. "
                     "All quantities in SI units (m, Pa, T, A/m, N/m^3). Exit codes: 0 done, "

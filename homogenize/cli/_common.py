@@ -13,13 +13,35 @@ from micro._validate import InputError, check_regular_file
 
 from homogenize._budget import check_memory, machine_memory_bytes
 
-__all__ = ["Formatter", "one_line_errors", "int_in", "float_in", "scheduler_address",
-           "check_outputs", "check_output_dir", "check_input_file", "machine_memory_bytes",
-           "check_memory", "parse_at", "write_snippet", "config_of"]
+__all__ = ["Formatter", "Parser", "NEGATIVE_NUMBER", "one_line_errors", "int_in", "float_in",
+           "scheduler_address", "check_outputs", "check_output_dir", "check_input_file",
+           "machine_memory_bytes", "check_memory", "parse_at", "write_snippet", "config_of"]
 
 
 class Formatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     pass
+
+
+#: a number with a minus sign in any notation Python's float() reads: -1, -1.5, -.5, -1e-6,
+#: -2.5E+3, -1_000, -inf, -nan (argparse's own pattern knows only -1 and -1.5)
+NEGATIVE_NUMBER = re.compile(
+    r"^-(?:(?:\d[\d_]*\.?[\d_]*|\.\d[\d_]*)(?:[eE][-+]?\d[\d_]*)?|inf|infinity|nan)$",
+    re.IGNORECASE)
+
+
+class Parser(argparse.ArgumentParser):
+    """The argument parser of every ``mapsim`` command (subcommands inherit the class).
+
+    A word that is a negative number in any notation (:data:`NEGATIVE_NUMBER`: ``-15.5e-3``,
+    ``-1e-6``, ``-inf``) is a value, never an option, so it reaches the option's range check
+    (``--mean-radius -1e-6`` -> the range message) and fills ``nargs=3`` vectors
+    (``--magnet-position 20e-3 2.5e-3 -15.5e-3``). No option of mapsim looks like a number,
+    which is argparse's own condition for this reading.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
 
 
 def one_line_errors(sub) -> None:

@@ -99,3 +99,32 @@ def test_load_summarises_existing_file(tmp_path, capsys):
     assert s["phi"] == pytest.approx(4 / 3 * 3.141592653589793 * 9e-24 / 1e-18, rel=1e-12)
     assert main(["rve", "--load", str(tmp_path / "missing.h5")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- issue 36
+@pytest.mark.parametrize("word", ["-1e-6", "-1E-6", "-.5", "-2.5e+3", "-1", "-1.", "-inf",
+                                  "-1_000"])
+def test_negative_numbers_in_any_notation_reach_the_range_check(word, capsys):
+    # argparse's own pattern reads "-1e-6" as an option ("expected one argument")
+    assert main(["rve", "--mean-radius", word]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mapsim rve: error: --mean-radius must be") and "\n" not in err
+    assert "expected one argument" not in err
+
+
+def test_negative_number_pattern_and_parser_class():
+    from homogenize.cli import build_parser
+    from homogenize.cli._common import NEGATIVE_NUMBER, Parser
+    for w in ("-1e-6", "-15.5e-3", "-0.5", "-.5", "-3", "-INF", "-nan", "-1e+06"):
+        assert NEGATIVE_NUMBER.match(w), w
+        float(w.replace("_", ""))
+    for w in ("--n", "-h", "-e5", "-", "-1e", "-1e-", "--1", "-x1"):
+        assert not NEGATIVE_NUMBER.match(w), w
+    parser = build_parser()
+    assert isinstance(parser, Parser)
+    sub = next(a for a in parser._actions if hasattr(a, "choices") and a.choices)
+    assert all(isinstance(p, Parser) for p in sub.choices.values())     # every command
+    a = parser.parse_args(["beam", "--magnet-position", "20e-3", "2.5e-3", "-15.5e-3"])
+    assert a.magnet_position == [20e-3, 2.5e-3, -15.5e-3]
+    a = parser.parse_args(["rve", "--chain-direction", "-1e-3", "0", "-1"])
+    assert a.chain_direction == [-1e-3, 0.0, -1.0]
