@@ -9,6 +9,7 @@ import math
 import os
 import platform
 import re
+import stat
 import subprocess
 import sys
 import tempfile
@@ -19,7 +20,8 @@ from micro._validate import InputError
 import h5py
 import numpy as np
 
-__all__ = ["atomic_path", "clean_stale_temps", "atomic_write_text", "write_json", "manifest", "git_revision",
+__all__ = ["atomic_path", "clean_stale_temps", "open_regular", "is_regular_file", "NotRegularFile",
+           "protect_inputs", "protected_inputs", "atomic_write_text", "write_json", "manifest", "git_revision",
            "open_hdf5", "RESULT_DIGITS", "round_floats", "data_digest", "save_png", "hdf5_agree"]
 
 _PACKAGES = ("mapsim", "numpy", "scipy", "numba", "scikit-fem", "h5py", "trimesh", "pyamg",
@@ -72,6 +74,87 @@ def clean_stale_temps(path, max_age_s: float = STALE_TEMP_SECONDS) -> int:
     return n
 
 
+class NotRegularFile(OSError):
+    """A path to read that is not a regular file (a FIFO, device, directory or socket)."""
+
+
+def is_regular_file(path) -> bool:
+    """Whether ``path`` is (or links to) a regular file; never opens it."""
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except (OSError, ValueError):
+        return False
+
+
+def open_regular(path, mode: str = "rb", **kwargs):
+    """Open ``path`` for reading only if it is a regular file, without ever blocking.
+
+    A FIFO would block ``open`` until a writer appears and a device such as /dev/zero is read
+    forever: the file is opened non-blocking, checked with ``fstat`` on the open descriptor (no
+    race with a rename), and only then handed out in blocking mode. Anything else raises
+    :class:`NotRegularFile` (an ``OSError``); a missing file ``FileNotFoundError``.
+    """
+    if any(c in mode for c in "wax+"):
+        raise ValueError("open_regular opens for reading only")
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = "a directory" if stat.S_ISDIR(st.st_mode) else "a device, pipe or socket"
+            raise NotRegularFile(f"{path} is not a regular file (it is {kind})")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, mode, **kwargs)
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+# Inputs of the running command (device, inode): no atomic write may replace one of them,
+# whatever path names it (the last line of defence behind the CLI's checks of its options).
+_PROTECTED: dict = {}
+
+
+def protect_inputs(paths) -> None:
+    """Declare the files the running command reads: :func:`atomic_path` then refuses to replace
+    any of them (an output that is also an input of the same run) with :class:`InputError`.
+    Missing paths are skipped. ``protect_inputs(())`` does nothing; see
+    :func:`protected_inputs` to clear."""
+    for p in paths:
+        if p is None:
+            continue
+        try:
+            st = os.stat(p)
+        except (OSError, ValueError):
+            continue
+        if stat.S_ISREG(st.st_mode):
+            _PROTECTED[(st.st_dev, st.st_ino)] = str(p)
+
+
+@contextlib.contextmanager
+def protected_inputs(paths):
+    """Context manager: :func:`protect_inputs` for the block, then forget them again."""
+    saved = dict(_PROTECTED)
+    protect_inputs(paths)
+    try:
+        yield
+    finally:
+        _PROTECTED.clear()
+        _PROTECTED.update(saved)
+
+
+def _refuse_protected(path: Path) -> None:
+    if not _PROTECTED:
+        return
+    try:
+        st = os.stat(path)
+    except OSError:
+        return
+    src = _PROTECTED.get((st.st_dev, st.st_ino))
+    if src is not None:
+        raise InputError(f"{path} is an input of this command ({src}); refusing to overwrite "
+                         f"it: give another output name or directory")
+
+
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside ``path``; move it onto ``path`` only if the block succeeds.
@@ -81,6 +164,7 @@ def atomic_path(path):
     :data:`STALE_TEMP_SECONDS`) are removed first.
     """
     path = Path(path)
+    _refuse_protected(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     clean_stale_temps(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -111,8 +195,11 @@ def open_hdf5(path, what: str):
     """
 
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise InputError(f"{what} {path} does not exist")
+    if not path.is_file():
+        raise InputError(f"{what} {path} must be a regular file (this is a directory, device "
+                         f"or pipe)")
     try:
         return h5py.File(path, "r")
     except OSError as exc:

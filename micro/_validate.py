@@ -12,7 +12,7 @@ import stat
 
 import numpy as np
 
-__all__ = ["InputError", "ConvergenceError", "check_regular_file", "EXIT_INPUT", "EXIT_CONVERGENCE", "check_finite", "check_positive", "check_range", "check_choice"]
+__all__ = ["InputError", "ConvergenceError", "check_regular_file", "EXIT_INPUT", "EXIT_CONVERGENCE", "check_finite", "check_positive", "check_range", "check_choice", "check_slender", "check_header"]
 
 
 #: Exit code of the CLI for unusable input (:class:`InputError`).
@@ -99,3 +99,45 @@ def check_regular_file(path, label: str, max_bytes: int, missing: str = "does no
     if st.st_size > max_bytes:
         raise InputError(f"{label} is {st.st_size / 2 ** 20:.1f} MiB, more than the "
                          f"{max_bytes / 2 ** 20:g} MiB allowed")
+
+
+def check_slender(what: str, long_name: str, long_value: float, thin_name: str,
+                  thin_value: float, min_ratio: float, unit: str = "m",
+                  assumption: str = "") -> None:
+    """Refuse a geometry that contradicts the slender-body assumption of a model: ``long_value``
+    must be at least ``min_ratio`` times ``thin_value``. The message names both dimensions
+    (a unit slip such as a thickness in metres for one in millimetres is the usual cause)."""
+    lv, tv = float(long_value), float(thin_value)
+    if not (math.isfinite(lv) and math.isfinite(tv)) or lv < min_ratio * tv:
+        why = f" ({assumption})" if assumption else ""
+        raise InputError(f"{what}: {thin_name} = {tv:g} {unit} is not small against "
+                         f"{long_name} = {lv:g} {unit}; the model needs {long_name} >= "
+                         f"{min_ratio:g} x {thin_name}{why}; a value in the wrong unit?")
+
+
+def check_header(where: str, header, required=(), one_of=()) -> list:
+    """Check a CSV header (a list of column names): no name twice, every ``required`` name
+    present, and exactly one of the alternatives ``one_of`` (when given; two would leave it
+    unsaid which one is meant). Returns the stripped names. ``where`` starts every message
+    (e.g. ``"sizes.csv, row 1"``)."""
+    names = [str(h).strip() for h in header]
+    seen = set()
+    for h in names:
+        if h in seen:
+            raise InputError(f"{where}, column '{h}': duplicate column name; which one is meant "
+                             f"is ambiguous: keep one")
+        seen.add(h)
+    for r in required:
+        if r not in seen:
+            raise InputError(f"{where}: required column '{r}' missing (header has: "
+                             f"{', '.join(names)})")
+    if one_of:
+        given = [c for c in one_of if c in seen]
+        if not given:
+            raise InputError(f"{where}: the header needs one of the columns "
+                             f"{' or '.join(repr(c) for c in one_of)} (header has: "
+                             f"{', '.join(names)})")
+        if len(given) > 1:
+            raise InputError(f"{where}: columns {' and '.join(repr(c) for c in given)} are both "
+                             f"given, which one to use is ambiguous; keep only one of them")
+    return names

@@ -12,13 +12,14 @@ root attributes ``box_m`` (with ``box_m_units``), ``seed`` (``-1`` stored with
 from __future__ import annotations
 
 import json
+import os
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ._io import _default as _json_default, atomic_path, write_json
+from ._io import _default as _json_default, atomic_path, is_regular_file, open_regular, write_json
 from ._validate import InputError
 from micro._io import open_hdf5
 import h5py
@@ -319,8 +320,11 @@ def check_sidecar_manifest(path) -> str | None:
     Returns a note for the user, or None when there is nothing to say.
     """
     side = sidecar_path(path)
+    if os.path.lexists(side) and not is_regular_file(side):
+        return f"{side} is not a regular file (a FIFO or device?); left as it is"
     try:
-        have = json.loads(side.read_text(encoding="utf-8"))
+        with open_regular(side, "r", encoding="utf-8") as fh:
+            have = json.loads(fh.read())
     except FileNotFoundError:
         return None
     except (OSError, ValueError):

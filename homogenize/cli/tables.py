@@ -201,7 +201,8 @@ def register(sub, formatter):
                    help="fix grid axes to one of their values, e.g. \"phi=0.035,B_T=0.1\" "
                         "(default: every grid point of the study)")
     _add_cluster_options(p)
-    p.set_defaults(func=_cmd_rve_size, output_dirs=("out",), inputs=("study",))
+    p.set_defaults(func=_cmd_rve_size, output_dirs=("out",), inputs=("study",),
+                   output_dir_writes={"out": ("rve_size_n*", "rve_size.*", ".*")})
 
     p = sub.add_parser("compare", formatter_class=formatter, description=_COMPARE_DOC,
                        help="test whether two grid points of a table differ")
@@ -240,7 +241,9 @@ def register(sub, formatter):
     p.add_argument("--width", type=float_in("--width", 0.0, 1.0, "m", lo_open=True),
                    default=5e-3, help="assumed strip width [m]")
     _add_cluster_options(p)
-    p.set_defaults(func=_cmd_chain, output_dirs=("out",), inputs=("study",))
+    p.set_defaults(func=_cmd_chain, output_dirs=("out",), inputs=("study",),
+                   output_dir_writes={"out": ("table.*", "chain.json", "summary.md",
+                                              "deflection_vs_*.png", ".*")})
     one_line_errors(sub)
 
 

@@ -20,7 +20,7 @@ import numpy as np
 from homogenize.macro import closed_form as cf
 from homogenize.macro.fem import Material, box_mesh, linear_solve, neo_hookean_solve, \
     probe_displacement
-from micro._validate import InputError, check_choice, check_positive
+from micro._validate import InputError, check_choice, check_positive, check_slender
 from micro.materials import PDMS
 
 __all__ = ["Strip", "CantileverResult", "MODELS", "beam_divisions", "solve_cantilever",
@@ -28,6 +28,13 @@ __all__ = ["Strip", "CantileverResult", "MODELS", "beam_divisions", "solve_canti
 
 #: models understood by :func:`solve_cantilever`
 MODELS = ("eb", "eb-plate", "timoshenko", "elastica", "fem", "neo-hookean")
+
+
+#: smallest length / thickness of a strip: every model here (Euler-Bernoulli, Timoshenko,
+#: elastica, the 3D FEM meshed as a beam) takes the strip as slender; the shortest strip of the
+#: tests and studies has 6, a strip thicker than a quarter of its length is a block (or a
+#: thickness given in the wrong unit)
+MIN_SLENDERNESS = 4.0
 
 
 @dataclass(frozen=True)
@@ -41,6 +48,8 @@ class Strip:
         check_positive("length_m", self.length_m, "m")
         check_positive("width_m", self.width_m, "m")
         check_positive("thickness_m", self.thickness_m, "m")
+        check_slender("strip", "length_m", self.length_m, "thickness_m", self.thickness_m,
+                      MIN_SLENDERNESS, assumption="a beam: slender along its length")
 
 
 @dataclass(frozen=True)

@@ -32,9 +32,15 @@ from skfem.models.elasticity import linear_elasticity
 
 from homogenize.macro.fem import (FEMSolution, Material, _solve_free, box_mesh, probe_displacement,
                                   vector_basis)
-from micro._validate import check_choice, check_finite, check_positive
+from micro._validate import check_choice, check_finite, check_positive, check_slender
 
 __all__ = ["ChannelGeometry", "ChannelResult", "solve_channel"]
+
+
+#: smallest channel length / height d / b (lubrication along the channel; the studies use >= 25)
+MIN_LENGTH_TO_HEIGHT = 4.0
+#: largest ceiling thickness / channel width c / a (the paper's sweep reaches 4)
+CEILING_MAX_PER_WIDTH = 10.0
 
 
 @dataclass(frozen=True)
@@ -52,6 +58,13 @@ class ChannelGeometry:
             check_positive(name, getattr(self, name), "m")
         if self.wall_m is not None:
             check_positive("wall_m", self.wall_m, "m")
+        # the model: a thin ceiling over a wide, flat channel that is long against its height
+        # (lubrication along d); a ratio far outside these is a value in the wrong unit
+        check_slender("channel", "d_m (length)", self.d_m, "b_m (height)", self.b_m,
+                      MIN_LENGTH_TO_HEIGHT, assumption="lubrication along the channel")
+        check_slender("channel", "a_m (width)", self.a_m, "c_m (ceiling thickness)", self.c_m,
+                      1.0 / CEILING_MAX_PER_WIDTH,
+                      assumption="a ceiling that bends over the channel")
 
     @property
     def wall(self) -> float:

@@ -71,6 +71,7 @@ def seed_strip(thickness_m: float = 1e-3, width_m: float = 5e-3) -> dict:
     t = check_positive("thickness_m", thickness_m, "m")
     w = check_positive("width_m", width_m, "m")
     L = (2 * SEED["E_Pa"] * t ** 2 * SEED["deflection_m"] / (3 * SEED["f_paper_N_m3"])) ** 0.25
+    Strip(L, w, t)                       # the strip's slenderness (a thickness in metres?)
     return {"length_m": L, "width_m": w, "thickness_m": t, "E_Pa": SEED["E_Pa"],
             "nu": SEED["nu"]}
 
@@ -127,6 +128,28 @@ def _magnet_sweep(table, phi, strip, E, N, others, gaps_m=MAGNET_GAPS_M):
     return rows
 
 
+def _check_chain_study(study) -> None:
+    """Refuse a study the chain cannot use, before its table is computed."""
+    for req in ("phi", "B_T", "gradB_T_per_m"):
+        if req not in study.axis_names:
+            raise InputError(f"{study.path}: the chain needs the grid axis {req}")
+    if study.evaluator == "relax":
+        raise InputError(f"{study.path}: the chain needs the body force f_eff_N_m3, which the "
+                         f"relax evaluator does not compute; use evaluator = \"rve\"")
+    axes = dict(study.axes)
+    multi = [a for a, v in axes.items()
+             if a not in ("phi", "B_T", "gradB_T_per_m") and len(v) > 1]
+    if multi:
+        raise InputError(f"{study.path}: the chain takes grid axes phi, B_T, gradB_T_per_m "
+                         f"(one value for the others); {multi} have several")
+    B = [float(b) for b in axes["B_T"]]
+    if min(B) <= 0:
+        raise InputError(f"{study.path}: the chain plots against log B: B_T values must be > 0")
+    if len(B) < 2:
+        raise InputError(f"{study.path}: the chain interpolates M_eff(H) along B_T: [grid] B_T "
+                         f"needs at least two values, got {B}")
+
+
 def run_chain(study=None, out_dir="results/chain", *, workers=None, scheduler=None,
               progress=True, keep_parts=False, thickness_m=1e-3, width_m=5e-3,
               n_fine=61, demagnetization=True) -> dict:
@@ -138,14 +161,14 @@ def run_chain(study=None, out_dir="results/chain", *, workers=None, scheduler=No
     ``deflection_vs_B.png`` and ``deflection_vs_magnet_gap.png``. Returns ``chain.json``.
     """
     study = load_study(DEFAULT_STUDY if study is None else study)
-    for req in ("phi", "B_T", "gradB_T_per_m"):
-        if req not in study.axis_names:
-            raise InputError(f"{study.path}: the chain needs the grid axis {req}")
+    # everything the chain needs of the study and the strip is checked before anything is
+    # written (the table alone takes minutes, and a refused run leaves no directory behind)
+    _check_chain_study(study)
+    strip = seed_strip(thickness_m, width_m)
     out_dir = Path(out_dir)
     table_path = run_batch(study, out_dir / "table.h5", workers=workers, scheduler=scheduler,
                            progress=progress, clean=not keep_parts)
     table = read_table(table_path)
-    strip = seed_strip(thickness_m, width_m)
     N = prism_demag_factors(strip["length_m"], strip["width_m"], strip["thickness_m"])[2] \
         if demagnetization else 0.0
     g = SEED["gradB_T_per_m"]
