@@ -53,6 +53,7 @@ from micro.rve import minimum_image
 
 from . import _assembly as asm
 from . import _budget
+from ._assembly import isotropic_voigt, laminate_voigt   # public here: the phases' stiffness
 from .solvers import _matfree as mf
 from .solvers._patches import ParticlePatches
 from ._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
@@ -66,7 +67,8 @@ from scipy.sparse.linalg import splu
 __all__ = ["Material", "CellConfig", "homogenize", "CellResult", "homogenize_rve", "homogenize_mesh", "magnetic_tol", "isotropic_projection",
            "anisotropy_index", "voigt_to_tensor", "tensor_to_voigt",
            "hashin_shtrikman_bounds", "eshelby_dilute", "mori_tanaka", "guth_gold",
-           "bulk_shear", "young_poisson", "lame", "isotropic_stiffness_voigt", "FE_PDMS_CONTRAST"]
+           "bulk_shear", "young_poisson", "lame", "isotropic_stiffness_voigt", "FE_PDMS_CONTRAST",
+           "cell_solver", "isotropic_voigt", "laminate_voigt"]
 
 VOIGT = asm.VOIGT
 CASES = ("e11", "e22", "e33", "g23", "g13", "g12")
@@ -550,6 +552,25 @@ def _composite_fields(mesh: VoxelMesh, matrix: Material, particle: Material):
     full = (mesh.fraction >= 1.0).astype(np.float64)
     lam, mu = (1.0 - full) * lm + full * lp, (1.0 - full) * mm + full * mp
     return lam, mu, _Composite(mesh, matrix, particle, lam, mu)
+
+
+def cell_solver(mesh: VoxelMesh, *, matrix: Material = elastic(PDMS),
+                particle: Material = elastic(FE), tol: float = 1e-6, maxiter: int = 2000,
+                solver: str = "fast", options: SolverOptions | None = None):
+    """The solver :func:`homogenize_mesh` builds for ``mesh`` (its phases' fields, the composite
+    voxels' laminates, the stiff particles' rigid modes deflated), for experiments on the solver
+    itself: ``.matvec`` is the stiffness operator, ``.M`` the preconditioner (the matrix-free
+    solver's :class:`homogenize.solvers.matfree.GeometricVCycle`, or the one that
+    ``options.preconditioner`` makes), ``.solve(F)`` the deflated block CG on load columns F."""
+    options = _options(options)
+    composite = None
+    if mesh.method in ("composite", "laminate"):
+        lam, mu, composite = _composite_fields(mesh, matrix, particle)
+    else:
+        lam, mu = _material_fields(mesh, matrix, particle)
+    return _CellSolver(mesh, lam, mu, deflate=particle.E_Pa > 10.0 * matrix.E_Pa,
+                       stiff_mask=mesh.fraction >= 0.5, tol=tol, maxiter=maxiter, solver=solver,
+                       composite=composite, options=options)
 
 
 def _force_density(mesh: VoxelMesh, forces_N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -68,7 +68,8 @@ from .mesh import _as_geometry
 __all__ = ["CutResult", "homogenize_cut", "homogenize_level_set", "discrete_volume",
            "volume_matched_radius", "sphere_fn", "nodal_phi", "nitsche_matrices", "cut_pieces",
            "split_tet", "tet_negative_volume", "tet_rule", "tri_rule", "q1",
-           "memory_estimate_bytes", "check_cut_memory"]
+           "memory_estimate_bytes", "check_cut_memory", "isotropic_element_matrices",
+           "side_integrals", "cut_cell_problem"]
 
 _CORN = asm.CORNERS.astype(float)       # local corner a = x + 2 y + 4 z -> (x, y, z)
 #: the 6 Kuhn tetrahedra of the unit cube as corner indices (6, 4): all share the main diagonal
@@ -668,6 +669,16 @@ def _cut_cell_problem(phi, nodes, n, lames, cases, tol, cut_matrices, two_copies
                        for b in range(len(cases))] for a in range(len(cases))])
     phi_h = ((full.sum() * h ** 3) + vol[0].sum())
     return C, float(phi_h), its, ndof, int(cvox.size), info
+
+
+#: the cut-voxel building blocks by public names, for studies of other cut-voxel
+#: discretizations on the same cell problem (results/cell/cut_cell_experiments.py: the
+#: ridge-enriched XFEM): the isotropic element matrices from gradient products, the per-side
+#: integrals over the pieces of :func:`cut_pieces`, and the periodic cell problem that takes the
+#: cut voxels' matrices from a callable (the docstrings are those of the private originals)
+isotropic_element_matrices = _iso_K
+side_integrals = _side_integrals
+cut_cell_problem = _cut_cell_problem
 
 
 # ------------------------------------------------------------------------------------------------

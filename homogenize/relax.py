@@ -83,7 +83,8 @@ from .mesh import voxelize
 __all__ = ["relax", "RelaxResult", "equilibrium", "Equilibrium", "fem_displaceability",
            "magnetostriction_curve",
            "green_displaceability", "microstructure", "magnetic_coenergy_J", "BOUNDARIES",
-           "ELASTIC_MODELS", "MAX_SUBSTEP_HALVINGS"]
+           "ELASTIC_MODELS", "MAX_SUBSTEP_HALVINGS", "pair_contact_forces",
+           "rigid_sphere_displaceability"]
 
 BOUNDARIES = ("free", "strain")
 ELASTIC_MODELS = ("green", "fem")
@@ -953,6 +954,18 @@ def _pair_contact_forces(x, a, box, g0, matrix, X_ref=None, stiffen=1.0):
         phi, _ = _barrier(gv, g0p, kc)
         out.append((p, q, dv, phi * dv / rv))
     return out
+
+
+def pair_contact_forces(centers_m, radii_m, box_m: float, gap_m: float, matrix: ElasticMaterial,
+                        reference_centers_m=None, stiffen: float = 1.0) -> list:
+    """The contact penalty of :func:`relax` between the particles at ``centers_m`` (radii
+    ``radii_m``, periodic cube ``box_m``): a list of ``(i, j, d_ij, force on i from j [N])`` per
+    pair closer than its activation gap (``gap_m``, or the pair's gap at ``reference_centers_m``
+    if smaller), ``d_ij`` the minimum-image vector between them [m]; ``stiffen`` scales the
+    penalty stiffness (50 x the sphere's elastic spring in ``matrix``). E.g. the contact share of
+    a relaxed RVE's virial stress is ``-sum outer(d_ij, f_ij) / box_m^3``."""
+    return _pair_contact_forces(centers_m, radii_m, box_m, gap_m, matrix, reference_centers_m,
+                                stiffen)
 
 
 def _contact_stiffness(a, matrix):

@@ -9,7 +9,7 @@ smoothed-aggregation hierarchies (:func:`smoothed_aggregation`, near-null space 
 Modules: ``options`` (the settings), ``amg`` (smoothed aggregation, its block V-cycle, the BSR
 operator), ``krylov`` (block CG, coupled block CG, deflation), and the private ``_matfree`` (the
 matrix-free voxel operator and its geometric multigrid) and ``_patches`` (the particle patches
-of its fine level). Numba kernels: :mod:`homogenize._kernels`, and (not yet moved there) the
+of its fine level), whose public names are in ``matfree``. Numba kernels: :mod:`homogenize._kernels`, and (not yet moved there) the
 node-operator, transfer and patch kernels inside ``_matfree`` and ``_patches``.
 """
 from .amg import (SA_SMOOTH, BlockVCycle, BSROp, greedy_colours, grid_colours,

@@ -340,6 +340,11 @@ class MatFreeOperator:
                  X.reshape(-1, 3, k), B.reshape(-1, 3, k),
                  self.dinv if mode >= 2 else self.diag, out.reshape(-1, 3, k), mode)
 
+    def node_residual(self, nodes, X, B, out) -> None:
+        """``out[t] = (B - K X)`` at the grid nodes ``nodes[t]`` (int64), ``out`` of shape
+        (len(nodes), 3, k) for X, B of shape (3 n^3, k), C-contiguous float64."""
+        self._run(nodes, X, B, out, 1)
+
     def __matmul__(self, X):
         X = np.ascontiguousarray(X, dtype=np.float64)
         one = X.ndim == 1
@@ -638,6 +643,11 @@ class GeometricVCycle:
         self.coarse_op = cop
         del Ac, f
         self.shape = self.levels[0].op.shape
+
+    def cycle(self, level: int, B):
+        """One V-cycle from ``level`` down (0: the fine grid, the whole cycle; ``len(levels)``:
+        the coarse solve alone) on the C-contiguous block B (3 n_level^3, k); returns X."""
+        return self._cycle(level, B)
 
     def _cycle(self, i, B):
         if i == len(self.levels):

@@ -283,3 +283,31 @@ def coupled_block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None 
     if idx.size:
         X[:, idx] = Xa
     return X, hist
+
+
+# ------------------------------------------------------------------------------------------------
+# the steps of the drivers by public names, for variants of them passed in as
+# SolverOptions.krylov (results/cell/magnetic_column_experiments.py); the drivers above are the
+# only users inside the library
+# ------------------------------------------------------------------------------------------------
+
+#: (X, Xa, R, hist, idx, fa, tols) = cg_start(A, F, tol, deflation): the start of both drivers
+cg_start = _cg_start
+#: own(Y, R): Y as a C-contiguous float64 array that shares no memory with R
+own = _own
+#: gram(A, B) = A^T B, deterministic (fixed chunks of CG_CHUNK rows, added in order)
+gram = _gram
+#: colnorms(A): the column 2-norms, deterministic as :func:`gram`
+colnorms = _colnorms
+#: group_pinv(G, groups): block-diagonal pseudo-inverse of the Gram matrix G per column group
+group_pinv = _group_pinv
+#: done = record_step(hist, idx, res, tols, k, it, callback): append the active columns'
+#: relative residuals, report progress, return which active columns converged
+record_step = _record_step
+#: block_step(X, R, P, Q, alpha): X += P alpha, R -= Q alpha, in place (numba)
+block_step = kn.block_step
+#: block_directions(P, Z, beta, chunk, out): out = Z + P beta (numba; out may be P)
+block_directions = kn.block_directions
+
+__all__ += ["cg_start", "own", "gram", "colnorms", "group_pinv", "record_step", "block_step",
+            "block_directions"]

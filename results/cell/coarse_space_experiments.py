@@ -51,8 +51,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-import homogenize._assembly as asm
-import homogenize.solvers._matfree as mf
+import homogenize.solvers.matfree as mf
 import homogenize.cell as cell
 from homogenize.solvers import (BlockVCycle, SolverOptions, grid_node_coordinates,
                                 rigid_body_modes, smoothed_aggregation)
@@ -71,11 +70,11 @@ def coarsen_truncated(field: mf.ElementField, keep: np.ndarray) -> mf.ElementFie
     n = field.n
     nc = n // 2
     e = field.etype.reshape(n, n, n)
-    kids = np.stack([e[cz::2, cy::2, cx::2].reshape(-1) for cx, cy, cz in asm.CORNERS], axis=1)
+    kids = np.stack([e[cz::2, cy::2, cx::2].reshape(-1) for cx, cy, cz in mf.CORNERS], axis=1)
     k3 = keep.reshape(n, n, n)
     km = np.empty((nc ** 3, 8, 8), dtype=bool)      # (coarse voxel, child, child's corner)
-    for c, (cx, cy, cz) in enumerate(asm.CORNERS):
-        for a, (ax, ay, az) in enumerate(asm.CORNERS):
+    for c, (cx, cy, cz) in enumerate(mf.CORNERS):
+        for a, (ax, ay, az) in enumerate(mf.CORNERS):
             km[:, c, a] = np.roll(k3, shift=(-(cz + az), -(cy + ay), -(cx + ax)),
                                   axis=(0, 1, 2))[::2, ::2, ::2].reshape(-1)
     Pc = mf.child_prolongations()

@@ -4,7 +4,7 @@ first order at Fe/PDMS contrast, and a discretization of the same voxel grid tha
 The Nitsche cut voxels, their geometry (Kuhn splitting, quadrature, volume matching) and the
 cut-voxel cell solver now live in mapsim (homogenize.cut, imported here); the ridge XFEM, the
 experiments and their analysis stay in this script. All use the project's periodic Q1 voxel
-grid (homogenize._assembly: node i + n (j + n k), SRI element in the voxels that no interface
+grid (homogenize.cell: node i + n (j + n k), SRI element in the voxels that no interface
 cuts) and a nodal level set phi (< 0: iron, > 0: PDMS). A voxel is CUT when its corner values
 change sign; its 6 Kuhn tetrahedra (all along the main diagonal, so the faces match between
 voxels) are split exactly by the plane of the linear interpolant of phi, which gives the
@@ -31,7 +31,7 @@ Methods compared:
 
 Experiments:
 1. Tilted periodic Fe/PDMS laminate, normal (1, 1, 1)/sqrt 3, Fe fraction 0.5, against the exact
-   rank-one laminate (homogenize._assembly.laminate_voigt): the relative error of the energy of
+   rank-one laminate (homogenize.cell.laminate_voigt): the relative error of the energy of
    C_eff along each eigenvector of the exact one (3 soft modes, 3 stiff).
 2. One dilute Fe sphere per periodic PDMS cell (phi 0.01, the cell of dilute_rate.py): the shear
    coefficient c = (G / G_m - 1) / phi against that study's curved-P2 limit 2.3408 +- 0.0056, at
@@ -54,11 +54,10 @@ from pathlib import Path
 
 import numpy as np
 
-from homogenize import _assembly as asm
 from homogenize import cut
-from homogenize.cell import homogenize_mesh, voigt_to_tensor
-from homogenize.cut import (_iso_K, _side_integrals, cut_pieces, nitsche_matrices, nodal_phi,
-                            sphere_fn)
+from homogenize.cell import homogenize_mesh, isotropic_voigt, laminate_voigt, voigt_to_tensor
+from homogenize.cut import (cut_pieces, isotropic_element_matrices, nitsche_matrices, nodal_phi,
+                            side_integrals, sphere_fn)
 from homogenize.mesh import VoxelMesh
 from micro.materials import FE, PDMS, elastic
 
@@ -92,13 +91,13 @@ def xfem_ridge_matrices(phi_c, h, lames, Es):
                 - sg[:, None, None] * np.einsum("sqad,sa->sqd", dN, ph))
         return np.concatenate([dN, psi[..., None, None] * dN + N[..., None] * dpsi[..., None, :]],
                               axis=-2)
-    G, g1, vol = _side_integrals(subs, sown, ssg, m, h, grads)
-    K = _iso_K(G[0], *lames[0]) + _iso_K(G[1], *lames[1])
+    G, g1, vol = side_integrals(subs, sown, ssg, m, h, grads)
+    K = isotropic_element_matrices(G[0], *lames[0]) + isotropic_element_matrices(G[1], *lames[1])
     loads = [np.zeros((m, 16, 3)) for _ in Es]
     for s in range(2):
         lam, mu = lames[s]
         for e, E in enumerate(Es):
-            St = voigt_to_tensor(asm.isotropic_voigt(lam, mu) @ E)
+            St = voigt_to_tensor(isotropic_voigt(lam, mu) @ E)
             loads[e] -= np.einsum("maj,ij->mai", g1[s], St)
     return K, [f.reshape(m, 48) for f in loads], vol
 
@@ -122,7 +121,7 @@ def cell_problem(phi_fn, n, method, cases=(3, 4, 5), particle=FE_EL, matrix=PDMS
         raise ValueError(method)
     # energy "linear": the C formula this study's JSON was made with (homogenize.cut's public
     # functions use the variational one, whose error is quadratic in the CG error)
-    C, phi_h, its, _, _, alpha = cut._cut_cell_problem(
+    C, phi_h, its, _, _, alpha = cut.cut_cell_problem(
         phi, nodes, n, lames, list(cases), tol, cut_matrices, two_copies=method == "nitsche",
         energy="linear")
     extra = {}
@@ -174,9 +173,8 @@ def laminate_phi(n, m=LAMINATE_NORMAL, f=LAMINATE_F):
 def laminate_errors(C):
     """Relative energy error along each eigenvector of the exact laminate, soft modes first."""
     n = np.asarray(LAMINATE_NORMAL, float) / np.linalg.norm(LAMINATE_NORMAL)
-    exact = asm.laminate_voigt(asm.isotropic_voigt(*FE_EL.lame_Pa),
-                               asm.isotropic_voigt(*PDMS_EL.lame_Pa),
-                               np.array([LAMINATE_F]), n[None])[0]
+    exact = laminate_voigt(isotropic_voigt(*FE_EL.lame_Pa), isotropic_voigt(*PDMS_EL.lame_Pa),
+                           np.array([LAMINATE_F]), n[None])[0]
     lam, V = np.linalg.eigh(exact)
     return [float(V[:, a] @ C @ V[:, a] / lam[a] - 1.0) for a in range(6)], lam.tolist()
 

@@ -46,37 +46,36 @@ def _keep_block_cg(A, M, F, *, tol, maxiter, deflation=None, callback=None, grou
     """Block CG over all columns that never shrinks (O'Leary's, as coupled_block_cg)."""
     import numpy as np
 
-    from homogenize import _kernels as kn
-    from homogenize.solvers.krylov import (CG_CHUNK, _cg_start, _colnorms, _gram, _group_pinv,
-                                           _own)
+    from homogenize.solvers.krylov import (CG_CHUNK, block_directions, block_step, cg_start,
+                                           colnorms, gram, group_pinv, own)
     k = F.shape[1]
-    X, Xa, R, hist, idx, fa, tols = _cg_start(A, F, tol, deflation)
+    X, Xa, R, hist, idx, fa, tols = cg_start(A, F, tol, deflation)
     if idx.size != k:
         raise ValueError("every column must be active at the start")
     g = np.zeros(k, np.int64) if groups is None else np.asarray(groups)
     same = g[:, None] == g[None, :]
-    P = _own(M(R), R)
+    P = own(M(R), R)
     if deflation is not None:
         deflation.project(P)
     conv = np.zeros(k, bool)
     it = 0
     while not conv.all() and it < maxiter:
-        Q = _own(A(P), P)
-        Gi = _group_pinv(_gram(P, Q), g)
-        kn.block_step(Xa, R, P, Q, np.ascontiguousarray(Gi @ (_gram(P, R) * same)))
+        Q = own(A(P), P)
+        Gi = group_pinv(gram(P, Q), g)
+        block_step(Xa, R, P, Q, np.ascontiguousarray(Gi @ (gram(P, R) * same)))
         if deflation is not None:
             deflation.correct(Xa, R)
         it += 1
-        res = _colnorms(R) / fa
+        res = colnorms(R) / fa
         for c in np.flatnonzero(~conv):
             hist[c].append(float(res[c]))
         conv |= res <= tols
-        Z = _own(M(R), R)
+        Z = own(M(R), R)
         if deflation is not None:
             deflation.project(Z)
-        beta = np.ascontiguousarray(-(Gi @ (_gram(Q, Z) * same)))
+        beta = np.ascontiguousarray(-(Gi @ (gram(Q, Z) * same)))
         del Q
-        kn.block_directions(P, Z, beta, CG_CHUNK, P)
+        block_directions(P, Z, beta, CG_CHUNK, P)
     return Xa, hist
 
 
@@ -84,26 +83,25 @@ def _restart_block_cg(A, M, F, *, tol, maxiter, deflation=None, callback=None, g
     """coupled_block_cg restarted (P = Z) whenever columns leave the block."""
     import numpy as np
 
-    from homogenize import _kernels as kn
-    from homogenize.solvers.krylov import (CG_CHUNK, _cg_start, _colnorms, _gram, _group_pinv,
-                                           _own, _record_step)
+    from homogenize.solvers.krylov import (CG_CHUNK, block_directions, block_step, cg_start,
+                                           colnorms, gram, group_pinv, own, record_step)
     k = F.shape[1]
-    X, Xa, R, hist, idx, fa, tols = _cg_start(A, F, tol, deflation)
+    X, Xa, R, hist, idx, fa, tols = cg_start(A, F, tol, deflation)
     labels = np.zeros(k, np.int64) if groups is None else np.asarray(groups)
-    P = _own(M(R), R)
+    P = own(M(R), R)
     if deflation is not None:
         deflation.project(P)
     it = 0
     while idx.size and it < maxiter:
         g = labels[idx]
-        Q = _own(A(P), P)
-        Gi = _group_pinv(_gram(P, Q), g)
-        kn.block_step(Xa, R, P, Q,
-                      np.ascontiguousarray(Gi @ (_gram(P, R) * (g[:, None] == g[None, :]))))
+        Q = own(A(P), P)
+        Gi = group_pinv(gram(P, Q), g)
+        block_step(Xa, R, P, Q,
+                      np.ascontiguousarray(Gi @ (gram(P, R) * (g[:, None] == g[None, :]))))
         if deflation is not None:
             deflation.correct(Xa, R)
         it += 1
-        done = _record_step(hist, idx, _colnorms(R) / fa, tols, k, it, callback)
+        done = record_step(hist, idx, colnorms(R) / fa, tols, k, it, callback)
         if done.any():
             X[:, idx[done]] = Xa[:, done]
             idx, fa = idx[~done], fa[~done]
@@ -111,15 +109,15 @@ def _restart_block_cg(A, M, F, *, tol, maxiter, deflation=None, callback=None, g
                 break
             Xa = np.ascontiguousarray(Xa[:, ~done])
             R = np.ascontiguousarray(R[:, ~done])
-        Z = _own(M(R), R)
+        Z = own(M(R), R)
         if deflation is not None:
             deflation.project(Z)
         if done.any():
             P = Z
             continue
-        beta = np.ascontiguousarray(-(Gi @ (_gram(Q, Z) * (g[:, None] == labels[idx][None, :]))))
+        beta = np.ascontiguousarray(-(Gi @ (gram(Q, Z) * (g[:, None] == labels[idx][None, :]))))
         del Q
-        kn.block_directions(P, Z, beta, CG_CHUNK, P)
+        block_directions(P, Z, beta, CG_CHUNK, P)
     if idx.size:
         X[:, idx] = Xa
     return X, hist

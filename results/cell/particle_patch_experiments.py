@@ -3,7 +3,7 @@ the numbers behind "Particle patches" in results/cell/README.md.
 
 One patch per particle: the fine-grid nodes within r + delta voxels of its centre (periodic; the
 pinned node left out). The patch's principal submatrix of K, assembled from the operator's own
-stencil rows (homogenize.solvers._matfree.node_stencils), is factorized densely (Cholesky). In the V-cycle
+stencil rows (homogenize.solvers.matfree.node_stencils), is factorized densely (Cholesky). In the V-cycle
 the patches are solved one after the other (multiplicative Schwarz):
 - after the fine level's pre-smoothing, in particle order;
 - before its post-smoothing, in reverse order.
@@ -85,48 +85,48 @@ def patch_matrix(op, nodes) -> np.ndarray:
 
 
 class PatchedCycle:
-    """GeometricVCycle._cycle with the particle patches solved after the fine pre-smoothing and
+    """GeometricVCycle.cycle with the particle patches solved after the fine pre-smoothing and
     before the fine post-smoothing (reverse order)."""
 
     def __init__(self, rve, delta):
         self.rve, self.delta, self.patches = rve, delta, None
 
-    def _build(self, op):
+    def build(self, op):
         from scipy.linalg import cho_factor
         self.patches = [(nodes, cho_factor(patch_matrix(op, nodes)))
                         for nodes in patch_nodes(self.rve, op.n, self.delta, op.pin)]
 
-    def _sweep(self, op, X, B, order):
+    def sweep(self, op, X, B, order):
         from scipy.linalg import cho_solve
         k = X.shape[1]
         Xv = X.reshape(-1, 3, k)
         for t in order:
             nodes, fac = self.patches[t]
             r = np.empty((nodes.size, 3, k))
-            op._run(nodes, X, B, r, 1)                # residual on the patch rows
+            op.node_residual(nodes, X, B, r)          # residual on the patch rows
             Xv[nodes] += cho_solve(fac, r.reshape(-1, k)).reshape(-1, 3, k)
 
     def __call__(self, vcycle, i, B, _orig):
-        from homogenize.solvers import _matfree as mf
+        from homogenize.solvers import matfree as mf
         if i != 0:
             return _orig(vcycle, i, B)
         L = vcycle.levels[0]
         op = L.op
         if self.patches is None:
-            self._build(op)
+            self.build(op)
         k = B.shape[1]
         X = np.zeros_like(B)
         fwd = ([L.colours[c] for c in range(len(L.colours))] * vcycle.sweeps
                + L.interface_colours * vcycle.interface_sweeps)
         op.gauss_seidel_from_zero(X, B, fwd)
-        self._sweep(op, X, B, range(len(self.patches)))
+        self.sweep(op, X, B, range(len(self.patches)))
         R = op.residual(X, B)
         nc = L.n // 2
         Rc = np.empty((3 * nc ** 3, k))
         mf.restrict(nc, R.reshape(-1, 3, k), Rc.reshape(-1, 3, k))
         Xc = np.ascontiguousarray(_orig(vcycle, 1, Rc))
         mf.prolong_add(nc, Xc.reshape(-1, 3, k), X.reshape(-1, 3, k))
-        self._sweep(op, X, B, range(len(self.patches) - 1, -1, -1))
+        self.sweep(op, X, B, range(len(self.patches) - 1, -1, -1))
         op.gauss_seidel(X, B, fwd[::-1])
         return X
 
@@ -144,7 +144,7 @@ class PatchedVCycle:
     def __matmul__(self, B):
         B = np.ascontiguousarray(B, dtype=np.float64)
         one = B.ndim == 1
-        X = self.patched(self.vcycle, 0, B[:, None] if one else B, type(self.vcycle)._cycle)
+        X = self.patched(self.vcycle, 0, B[:, None] if one else B, type(self.vcycle).cycle)
         return X[:, 0] if one else X
 
     __call__ = __matmul__
@@ -155,7 +155,7 @@ class PatchedVCycle:
 
 def options(patched: PatchedCycle | None = None):
     """The solver of session 13 (this script's own Python patches against it): mapsim's particle
-    patches (homogenize.solvers._patches, the default since session 14) off; with ``patched``, the
+    patches (homogenize.solvers.matfree.ParticlePatches, the default since session 14) off; with ``patched``, the
     V-cycle's fine level replaced by it (SolverOptions.preconditioner)."""
     from homogenize.solvers import SolverOptions
     opts = SolverOptions(patch_shell_voxels=None)
@@ -238,10 +238,8 @@ def check_symmetry(rve_voxels: int = 64, voxels: int = 32) -> dict:
     from micro.materials import FE, PDMS, elastic
     rve = bench_rve(rve_voxels, 1)
     mesh = voxelize(rve, voxels, method="composite")
-    lam, mu, comp = cell._composite_fields(mesh, elastic(PDMS), elastic(FE))
-    s = cell._CellSolver(mesh, lam, mu, deflate=True, stiff_mask=mesh.fraction >= 0.5,
-                         tol=1e-6, maxiter=10, solver="matrix-free", composite=comp,
-                         options=options(PatchedCycle(rve, DELTA)))
+    s = cell.cell_solver(mesh, matrix=elastic(PDMS), particle=elastic(FE), tol=1e-6, maxiter=10,
+                         solver="matrix-free", options=options(PatchedCycle(rve, DELTA)))
     rng = np.random.default_rng(5)
     x, y = rng.normal(size=(2, 3 * voxels ** 3, 1))
     out = {}
@@ -259,7 +257,7 @@ FULL_CASES = [(128, 128, 1e-8, 1.0), (128, 64, 1e-8, 0.5), (128, 64, 1e-8, 2.0)]
 
 def main() -> None:
     # this script's own (Python) patches against the solver of session 13: mapsim's particle
-    # patches (homogenize.solvers._patches, the default since session 14) stay off (options())
+    # patches (homogenize.solvers.matfree.ParticlePatches, the default since session 14) stay off (options())
     if sys.argv[1:2] == ["--one"]:
         print(json.dumps(run_rve(int(sys.argv[2]), int(sys.argv[3]))))
         return

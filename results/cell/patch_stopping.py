@@ -1,7 +1,7 @@
 """What the block CG's stopping quantities say about the error, with and without particle patches
 (session 14): the numbers behind "Stopping rule for the patches" in results/cell/README.md.
 
-With particle patches (homogenize.solvers._patches) the relative residual ||r|| / ||f|| stops the CG
+With particle patches (homogenize.solvers.matfree.ParticlePatches) the relative residual ||r|| / ||f|| stops the CG
 while the error is still large (session 13: 5-6 iterations, E_eff 2e-5 off at tol 1e-6). This
 study records, per CG iteration and load column, on the real cell problem of
 homogenize.cell.homogenize_rve (6 strains + the magnetic column, "strains" block CG, no column

@@ -72,9 +72,8 @@ def main():
     # the V-cycle of session 13, without particle patches (the default since session 14)
     opts = SolverOptions(patch_shell_voxels=None)
     mesh = voxelize(bench_rve(n), n, method="composite")
-    lam, mu, comp = cell._composite_fields(mesh, elastic(PDMS), elastic(FE))
-    s = cell._CellSolver(mesh, lam, mu, deflate=True, stiff_mask=mesh.fraction >= 0.5, tol=1e-6,
-                         maxiter=2000, solver="matrix-free", composite=comp, options=opts)
+    s = cell.cell_solver(mesh, matrix=elastic(PDMS), particle=elastic(FE), tol=1e-6,
+                         maxiter=2000, solver="matrix-free", options=opts)
     op, M = s.matvec, s.M
     fine = M.levels[0]
     rng = np.random.default_rng(0)

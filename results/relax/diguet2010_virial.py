@@ -22,8 +22,8 @@ if __name__ == "__main__":
     rows = []
     for s, r_rel in zip(res.steps, res.rves):
         vir = np.asarray(s["virial_stress_Pa"]).copy()
-        for (_, _, dv, fv) in R._pair_contact_forces(r_rel.centers_m, rve.radii_m, rve.box_m, g0,
-                                                     MATRIX, np.asarray(rve.centers_m)):
+        for (_, _, dv, fv) in R.pair_contact_forces(r_rel.centers_m, rve.radii_m, rve.box_m, g0,
+                                                    MATRIX, np.asarray(rve.centers_m)):
             vir -= np.outer(dv, fv) / rve.box_m ** 3
         st = solve(rve, [0, 0, s["B_T"]], 0.0, "regime", demag_factor=N_DEMAG)
         Ma, Mr = float(st.M_eff_A_per_m[2]), s["M_eff_A_per_m"]

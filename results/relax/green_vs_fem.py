@@ -24,8 +24,8 @@ import numpy as np
 
 from micro import RVE
 from micro.materials import ElasticMaterial
-from homogenize._green import rigid_sphere_displaceability
-from homogenize.relax import fem_displaceability, green_displaceability
+from homogenize.relax import (fem_displaceability, green_displaceability,
+                              rigid_sphere_displaceability)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 L, A = 200e-9, 25e-9
