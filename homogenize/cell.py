@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from tqdm import tqdm
+from micro._progress import progress_bar
 
 from micro._validate import ConvergenceError, InputError, check_finite, check_range
 from micro.materials import FE, PDMS, ElasticMaterial, elastic
@@ -656,7 +656,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     if progress:
         # the bar counts converged load cases; its text shows the CG iteration and the worst
         # residual against the tolerance, so it moves with the work
-        bar = tqdm(total=len(names), desc="cell problems (block CG)", unit="case", leave=False)
+        bar = progress_bar(total=len(names), desc="cell problems (block CG)", unit="case",
+                           leave=False)
 
         def callback(it, n_done, worst):
             bar.n = min(n_done, len(names))

@@ -81,7 +81,7 @@ from micro._validate import InputError
 from ._evaluate import QUANTITIES, get_evaluator
 from ._stats import summarize, t_half_width
 from ._study import Study, Task, _unit_of, load_study
-from tqdm import tqdm
+from micro._progress import progress_bar
 import shutil
 import h5py
 from micro._io import open_hdf5
@@ -416,9 +416,9 @@ def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, c
     if todo:
         ctx = contextlib.nullcontext(client) if client is not None else \
             _dask_client(scheduler, workers, processes)
-        with ctx as cl, tqdm(total=len(tasks), initial=n_done, desc=f"batch {study.name}",
-                             unit="RVE", file=sys.stderr, disable=not progress,
-                             dynamic_ncols=True) as bar:
+        with ctx as cl, progress_bar(total=len(tasks), initial=n_done, desc=f"batch {study.name}",
+                                     unit="RVE", file=sys.stderr, disable=not progress,
+                                     dynamic_ncols=True) as bar:
             from dask.distributed import as_completed
             by_key = {}
             futures = []

@@ -36,7 +36,7 @@ from .rve import RVE, minimum_image
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 from scipy.spatial.distance import pdist
-from tqdm import tqdm
+from micro._progress import progress_bar
 from scipy.spatial import cKDTree
 
 __all__ = ["ParticleConfig", "place", "LogNormal", "Histogram", "Monodisperse", "CoreShell", "default_distribution",
@@ -679,7 +679,7 @@ def _place_bodies(offsets, radii, body_start, box, gap, rng, max_attempts, kerne
     state = np.zeros(3, dtype=np.int64)
     bar = None
     if progress:
-        bar = tqdm(total=nbody, desc="placing", unit="body", file=sys.stderr)
+        bar = progress_bar(total=nbody, desc="placing", unit="body", file=sys.stderr)
     try:
         while True:
             batch = int(min(max(4096, 2 * (nbody - state[0])), 1 << 20))
@@ -741,7 +741,7 @@ def _compress(radii, box, gap, rng, max_attempts, progress=False):
     L0 = L
     bar = None
     if progress and L0 > box:
-        bar = tqdm(total=100, desc="compressing", unit="%", file=sys.stderr)
+        bar = progress_bar(total=100, desc="compressing", unit="%", file=sys.stderr)
     try:
         while L > box:
             L_new = max(box, L * (1.0 - step))

@@ -46,7 +46,7 @@ from homogenize.experiments.causes import composite_magnetization_A_per_m, predi
 from dataclasses import replace as _replace
 from dataclasses import replace
 from homogenize.experiments.causes import default_params
-from tqdm import tqdm
+from micro._progress import progress_bar
 
 __all__ = ["Diagnosis", "FitResult", "diagnose", "make_folds", "fit", "cross_validate",
            "covariates", "MIN_GAIN", "ALPHA"]
@@ -376,7 +376,7 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
     steps, rounds, round_bases = [], [], []
     bar = None
     if progress:
-        bar = tqdm(desc=f"diagnose {exp.kind}", unit="model", file=sys.stderr, leave=False)
+        bar = progress_bar(desc=f"diagnose {exp.kind}", unit="model", file=sys.stderr, leave=False)
     remaining = [c for c in CAUSES if applicable(c, exp)[0]]
     if folds is None:
         n_seed = len(parameters(seed, exp))

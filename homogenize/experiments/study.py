@@ -20,7 +20,7 @@ from .causes import CAUSES, applicable
 from .diagnose import diagnose
 from .synthetic import generate, study_cases
 from pathlib import Path
-from tqdm import tqdm
+from micro._progress import progress_bar
 
 __all__ = ["run_study", "summarize"]
 
@@ -33,7 +33,7 @@ def run_study(n: int, seed: int = 0, progress: bool = True) -> list[dict]:
     it = study_cases(n, seed)
     bar = None
     if progress:
-        bar = tqdm(total=len(it), desc="diagnose-study", unit="case", file=sys.stderr)
+        bar = progress_bar(total=len(it), desc="diagnose-study", unit="case", file=sys.stderr)
     for hidden, kind, s in it:
         t0 = time.perf_counter()
         case = generate(hidden, kind, seed=s)

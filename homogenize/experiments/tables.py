@@ -68,7 +68,7 @@ from homogenize.cell import bulk_shear, eshelby_dilute, young_poisson
 from micro.dipoles import solve
 from micro._validate import InputError, check_positive
 from micro._io import atomic_write_text, manifest, write_json
-from tqdm import tqdm
+from micro._progress import progress_bar
 from scipy.interpolate import PchipInterpolator
 
 __all__ = ["STIFFNESS_PHIS", "STIFFNESS_SEEDS", "STIFFNESS_VOXELS", "RADIUS_VOXELS", "GAP_VOXELS",
@@ -141,7 +141,7 @@ def build_stiffness_table(phis=STIFFNESS_PHIS, seeds=STIFFNESS_SEEDS, voxels=STI
     rows = []
     it = jobs
     if progress:
-        it = tqdm(jobs, desc="stiffness table (FEM)", unit="RVE", file=sys.stderr)
+        it = progress_bar(jobs, desc="stiffness table (FEM)", unit="RVE", file=sys.stderr)
     t0 = time.perf_counter()
     for p, s in it:
         rows.append(stiffness_point(p, s, voxels))
@@ -282,7 +282,7 @@ def build_stress_table(phis=STRESS_PHIS, seeds=STRESS_SEEDS, fields=STRESS_FIELD
     jobs = [(p, s, h) for p in phis for s in seeds for h in fields]
     it = jobs
     if progress:
-        it = tqdm(jobs, desc="dipolar stress table", unit="RVE", file=sys.stderr)
+        it = progress_bar(jobs, desc="dipolar stress table", unit="RVE", file=sys.stderr)
     t0 = time.perf_counter()
     rows = [stress_point(p, s, h) for p, s, h in it]
     cols = ("phi", "seed", "law", "h", "m_reduced", "kappa_zz", "kappa_dev")
@@ -404,7 +404,7 @@ def build_cell_stress_table(phis=CELL_PHIS, voxels=CELL_VOXELS, path=None, progr
     t0 = time.perf_counter()
     bar = None
     if progress:
-        bar = tqdm(total=len(phis) * CELL_PER_PHI, desc="cell magnetic stress (FEM)",
+        bar = progress_bar(total=len(phis) * CELL_PER_PHI, desc="cell magnetic stress (FEM)",
                    unit="RVE", file=sys.stderr)
     for p in phis:
         done = 0

@@ -10,7 +10,7 @@ import time
 from types import SimpleNamespace
 
 import numpy as np
-from tqdm import tqdm
+from micro._progress import progress_bar
 
 from homogenize._effective_media import (bulk_shear, eshelby_dilute, guth_gold,
                                          hashin_shtrikman_bounds, mori_tanaka, young_poisson)
@@ -33,7 +33,7 @@ def phi_study(phis=(0.01, 0.05, 0.1, 0.2, 0.3), voxels: int = 24, *, matrix_E_Pa
     rows = []
     it = phis
     if progress:
-        it = tqdm(phis, desc="phi study", unit="phi", leave=False)
+        it = progress_bar(phis, desc="phi study", unit="phi", leave=False)
     for phi in it:
         a = (3.0 * phi / (4.0 * np.pi)) ** (1.0 / 3.0)
         rve = SimpleNamespace(box_m=1e-6, centers_m=np.full((1, 3), 0.5e-6), radii_m=np.array([a * 1e-6]))
@@ -103,7 +103,7 @@ def dilute_convergence_study(voxels=(8, 16, 24, 32, 48, 64), phi: float = 0.01, 
     rows = []
     it = voxels
     if progress:
-        it = tqdm(voxels, desc="dilute sphere refinement", unit="grid", leave=False)
+        it = progress_bar(voxels, desc="dilute sphere refinement", unit="grid", leave=False)
     for n in it:
         # centre slightly off the grid symmetry so no voxel face cuts the sphere symmetrically
         rve = SimpleNamespace(box_m=1e-6, centers_m=np.full((1, 3), (0.5 + 0.1 / n) * 1e-6),

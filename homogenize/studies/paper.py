@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import OptimizeWarning, curve_fit, root_scalar
-from tqdm import tqdm
+from micro._progress import progress_bar
 
 from homogenize.macro import closed_form as cf
 from homogenize.macro import elements as el
@@ -108,7 +108,7 @@ def _richardson(t_a, t_b, k_a, k_b, p):
 def _progress(total, quiet):
     if quiet:
         return None
-    return tqdm(total=total, desc="mapsim paper", file=sys.stderr, unit="step")
+    return progress_bar(total=total, desc="mapsim paper", file=sys.stderr, unit="step")
 
 
 def _beam_study(sp: SeedParameters, width_m, thickness_m, levels, bar):
