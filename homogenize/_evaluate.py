@@ -35,6 +35,7 @@ import numpy as np
 import micro
 from micro import magnetization
 from micro._validate import InputError
+from micro.materials import PDMS, SEED
 from micro.particles import CoreShell, LogNormal, Monodisperse
 import itertools
 from micro.dipoles import solve
@@ -78,7 +79,7 @@ QUANTITIES = {
 }
 
 # Seed-paper values used by the synthetic model, so that its numbers look like the real ones.
-_MS_A_PER_M = 7870.0 * 178.0       # Fe saturation magnetization rho * sigma [A/m]
+_MS_A_PER_M = SEED.Ms_A_m         # Fe saturation magnetization rho * sigma [A/m]
 _B_SAT_T = 0.3                       # field scale of the synthetic magnetization curve [T]
 _REL_SD_100 = 0.05                   # relative sd of f_eff at 100 particles
 
@@ -145,10 +146,11 @@ def synthetic_truth(point: dict, settings: dict) -> dict:
         "phi_rve": (np.array(phi), np.array(0.0)),
     }
     if settings.get("fem"):
-        out["E_eff_Pa"] = (np.array(2e6 * (1 + 2.5 * phi)), np.array(2e6 * rel * phi))
-        out["nu_eff"] = (np.array(0.45), np.array(0.01 * rel))
+        out["E_eff_Pa"] = (np.array(PDMS.E_Pa * (1 + 2.5 * phi)), np.array(PDMS.E_Pa * rel * phi))
+        out["nu_eff"] = (np.array(PDMS.nu), np.array(0.01 * rel))
         out["stress_mag_Pa"] = out["virial_stress_Pa"]
-        out["strain_mag"] = (out["virial_stress_Pa"][0] / 2e6, out["virial_stress_Pa"][1] / 2e6)
+        out["strain_mag"] = (out["virial_stress_Pa"][0] / PDMS.E_Pa,
+                             out["virial_stress_Pa"][1] / PDMS.E_Pa)
     return out
 
 
@@ -463,7 +465,7 @@ class RelaxEvaluator:
         if study.relax.get("elastic_model") == "fem" and not study.fem:
             raise InputError(f"{study.path}: [relax] elastic_model = \"fem\" needs [study] "
                              f"fem = true (the voxel FEM at [study] voxels)")
-        nu = study.relax.get("matrix_nu", 0.45)
+        nu = study.relax.get("matrix_nu", PDMS.nu)
         if not -1.0 < nu <= 0.5:
             raise InputError(f"{study.path}: [relax] matrix_nu must be in (-1, 0.5], got {nu}")
         _check_laws_and_particles(study, gen_keys, get_law)
@@ -476,9 +478,9 @@ class RelaxEvaluator:
         phi = point.pop("phi")
         B = float(point.pop("B_T"))
         law = point.pop("law", DEFAULT_LAW)
-        E = float(point.pop("matrix_E_Pa", opts.pop("matrix_E_Pa", 2.0e6)))
+        E = float(point.pop("matrix_E_Pa", opts.pop("matrix_E_Pa", PDMS.E_Pa)))
         opts.pop("matrix_E_Pa", None)
-        matrix = ElasticMaterial(E, float(opts.pop("matrix_nu", 0.45)))
+        matrix = ElasticMaterial(E, float(opts.pop("matrix_nu", PDMS.nu)))
         kwargs = _rve_kwargs({**s["rve"], **point})
         seed = task.seed_int()
         B_steps = [float(b) for b in s["B_steps_T"]]

@@ -21,6 +21,7 @@ import numpy as np
 
 from ._io import _default as _json_default, atomic_path, is_regular_file, open_regular, write_json
 from ._validate import InputError
+from .materials import SEED
 from micro._io import open_hdf5
 import h5py
 
@@ -197,8 +198,10 @@ class RVE:
         return RVE(**kw)
 
     @classmethod
-    def from_spheres(cls, box_m, centers_m, radii_m, *, density_kg_m3=7870.0,
-                     sigma_Am2_kg=178.0, cluster_id=None, seed=None, params=None) -> "RVE":
+    def from_spheres(cls, box_m, centers_m, radii_m, *,
+                     density_kg_m3=SEED.particle_density_kg_m3,
+                     sigma_Am2_kg=SEED.sigma_s_Am2_kg, cluster_id=None, seed=None,
+                     params=None) -> "RVE":
         """An RVE of homogeneous spheres (no shell), e.g. for tests and hand-built cases.
 
         ``density_kg_m3`` and ``sigma_Am2_kg`` (specific saturation moment) default to the

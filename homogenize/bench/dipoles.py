@@ -38,6 +38,7 @@ from scipy.constants import mu_0 as MU0
 from micro import _kernels as K
 from micro._ewald import PeriodicSum
 from micro.dipoles import DipoleSum, dipole_field_direct, solve
+from micro.materials import SEED
 import re
 from micro.particles import generate_rve
 import shutil
@@ -70,7 +71,7 @@ def _random_rve_arrays(n, phi, seed):
     box = (n * v / phi) ** (1 / 3)
     c = rng.random((n, 3)) * box
     m = rng.normal(size=(n, 3)) + [0, 0, 1.0]
-    m *= 7870 * 178 * v / np.linalg.norm(m, axis=1)[:, None]
+    m *= SEED.Ms_A_m * v / np.linalg.norm(m, axis=1)[:, None]
     return box, c, m
 
 
@@ -235,7 +236,7 @@ class _Chains:
         self.centers_m = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
         n = len(self.centers_m)
         self.radii_m = np.full(n, a)
-        self.m_sat_Am2 = np.full(n, 7870 * 178 * v)
+        self.m_sat_Am2 = np.full(n, SEED.Ms_A_m * v)
         self.phi = n * v / L ** 3
 
 

@@ -60,7 +60,7 @@ def _green_vs_fem(quick: bool) -> dict:
     c = np.array([[50, 50, 50], [50, 50, 115], [120, 60, 60], [130, 140, 120]]) * 1e-9
     n_p, vox = (3, 20) if quick else (4, 32)
     rve = RVE.from_spheres(L, c[:n_p], [25e-9] * n_p)
-    mat = ElasticMaterial(1.0e6, 0.45)
+    mat = ElasticMaterial(1.0e6, PDMS.nu)
     t0 = time.perf_counter()
     Mf = fem_displaceability(rve, vox, mat, tol=1e-7)
     t_fem = time.perf_counter() - t0

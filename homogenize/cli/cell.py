@@ -10,7 +10,7 @@ from micro._io import manifest, write_json
 from micro._validate import InputError, check_finite, check_positive
 from micro.dipoles import solve
 from micro.magnetization import DEFAULT_LAW, LAW_NAMES, get_law
-from micro.materials import FE
+from micro.materials import FE, PDMS
 from micro.materials import ElasticMaterial as Material
 from micro.rve import RVE
 
@@ -227,19 +227,19 @@ def register(sub, formatter):
     p.add_argument("--law", default=DEFAULT_LAW, choices=LAW_NAMES,
                    help="magnetization law of one particle")
     p.add_argument("--matrix-E", dest="matrix_E", type=float_in("--matrix-E", *_MODULUS, "Pa"),
-                   default=2e6,
+                   default=PDMS.E_Pa,
                    help="matrix Young's modulus [Pa]")
     p.add_argument("--matrix-nu", dest="matrix_nu",
                    type=float_in("--matrix-nu", -1.0, 0.5, lo_open=True, hi_open=True),
-                   default=0.45,
+                   default=PDMS.nu,
                    help="matrix Poisson's ratio [1], in (-1, 0.5)")
     p.add_argument("--particle-E", dest="particle_E",
                    type=float_in("--particle-E", *_MODULUS, "Pa"),
-                   default=211e9,
+                   default=FE.E_Pa,
                    help="particle Young's modulus [Pa] (Fe)")
     p.add_argument("--particle-nu", dest="particle_nu",
                    type=float_in("--particle-nu", -1.0, 0.5, lo_open=True, hi_open=True),
-                   default=0.29,
+                   default=FE.nu,
                    help="particle Poisson's ratio [1]")
     p.add_argument("--rigid", action="store_true", help="rigid particles (stiff limit)")
     p.add_argument("--method", default="composite",

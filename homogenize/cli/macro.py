@@ -10,7 +10,7 @@ from micro._validate import InputError, check_positive
 import numpy as np
 
 from micro.demag import prism_demag_factors
-from micro.materials import SEED
+from micro.materials import PDMS, SEED
 
 from homogenize.cli._common import (check_memory, config_of, float_in, int_in, parse_at,
                                     write_snippet)
@@ -297,10 +297,11 @@ def _channel_geometry_options(g) -> None:
 
 
 def _material_options(p):
-    p.add_argument("--E-Pa", dest="E_Pa", type=_E, default=2.0e6,
+    p.add_argument("--E-Pa", dest="E_Pa", type=_E, default=PDMS.E_Pa,
                    help="Young's modulus of the composite [Pa]")
-    p.add_argument("--nu", type=_NU, default=0.45, help="Poisson ratio [-], in (-1, 0.5)")
-    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=_RHO, default=1210.0,
+    p.add_argument("--nu", type=_NU, default=PDMS.nu, help="Poisson ratio [-], in (-1, 0.5)")
+    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=_RHO,
+                   default=PDMS.density_kg_m3,
                    help="mass density [kg/m^3] (self-weight, with --gravity-m-s2)")
     p.add_argument("--gravity-m-s2", dest="gravity_m_s2", type=_G, default=0.0,
                    help="gravity along the body force [m/s^2]; 0 = no self-weight")

@@ -37,6 +37,7 @@ from homogenize.experiments.tables import Unavailable, filler_stiffness_ratio
 from homogenize.macro import closed_form
 from micro._io import atomic_write_text
 from micro._validate import InputError
+from micro.materials import FE, PDMS
 from scipy.interpolate import CubicSpline
 from scipy.constants import k as kB
 
@@ -300,7 +301,7 @@ def _project_law(law, H_abs, Ms, chi0):
     if law == "langevin":
         obj = mag.get_law("langevin", T_K=_LANGEVIN_T_K)
         # one moment per distinct Ms (rows may differ through the oxide shell)
-        m = 3.0 * 1.380649e-23 * _LANGEVIN_T_K * chi0 / (mu_0 * Ms)
+        m = 3.0 * kB * _LANGEVIN_T_K * chi0 / (mu_0 * Ms)
         V = m / Ms
         return np.asarray(obj.magnitude(H_abs, m, V), dtype=float) / V
     raise ValueError(f"unknown law {law!r}")
@@ -378,10 +379,10 @@ def local_field_factor(phi):
 # filler stiffening: adapter onto homogenize.cell closed forms
 
 #: Iron particles (the FEM helper's defaults for ``homogenize_rve``).
-PARTICLE_E_PA, PARTICLE_NU = 211e9, 0.29
+PARTICLE_E_PA, PARTICLE_NU = FE.E_Pa, FE.nu
 
 
-def stiffening_ratio(phi, nu_matrix: float = 0.45, E_matrix_Pa: float = 2e6):
+def stiffening_ratio(phi, nu_matrix: float = PDMS.nu, E_matrix_Pa: float = PDMS.E_Pa):
     """E_eff / E_matrix of iron spheres at volume fraction phi [-]: the project's voxel-FEM
     homogenization of random RVEs, tabulated (``tables.filler_stiffness_ratio``; Fe / PDMS
     contrast 1e5, i.e. rigid spheres, matrix nu = 0.45). ``nu_matrix`` and ``E_matrix_Pa`` are
@@ -390,7 +391,7 @@ def stiffening_ratio(phi, nu_matrix: float = 0.45, E_matrix_Pa: float = 2e6):
     return filler_stiffness_ratio(phi)
 
 
-def mori_tanaka_stiffening_ratio(phi, nu_matrix: float, E_matrix_Pa: float = 2e6):
+def mori_tanaka_stiffening_ratio(phi, nu_matrix: float, E_matrix_Pa: float = PDMS.E_Pa):
     """The Mori-Tanaka estimate of ``homogenize.cell`` for the same particles (the
     Hashin-Shtrikman bound on the matrix side): a cross-check of the FEM table only."""
     cell = cellmod

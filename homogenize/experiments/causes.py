@@ -61,6 +61,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from micro.materials import PDMS, SEED
+
 from . import _physics as P
 from .io import Experiment
 from homogenize.experiments.tables import (Unavailable, microstructure_stress_coefficient,
@@ -237,9 +239,10 @@ def _probe(cause, exp):
         if exp.kind == "magnetostriction":
             microstructure_stress_coefficient(0.1, 1.0)
     if cause == "oxide_shell":
-        P.core_shell_moment_ratio(np.array([20e-9]), 1e-9, 25e-9, 7870.0, 178.0)
+        P.core_shell_moment_ratio(np.array([20e-9]), 1e-9, 25e-9, SEED.particle_density_kg_m3,
+                                  SEED.sigma_s_Am2_kg)
     if cause == "filler_stiffening":
-        P.stiffening_ratio(np.array([0.1]), 0.45)
+        P.stiffening_ratio(np.array([0.1]), PDMS.nu)
     if cause == "microstructure_evolution":
         microstructure_stress_coefficient(0.1, 1.0)
     if cause in ("geometric_nonlinearity",):

@@ -12,13 +12,15 @@ import numpy as np
 
 from micro._validate import InputError
 
+from micro.materials import FE
+
 from .io import Matrix, Particles, write_experiment
 
 __all__ = ["read_diguet", "read_rtv615", "write_diguet", "write_rtv615", "DIGUET_PHI"]
 
 #: Iron volume fraction of the Diguet et al. (2010) sample: composite density 2833 kg/m^3
 #: (Stewart & Anand 2025) = (1 - phi) 1050 + phi 7870 kg/m^3 (silicone about 1050 kg/m^3).
-DIGUET_PHI = round((2833.0 - 1050.0) / (7870.0 - 1050.0), 3)
+DIGUET_PHI = round((2833.0 - 1050.0) / (FE.density_kg_m3 - 1050.0), 3)
 
 
 def read_diguet(path) -> dict:
@@ -72,7 +74,8 @@ def write_diguet(raw, toml_path) -> None:
     write_experiment(toml_path, "magnetostriction", cols,
                      title="Diguet et al. 2010, soft MRE cylinder L/D = 0.80, axial strain",
                      matrix=Matrix(E_Pa=690e3, nu=0.49, density_kg_m3=1050.0),
-                     particles=Particles(density_kg_m3=7870.0, sigma_s_Am2_kg=218.0,
+                     particles=Particles(density_kg_m3=FE.density_kg_m3,
+                                         sigma_s_Am2_kg=FE.sigma_s_Am2_kg,
                                          radius_mean_m=2.0e-6, radius_min_m=0.5e-6,
                                          radius_max_m=5.0e-6))
 

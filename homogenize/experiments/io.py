@@ -17,6 +17,7 @@ import numpy as np
 
 from micro._validate import InputError, check_regular_file
 from micro._io import atomic_write_text
+from micro.materials import GRAVITY_M_S2, PDMS, SEED
 
 __all__ = ["KINDS", "REQUIRED", "OPTIONAL", "MEASURED", "Matrix", "Particles", "Setup",
            "Experiment", "load_experiment", "write_experiment"]
@@ -74,16 +75,16 @@ MAX_FILE_BYTES = 64 * 2 ** 20
 @dataclass(frozen=True)
 class Matrix:
     """Matrix polymer (defaults: the seed paper's PDMS)."""
-    E_Pa: float = 2.0e6
-    nu: float = 0.45
-    density_kg_m3: float = 1210.0
+    E_Pa: float = PDMS.E_Pa
+    nu: float = PDMS.nu
+    density_kg_m3: float = PDMS.density_kg_m3
 
 
 @dataclass(frozen=True)
 class Particles:
     """Magnetic filler (defaults: the seed paper's NANOFER 25 powder)."""
-    density_kg_m3: float = 7870.0
-    sigma_s_Am2_kg: float = 178.0
+    density_kg_m3: float = SEED.particle_density_kg_m3
+    sigma_s_Am2_kg: float = SEED.sigma_s_Am2_kg
     radius_mean_m: float = 25e-9
     radius_min_m: float = 10e-9
     radius_max_m: float = 50e-9
@@ -97,7 +98,7 @@ class Particles:
 @dataclass(frozen=True)
 class Setup:
     """How the experiment was done."""
-    gravity_m_s2: float = 9.81
+    gravity_m_s2: float = GRAVITY_M_S2
     deflection_reference: str = "field_off"
     gravity_along_force: bool = True
 

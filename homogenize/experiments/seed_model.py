@@ -20,6 +20,8 @@ The single fitted parameter is ``scale`` (magnetic kinds) or ``E_Pa`` (tensile).
 from __future__ import annotations
 
 import numpy as np
+from micro.materials import SEED
+
 from .io import Experiment
 
 __all__ = ["seed_body_force_N_m3", "seed_predict", "seed_parameter"]
@@ -30,7 +32,8 @@ def seed_parameter(kind: str) -> str:
     return "E_Pa" if kind == "tensile" else "scale"
 
 
-def seed_body_force_N_m3(phi, gradB_T_per_m, density_kg_m3=7870.0, sigma_s_Am2_kg=178.0,
+def seed_body_force_N_m3(phi, gradB_T_per_m, density_kg_m3=SEED.particle_density_kg_m3,
+                         sigma_s_Am2_kg=SEED.sigma_s_Am2_kg,
                          scale=1.0):
     """Seed body force ``scale phi rho_p sigma_s dB/dz`` [N/m^3].
 

@@ -50,13 +50,15 @@ import numpy as np
 from scipy import integrate, optimize, special
 from scipy.constants import mu_0
 
+from micro.materials import FE, FE3O4, GRAVITY_M_S2, PDMS, SEED
+
 from .io import Experiment, Matrix, Particles, Setup, _ro
 from homogenize.experiments.io import write_experiment
 
 __all__ = ["SyntheticCase", "generate", "CASES", "study_cases", "write_case"]
 
-_MS = 7870.0 * 178.0            # the seed paper's particle saturation magnetization [A/m]
-_E = 2.0e6
+_MS = SEED.Ms_A_m               # the seed paper's particle saturation magnetization [A/m]
+_E = PDMS.E_Pa
 
 #: (hidden causes, kind) of the cases the tests and the study draw from.
 CASES = (
@@ -270,7 +272,7 @@ def _deflection(h, rng):
             gradB = np.concatenate(([0.0], gradB[1:]))
             B = np.concatenate(([0.0], B[1:]))
             f = np.concatenate(([0.0], f[1:]))
-            fg = ((1 - phi) * 1210.0 + phi * 7870.0) * 9.81
+            fg = ((1 - phi) * PDMS.density_kg_m3 + phi * FE.density_kg_m3) * GRAVITY_M_S2
             f = f + fg
         alpha = f * w * t * L ** 3 / EI
         if geo:
@@ -301,7 +303,8 @@ def _shell_ratio(r, shell, gsd=1.3, nominal=25e-9):
     def mean_ms(rm):
         rr = rm * np.exp(math.log(gsd) * x - 0.5 * math.log(gsd) ** 2)
         rc = np.clip(rr - shell, 0.0, None)
-        m = 218.0 * 7870.0 * rc ** 3 + 92.0 * 5170.0 * (rr ** 3 - rc ** 3)
+        m = (FE.sigma_s_Am2_kg * FE.density_kg_m3 * rc ** 3
+             + FE3O4.sigma_s_Am2_kg * FE3O4.density_kg_m3 * (rr ** 3 - rc ** 3))
         return float(np.sum(wts * m) / np.sum(wts * rr ** 3))
     return mean_ms(r) / mean_ms(nominal)
 

@@ -62,6 +62,7 @@ import numpy as np
 from scipy.constants import mu_0
 import inspect
 from homogenize.cell import homogenize_rve
+from micro.materials import FE, PDMS, SEED
 from micro.particles import Monodisperse, generate_rve
 from types import SimpleNamespace
 from homogenize.cell import bulk_shear, eshelby_dilute, young_poisson
@@ -95,8 +96,8 @@ STIFFNESS_SEEDS = (1, 2, 3)
 STIFFNESS_VOXELS = 24
 RADIUS_VOXELS = 5.0
 GAP_VOXELS = 1.8
-MATRIX_E_PA, MATRIX_NU = 2e6, 0.45
-PARTICLE_E_PA, PARTICLE_NU = 211e9, 0.29
+MATRIX_E_PA, MATRIX_NU = PDMS.E_Pa, PDMS.nu
+PARTICLE_E_PA, PARTICLE_NU = FE.E_Pa, FE.nu
 
 
 def _cell_tol() -> float:
@@ -249,7 +250,7 @@ STRESS_N = 200
 #: reduced applied fields H / Ms of the soft-sphere runs; None = saturated particles
 STRESS_FIELDS = (0.003, 0.03, 0.3, 3.0, None)
 _STRESS_CHI0 = 3.0
-_MS_A_PER_M = 7870.0 * 178.0
+_MS_A_PER_M = SEED.Ms_A_m
 #: mean-field value of kappa_dev: an affinely stretched Lorentz sphere (N = 1/3 - (2/5) eps)
 LORENTZ_STRESS = 0.2
 
@@ -544,7 +545,7 @@ def _restructuring_from(path: Path, phi: float, E_Pa: float, rtol: float):
     if any(q not in t.values for q in _RELAX_NEEDS):
         return None, f"{path.name}: not a relax table with fem = true"
     study = tomllib.loads(t.attrs.get("study_toml", "")) if t.attrs.get("study_toml") else {}
-    E_fixed = study.get("relax", {}).get("matrix_E_Pa", 2.0e6)
+    E_fixed = study.get("relax", {}).get("matrix_E_Pa", PDMS.E_Pa)
     B = np.asarray(t.axes.get("B_T", ()), dtype=float)
     if B.size < 2 or B[0] != 0.0:
         return None, f"{path.name}: needs B_T steps starting at 0 T"

@@ -42,6 +42,7 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import brentq
 
 from micro._validate import InputError, check_finite, check_positive, check_range
+from micro.materials import PDMS
 
 __all__ = [
     "BodyForceProfile",
@@ -217,7 +218,7 @@ def eb_tip_deflection_m(f_N_m3, length_m, width_m, thickness_m, E_Pa, nu=0.0, pl
     return float(out) if out.ndim == 0 else out
 
 
-def timoshenko_tip_deflection_m(f_N_m3, length_m, width_m, thickness_m, E_Pa, nu=0.45,
+def timoshenko_tip_deflection_m(f_N_m3, length_m, width_m, thickness_m, E_Pa, nu=PDMS.nu,
                                 plate=False):
     """Timoshenko tip deflection: Euler-Bernoulli plus the shear term ``q L^2 / (2 kappa G A)``.
 
@@ -240,7 +241,7 @@ def timoshenko_tip_deflection_m(f_N_m3, length_m, width_m, thickness_m, E_Pa, nu
     return float(out) if out.ndim == 0 else out
 
 
-def plate_clamped_strip_deflection_m(f_N_m3, span_m, thickness_m, E_Pa, nu=0.45):
+def plate_clamped_strip_deflection_m(f_N_m3, span_m, thickness_m, E_Pa, nu=PDMS.nu):
     """Mid-span deflection of a plate strip clamped on both long edges (cylindrical bending).
 
     ``delta = q a^4 / (384 D)`` with ``q = f c`` and ``D = E c^3 / (12 (1 - nu^2))``, i.e.

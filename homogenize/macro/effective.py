@@ -49,7 +49,7 @@ class TipDeflection:
 
 def tip_deflection_from_table(table, phi: float, B_T: float, gradB_T_per_m: float,
                               length_m: float, width_m: float, thickness_m: float, *,
-                              E_Pa: float | None = None, nu: float = 0.45, model="elastica",
+                              E_Pa: float | None = None, nu: float = PDMS.nu, model="elastica",
                               confidence: float | None = None, **other_axes) -> TipDeflection:
     """Tip deflection [m] of a clamped strip under the body force interpolated from a table.
 
