@@ -791,11 +791,12 @@ def _axi_assembler(body, solid, loads, displacement_only=False):
     return asm_
 
 
-def _newton(asm_, load_steps, tol, max_newton, max_cuts):
-    """Load stepping with Newton's method; returns (x, residuals, load factors, iterations)."""
+def _newton(asm_, load_steps, tol, max_newton, max_cuts, x0=None):
+    """Load stepping with Newton's method; returns (x, residuals, load factors, iterations).
+    ``x0``: the first iterate (default zero: the undeformed body)."""
     targets = list(_steps(load_steps))
     tol = check_positive("tol", tol, "")
-    x = np.zeros(asm_.n)
+    x = np.zeros(asm_.n) if x0 is None else np.array(x0, float)
     free, fu, fp = asm_.free, asm_.free_u, asm_.free_p
     hist, done = [], []
     lam_done, it_total, cuts = 0.0, 0, 0
@@ -1041,18 +1042,22 @@ def box_body(size_m, n=(2, 2, 2), *, symmetric: bool = True, grading: float = 1.
 
 
 def cylinder_body_3d(radius_m: float, length_m: float, n_r: int = 3, n_z: int | None = None,
-                     *, symmetric: bool = True, grading: float = 1.5) -> SolidBody:
+                     *, symmetric: bool = True, grading: float = 1.5,
+                     radial_grading: float = 1.0) -> SolidBody:
     """Tetrahedral mesh of a finite cylinder (radius ``R``, length ``L``, axis ``z``, centred
     on the origin): the quarter disk of :func:`spheroid_body` extruded in layers graded
     towards the end faces, each prism split in three tetrahedra by the global node order
-    (conforming). ``symmetric``: the part ``x, y, z >= 0`` with three symmetry planes."""
+    (conforming). ``symmetric``: the part ``x, y, z >= 0`` with three symmetry planes.
+    ``radial_grading`` >= 1: the disk's rings at radii ``1 - (1 - k/n_r)^radial_grading``
+    (finer towards the side; 1: uniform)."""
     R = check_positive("radius_m", radius_m, "m")
     L = check_positive("length_m", length_m, "m")
     n_r = int(check_positive("n_r", n_r, ""))
     n_z = max(1, int(round(n_r * 0.5 * L / R))) if n_z is None else \
         int(check_positive("n_z", n_z, ""))
     grading = check_range("grading", grading, 1.0, 10.0)
-    p2, t2 = _quarter_disk(n_r, 1.0)
+    radial_grading = check_range("radial_grading", radial_grading, 1.0, 10.0)
+    p2, t2 = _quarter_disk(n_r, radial_grading)
     if not symmetric:
         p2, t2 = _mirror(p2, t2, 0)
         p2, t2 = _mirror(p2, t2, 1)
@@ -1252,7 +1257,8 @@ class Solution3D:
 
 
 def solve_3d(body: SolidBody, solid: NeoHookeanSolid, loads: Loads, *, load_steps=1,
-             tol: float = 1e-10, max_newton: int = 25, max_cuts: int = 6) -> Solution3D:
+             tol: float = 1e-10, max_newton: int = 25, max_cuts: int = 6,
+             initial: Solution3D | None = None) -> Solution3D:
     """Finite-strain equilibrium of a three-dimensional ``body`` (see
     :func:`solve_axisymmetric`; same material law, loads, load stepping and errors).
 
@@ -1262,13 +1268,26 @@ def solve_3d(body: SolidBody, solid: NeoHookeanSolid, loads: Loads, *, load_step
     (a net load is balanced by the constraint forces, reported in ``reaction_force_N`` and
     ``reaction_moment_N_m``). Direct sparse solver (SuperLU): meant for meshes of up to a
     few thousand tetrahedra (the constraint rows are dense).
+
+    ``initial`` : a :class:`Solution3D` of the same body and solid (e.g. under nearby loads)
+    whose displacement and pressure start Newton instead of the undeformed body (then
+    ``load_steps=1`` is the natural choice: the load factor still runs from 0 to 1, but the
+    first iterate is already deformed).
     """
     if not isinstance(body, SolidBody):
         raise InputError(f"body must be a SolidBody, got {type(body).__name__}")
     if not isinstance(solid, NeoHookeanSolid):
         raise InputError(f"solid must be a NeoHookeanSolid, got {type(solid).__name__}")
     asm_ = _tet_assembler(body, solid, loads)
-    x, hist, done, its = _newton(asm_, load_steps, tol, max_newton, max_cuts)
+    x0 = None
+    if initial is not None:
+        if not isinstance(initial, Solution3D) or initial.u_m.shape[1] * 3 != asm_.nu_dof \
+                or initial.p_Pa.size != asm_.np_dof:
+            raise InputError("initial must be a Solution3D of the same body mesh")
+        x0 = np.zeros(asm_.n)
+        x0[:asm_.nu_dof] = initial.u_m.T.ravel()
+        x0[asm_.nu_dof:asm_.nu_dof + asm_.np_dof] = initial.p_Pa
+    x, hist, done, its = _newton(asm_, load_steps, tol, max_newton, max_cuts, x0)
     nu = asm_.nu_dof
     u = np.vstack([x[i:nu:3] for i in range(3)])
     fc = asm_.constraint_force(x).reshape(-1, 3).T                   # (3, N) nodal forces

@@ -108,7 +108,8 @@ __all__ = ["ConvergenceError", "LinearLaw", "FroehlichKennellyLaw", "LangevinLaw
            "TableLaw", "check_table_range", "linear", "froehlich_kennelly", "langevin", "tanh",
            "check_law",
            "Sphere", "Spheroid", "Cylinder", "Profile", "MeshOptions", "BodyMesh",
-           "axisymmetric_mesh", "ball_mesh_3d", "uniform_applied_gradient_field",
+           "axisymmetric_mesh", "ball_mesh_3d", "octant_mesh_3d",
+           "uniform_applied_gradient_field",
            "applied_field", "MagnetostaticResult", "solve_axisymmetric", "solve_3d", "field_at",
            "body_fields_at", "MagneticLoads", "magnetic_loads", "body_force_at", "traction_at",
            "maxwell_force_N", "coenergy_J"]
@@ -469,6 +470,12 @@ class BodyMesh:
     center_m : (dim,) -- centre ``c`` of the ball and of the Kelvin inversion [m]
     radius_m : R [m]
     axisymmetric : bool
+    octant : bool -- 3D only: the meshes hold the octant ``x, y, z >= 0`` (relative to the
+        centre) of a body symmetric about the three coordinate planes, in a uniform applied
+        field along z (:func:`octant_mesh_3d`): ``phi`` is odd in z (``phi = 0`` on ``z = 0``)
+        and even in x and y (natural condition on ``x = 0``, ``y = 0``); volumes and means are
+        those of the whole body. Only the solve and the body fields at points of the octant
+        (:func:`body_fields_at`) are meant for it.
     """
     mesh: object
     body_elements: np.ndarray
@@ -476,6 +483,7 @@ class BodyMesh:
     center_m: np.ndarray
     radius_m: float
     axisymmetric: bool
+    octant: bool = False
 
     def __post_init__(self):
         be = np.asarray(self.body_elements)
@@ -485,6 +493,8 @@ class BodyMesh:
             raise InputError(f"body_elements must be distinct element indices in [0, {n_el}), "
                              "at least one")
         R = check_positive("radius_m", self.radius_m, "m")
+        if self.octant and self.axisymmetric:
+            raise InputError("octant symmetry is for a 3D BodyMesh, not an axisymmetric one")
         c = np.asarray(self.center_m, float).reshape(-1, 1)
         rho = np.linalg.norm(self.mesh.p[:, self.mesh.t[:, be]].reshape(c.shape[0], -1) - c,
                              axis=0)
@@ -698,6 +708,98 @@ def ball_mesh_3d(radius_fn: Callable, radius_m: float | None = None, refinements
     return BodyMesh(mesh, np.arange(ball.t.shape[1]), ext, c.ravel(), float(R), False)
 
 
+def octant_surface_facets(body_mesh: MeshTet) -> np.ndarray:
+    """The vertices (3, n) of the boundary facets of an octant body mesh that are not on a
+    symmetry plane ``x_i = 0``: its outer surface (``np.unique`` of them: the surface vertices
+    whose rays :func:`octant_mesh_3d` extrudes, in that order)."""
+    p0 = np.asarray(body_mesh.p, float)
+    tol = 1e-9 * float(np.abs(p0).max())
+    bf = body_mesh.boundary_facets()
+    fv = p0[:, body_mesh.facets[:, bf]]                       # (3, 3, nf)
+    on_plane = np.any(np.all(np.abs(fv) <= tol, axis=1), axis=0)
+    return body_mesh.facets[:, bf[~on_plane]]
+
+
+def octant_mesh_3d(body_mesh: MeshTet, radius_m: float | None = None,
+                   domain_factor: float = 2.0, grading: float = 1.0) -> BodyMesh:
+    """Field mesh of the octant ``x, y, z >= 0`` of a body symmetric about the three coordinate
+    planes (its centre at the origin) and of the space around it, for a field along z.
+
+    Parameters
+    ----------
+    body_mesh : MeshTet -- the body's octant [m], star-shaped with respect to the origin, which
+        must be one of its vertices (e.g. the mechanics mesh of
+        :func:`homogenize.macro.finite_strain.cylinder_body_3d` or ``box_body``); it becomes
+        the body part of the field mesh node for node and element for element (vertex ``i``
+        and element ``e`` of ``body_mesh`` are vertex ``i`` and element ``e`` of the result)
+    radius_m : float, optional -- radius R of the meshed ball [m]; default ``domain_factor``
+        times the body's largest distance from the origin
+    grading : air layer thickness over the relative surface edge size [-]
+
+    Notes
+    -----
+    The air: the body's outer surface triangulation (its boundary facets off the symmetry
+    planes) extruded along the rays from the origin in geometric layers
+    ``rho_b (R / rho_b)^t`` up to the sphere ``R`` (prisms split conformingly into tetrahedra,
+    as in :func:`ball_mesh_3d`); air vertex ``n_body + (j - 1) n_s + i`` lies on the ray of the
+    ``i``-th surface vertex (``np.unique`` order) in layer ``j``. The Kelvin image of the
+    exterior is this whole mesh (a ball octant of radius R whose surface is the outer layer
+    node for node; its origin is infinity).
+    """
+    if not isinstance(body_mesh, MeshTet):
+        raise InputError(f"body_mesh must be a skfem MeshTet, got {type(body_mesh).__name__}")
+    p0 = np.asarray(body_mesh.p, float)
+    scale = float(np.abs(p0).max())
+    tol = 1e-9 * scale
+    if np.any(p0 < -tol):
+        raise InputError("body_mesh must lie in the octant x, y, z >= 0")
+    if not np.any(np.linalg.norm(p0, axis=0) <= tol):
+        raise InputError("the origin (the body's centre) must be a vertex of body_mesh")
+    tri = octant_surface_facets(body_mesh)
+    bn = np.unique(tri)
+    rho_b = np.linalg.norm(p0[:, bn], axis=0)
+    if np.any(rho_b <= tol):
+        raise InputError("the body's outer surface must not pass through its centre")
+    u = p0[:, bn] / rho_b
+    rho_max = float(rho_b.max())
+    R = float(domain_factor) * rho_max if radius_m is None else \
+        check_positive("radius_m", radius_m, "m")
+    if not R > 1.05 * rho_max:
+        raise InputError(f"the body (largest distance {rho_max:.4g} m from its centre) must lie "
+                         f"strictly inside the field domain of radius {R:.4g} m, with at least "
+                         f"5 % clearance (the body touches or leaves the domain boundary)")
+    check_positive("grading", grading)
+    local = np.full(p0.shape[1], -1)
+    local[bn] = np.arange(bn.size)
+    e = np.hstack([tri[[0, 1]], tri[[1, 2]], tri[[2, 0]]])         # surface edges
+    h_rel = float(np.mean(np.linalg.norm(p0[:, e[0]] - p0[:, e[1]], axis=0)
+                          / (0.5 * (np.linalg.norm(p0[:, e[0]], axis=0)
+                                    + np.linalg.norm(p0[:, e[1]], axis=0)))))
+    n_air = max(2, int(math.ceil(math.log(R / float(rho_b.min()))
+                                 / math.log(1.0 + grading * h_rel))))
+    nv, ns = p0.shape[1], bn.size
+    pts, layers = [p0], [bn]
+    for j in range(1, n_air + 1):
+        r_j = rho_b * (R / rho_b) ** (j / n_air) if j < n_air else np.full(ns, R)
+        pts.append(u * r_j)
+        layers.append(nv + (j - 1) * ns + np.arange(ns))
+    p = np.hstack(pts)
+    tets = [np.asarray(body_mesh.t)]
+    for j in range(n_air):
+        tets.append(_prisms_to_tets(layers[j][local[tri]], layers[j + 1][local[tri]]))
+    t = np.hstack(tets)
+    nb = body_mesh.t.shape[1]
+    t_air, vol = _orient_tets(t[:, nb:], p)
+    if np.min(vol) <= 1e-12 * np.max(vol):
+        raise InputError("the extruded air mesh has degenerate elements: is the body "
+                         "star-shaped with respect to its centre?")
+    t_body, _ = _orient_tets(t[:, :nb], p)
+    t = np.ascontiguousarray(np.hstack([t_body, t_air]))
+    mesh = MeshTet(np.ascontiguousarray(p), t)
+    return BodyMesh(mesh, np.arange(nb), MeshTet(np.ascontiguousarray(p), t),
+                    np.zeros(3), float(R), False, True)
+
+
 # --------------------------------------------------------------------------- solver
 
 def uniform_applied_gradient_field(H0_A_per_m: float, G_A_per_m2: float, z0_m: float = 0.0):
@@ -768,7 +870,8 @@ class MagnetostaticResult:
     H_A_per_m, M_A_per_m, B_T : (dim, n_el) total field, magnetization, flux density;
     M_mean_A_per_m, H_mean_A_per_m, H_applied_mean_A_per_m : (dim,) volume means over the body
     (vector means: the r entry of an axisymmetric body is 0);
-    volume_m3 : meshed body volume; demag_factor : magnetometric N along ``axis`` ``e``
+    volume_m3 : meshed body volume (the whole body of an octant geometry); demag_factor :
+    magnetometric N along ``axis`` ``e``
     ``(<H_a> - <H>) . e / <M> . e`` [-] (``e``: the uniform applied field's direction, else z;
     along ``<M>`` for a magnet without applied field); iterations, residual_history :
     Newton's record; law, H_applied (callable of x (dim, ...) -> (dim, ...)), M_imposed
@@ -842,6 +945,13 @@ def _sphere_facets(mesh, c, R):
     return bf[np.all(on[mesh.facets[:, bf]], axis=0)]
 
 
+def _plane_facets(mesh, axis, value, R):
+    """Boundary facets with every vertex on the plane ``x_axis = value``."""
+    bf = mesh.boundary_facets()
+    on = np.abs(mesh.p[axis] - value) < 1e-9 * R
+    return bf[np.all(on[mesh.facets[:, bf]], axis=0)]
+
+
 def _solve(geometry: BodyMesh, law, H0, H_applied, M_imposed, exterior, rtol, max_iter,
            linear_solver):
     law = _check_law(law)
@@ -856,6 +966,10 @@ def _solve(geometry: BodyMesh, law, H0, H_applied, M_imposed, exterior, rtol, ma
     dim = mesh.p.shape[0]
     Ha, uniform = _applied(H0, H_applied, dim)
     Mimp = _imposed(M_imposed, dim)
+    octant = bool(getattr(geometry, "octant", False))
+    if octant and (not uniform or np.ndim(H0) > 0 or M_imposed is not None):
+        raise InputError("an octant geometry (octant_mesh_3d) needs a uniform applied field "
+                         "along z given as a number H0_A_per_m, and a magnetization law")
     elem = ElementTriP2() if axi else ElementTetP2()
     basis = Basis(mesh, elem, intorder=3 if axi else 2)
     bbody = Basis(mesh, elem, elements=geometry.body_elements, intorder=4 if axi else 3)
@@ -902,6 +1016,14 @@ def _solve(geometry: BodyMesh, law, H0, H_applied, M_imposed, exterior, rtol, ma
     else:
         bext, N, gmap = None, n1, None
         fixed = outer
+    if octant:
+        # phi is odd in z: phi = 0 on the plane z = 0 (of the exterior image too: the
+        # inversion maps the plane onto itself)
+        zfix = [basis.get_dofs(_plane_facets(mesh, 2, float(c[2, 0, 0]), R)).all()]
+        if bext is not None:
+            zfix.append(gmap[bext.get_dofs(_plane_facets(geometry.exterior_mesh, 2, 0.0,
+                                                          R)).all()])
+        fixed = np.unique(np.concatenate([np.atleast_1d(fixed)] + zfix))
     A = A.tocsr()
     free = np.setdiff1d(np.arange(N), fixed)
     xq = np.asarray(bbody.global_coordinates())
@@ -993,6 +1115,11 @@ def _solve(geometry: BodyMesh, law, H0, H_applied, M_imposed, exterior, rtol, ma
         # vector means of an axisymmetric field: e_r averages to zero over the revolution
         for v in (Mmean, Hmean, Hamean):
             v[0] = 0.0
+    if octant:
+        # the whole body: x and y components average to zero over the mirror images
+        for v in (Mmean, Hmean, Hamean):
+            v[:2] = 0.0
+        V *= 8.0
     # the axis of N: the uniform applied field's direction, else z (a field along the axis),
     # else (no applied field: a magnet) the mean magnetization's
     e = np.zeros(dim)

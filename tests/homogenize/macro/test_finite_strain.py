@@ -665,3 +665,22 @@ def test_3d_cylinder_converges_to_the_axisymmetric_solution():
         rate = np.polyfit(np.log(1.0 / np.array(m)), np.log(err), 1)[0]
         assert 1.6 < rate < 2.5, (err, rate)
         assert err[-1] < 0.015
+
+
+def test_solve_3d_warm_start_reaches_the_same_state():
+    """solve_3d(initial=...) (the 3D specimen's staggered iteration): Newton from a solution
+    under nearby loads reaches the same equilibrium as from the undeformed body (to Newton's
+    tolerance, 1e-10 of the load: 1e-8 of u relative), in fewer iterations."""
+    body = fs.cylinder_body_3d(1e-3, 1.6e-3, 3)
+    solid = fs.NeoHookeanSolid.from_poisson(1e5, 0.49)
+
+    def loads(p):
+        return fs.Loads((fs.Traction(lambda x, n: p * n[2] ** 2 * n, "surface"),))
+    near = fs.solve_3d(body, solid, loads(2.0e3), load_steps=2)
+    cold = fs.solve_3d(body, solid, loads(2.2e3), load_steps=2)
+    warm = fs.solve_3d(body, solid, loads(2.2e3), initial=near)
+    np.testing.assert_allclose(warm.u_m, cold.u_m, rtol=0, atol=1e-8 * np.abs(cold.u_m).max())
+    assert warm.newton_iterations < cold.newton_iterations
+    from micro._validate import InputError
+    with pytest.raises(InputError, match="initial"):
+        fs.solve_3d(fs.cylinder_body_3d(1e-3, 1.6e-3, 2), solid, loads(1e3), initial=near)

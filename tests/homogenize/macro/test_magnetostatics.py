@@ -485,3 +485,68 @@ def test_body_touching_the_domain_boundary_is_refused():
     assert check_law(tanh(5.0, MS)) == tanh(5.0, MS)
     with pytest.raises(InputError, match="star-shaped"):
         axisymmetric_mesh(Profile(((0, A), (A, A), (0.2 * A, 0.9 * A), (A, -A), (0, -A))))
+
+
+# ------------------------------------------------------------ octant symmetry in 3D (issue 34)
+
+from homogenize.macro import magnetostatics as ms  # noqa: E402
+
+def _octant_of_ball(nrefs, axes):
+    """scikit-fem's ball (whose elements never cross a coordinate plane) cut to the octant
+    x, y, z >= 0 and stretched to the ellipsoid of semi-axes ``axes``."""
+    from skfem import MeshTet
+    ball = MeshTet.init_ball(nrefs=nrefs)
+    t = ball.t[:, (ball.p[:, ball.t].mean(axis=1) > 0).all(axis=0)]
+    used = np.unique(t)
+    idx = np.full(ball.p.shape[1], -1)
+    idx[used] = np.arange(used.size)
+    return MeshTet(ball.p[:, used] * np.reshape(axes, (3, 1)), idx[t])
+
+
+def test_octant_ellipsoid_demag_factor_and_convergence():
+    """A triaxial ellipsoid (1, 0.7, 1.4 mm; linear chi = 1) on the octant field mesh
+    (octant_mesh_3d: phi = 0 on z = 0, natural on x = 0 and y = 0, Kelvin exterior) in a field
+    along z: N_z against the closed form (micro.demag) within 0.5 % at nrefs 3 (measured
+    -0.26 %; the inscribed polyhedron holds 2.3 % less volume), the error shrinking by more
+    than 4 from nrefs 2 to 3 (measured 6.6: second order in h); M uniform-body value
+    chi H0 / (1 + chi N) within the same 0.5 %; the whole body's volume reported."""
+    from micro.demag import ellipsoid_demag_factors
+    axes = (1.0e-3, 0.7e-3, 1.4e-3)
+    Nz = ellipsoid_demag_factors(*axes)[2]
+    err = []
+    for nrefs in (2, 3):
+        g = ms.octant_mesh_3d(_octant_of_ball(nrefs, axes))
+        res = ms.solve_3d(g, ms.linear(1.0), 1e5)
+        err.append(res.demag_factor / Nz - 1.0)
+    assert abs(err[1]) < 5e-3 and abs(err[0]) > 4 * abs(err[1])
+    assert res.M_mean_A_per_m[2] == pytest.approx(1e5 / (1.0 + Nz), rel=5e-3)
+    np.testing.assert_array_equal(res.M_mean_A_per_m[:2], 0.0)
+    assert res.volume_m3 == pytest.approx(4.0 / 3.0 * np.pi * np.prod(axes), rel=3e-2)
+
+
+def test_octant_box_against_the_prism_factor():
+    """A sharp box 2 x 2 x 1.6 mm (finite_strain.box_body's octant, graded to the faces) of a
+    weakly magnetizable material (chi = 1e-3: M uniform to O(chi), so (H0 - <H>) / <M> is the
+    magnetometric factor to ~1e-4) against Aharoni's closed form (micro.demag, 0.3843): within
+    1 % at n = 6 (measured -0.5 %; the edges' field singularity makes the convergence first
+    order, errors measured 1.2 %, 0.7 %, 0.5 % at n = 3, 4, 6), the error shrinking."""
+    from homogenize.macro import finite_strain as fs
+    from micro.demag import prism_demag_factors
+    Nz = prism_demag_factors(2e-3, 2e-3, 1.6e-3)[2]
+    err = []
+    for n in (3, 6):
+        body = fs.box_body((2e-3, 2e-3, 1.6e-3), (n, n, max(1, round(0.8 * n))), grading=1.5)
+        res = ms.solve_3d(ms.octant_mesh_3d(body.mesh), ms.linear(1e-3), 1e5)
+        err.append(res.demag_factor / Nz - 1.0)
+    assert abs(err[1]) < 1e-2 and abs(err[1]) < abs(err[0])
+
+
+def test_octant_geometry_needs_a_uniform_axial_field():
+    from homogenize.macro import finite_strain as fs
+    g = ms.octant_mesh_3d(fs.box_body((2e-3, 2e-3, 2e-3), (2, 2, 2)).mesh)
+    with pytest.raises(InputError, match="octant"):
+        ms.solve_3d(g, ms.linear(1.0), (1e5, 0.0, 0.0))
+    with pytest.raises(InputError, match="octant"):
+        ms.solve_3d(g, ms.linear(1.0), H_applied=lambda x: np.zeros_like(x))
+    with pytest.raises(InputError, match="octant x, y, z >= 0"):
+        ms.octant_mesh_3d(fs.box_body((2e-3, 2e-3, 2e-3), (2, 2, 2), symmetric=False).mesh)
