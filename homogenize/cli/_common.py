@@ -15,11 +15,17 @@ from homogenize._budget import check_memory, machine_memory_bytes
 
 __all__ = ["Formatter", "Parser", "NEGATIVE_NUMBER", "one_line_errors", "int_in", "float_in",
            "scheduler_address", "check_outputs", "check_output_dir", "check_input_file",
-           "machine_memory_bytes", "check_memory", "parse_at", "write_snippet", "config_of"]
+           "machine_memory_bytes", "check_memory", "parse_at", "write_snippet", "config_of",
+           "add_material_options", "fill_from_preset"]
 
 
 class Formatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-    pass
+    """argparse's defaults in the help, except where the help text states its own default."""
+
+    def _get_help_string(self, action):
+        if "(default" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
 
 
 #: a number with a minus sign in any notation Python's float() reads: -1, -1.5, -.5, -1e-6,
@@ -228,7 +234,51 @@ def write_snippet(text: str, out: str, what: str) -> int:
     return 0
 
 
+#: attributes of the parsed options that describe the command, not the run
+_DISPATCH = ("func", "inputs", "outputs", "output_dirs", "output_dir_writes")
+
+
 def config_of(args) -> dict:
-    """The parsed options as a JSON-able configuration (for manifests)."""
-    return {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
-            if k != "func"}
+    """The parsed options as a JSON-able configuration (for manifests).
+
+    ``inputs`` and ``outputs`` are the files this run really read and wrote, by option
+    (``{"table": "t.h5"}``; ``{}`` when no input file was given), not the names of the options
+    that could hold one.
+    """
+    def js(v):
+        return str(v) if isinstance(v, Path) else v
+    out = {k: js(v) for k, v in vars(args).items() if k not in _DISPATCH}
+    for key in ("inputs", "outputs"):
+        given = {d: js(getattr(args, d, None)) for d in getattr(args, key, ())}
+        out[key] = {d: v for d, v in given.items() if v is not None}
+    return out
+
+
+# --------------------------------------------------------------------------- material presets
+def add_material_options(p, *, particle: bool = True, matrix: bool = True,
+                         what: str = "") -> None:
+    """``--particle-material`` / ``--matrix-material``: named presets of
+    :mod:`micro.materials` whose numbers fill every option of the command left unset (explicit
+    options win). ``what``: which options they fill, for the help."""
+    from micro.materials import DEFAULT_PRESET, MATRIX_PRESETS, PARTICLE_PRESETS
+    g = p.add_argument_group(
+        "materials (named presets with sources, micro.materials; explicit options win)", what)
+    if particle:
+        g.add_argument("--particle-material", choices=tuple(PARTICLE_PRESETS),
+                       default=DEFAULT_PRESET,
+                       help="filler powder: density, specific moment, size distribution, "
+                            "shell, elastic constants (default: seed-paper, the seed's "
+                            "7870 kg/m^3, 178 A m^2/kg, 25 nm)")
+    if matrix:
+        g.add_argument("--matrix-material", choices=tuple(MATRIX_PRESETS),
+                       default=DEFAULT_PRESET,
+                       help="elastomer: E, nu, density (default: seed-paper, the seed's PDMS "
+                            "2 MPa, 0.45, 1210 kg/m^3)")
+
+
+def fill_from_preset(args, values: dict) -> None:
+    """Every option (by ``dest``) of ``values`` that was not given (None) takes the preset's
+    value, so that the manifest records the numbers the run used."""
+    for dest, v in values.items():
+        if getattr(args, dest, None) is None:
+            setattr(args, dest, v)

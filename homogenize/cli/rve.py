@@ -20,12 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from micro._io import manifest, write_json
-from homogenize.cli._common import (check_input_file, check_memory, float_in, int_in,
-                                    one_line_errors)
+from homogenize.cli._common import (add_material_options, check_input_file, check_memory,
+                                    fill_from_preset, float_in, int_in, one_line_errors)
 from micro._validate import InputError, check_finite
 from micro.dipoles import METHODS, PME_ABOVE_N, SUMMATIONS, FieldConfig, magnetize
 from micro.magnetization import DEFAULT_LAW, LAW_NAMES, get_law
-from micro.materials import FE, FE3O4, SEED
+from micro.materials import FE, FE3O4, SEED, particle_preset, radius_bounds_m
 from micro import particles as P
 from micro.particles import describe, generate_rve
 from micro.rve import RVE, check_sidecar_manifest, sidecar_path
@@ -82,31 +82,40 @@ def register(sub, formatter):
     g = p.add_argument_group("size distribution of the outer radius")
     g.add_argument("--distribution", choices=("lognormal", "monodisperse", "histogram"),
                    default="lognormal", help="kind of radius distribution")
-    g.add_argument("--mean-radius", type=_radius("--mean-radius"), default=25e-9,
-                   help="lognormal: mean radius of the truncated distribution [m]")
+    g.add_argument("--mean-radius", type=_radius("--mean-radius"), default=None,
+                   help="lognormal: mean radius of the truncated distribution [m]; the "
+                        "--particle-material's unless given, seed-paper's "
+                        f"(default: {SEED.radius_m:g})")
     g.add_argument("--median-radius", type=_radius("--median-radius"), default=None,
                    help="lognormal: median of the parent lognormal [m] (replaces --mean-radius)")
-    g.add_argument("--gsd", type=float_in("--gsd", 1.0, 10.0, lo_open=True), default=1.4,
-                   help="lognormal: geometric standard deviation [1], > 1")
-    g.add_argument("--r-min", type=_radius("--r-min"),
-                   default=10e-9, help="lognormal: smallest radius [m]")
-    g.add_argument("--r-max", type=_radius("--r-max"),
-                   default=50e-9, help="lognormal: largest radius [m]")
-    g.add_argument("--radius", type=_radius("--radius"),
-                   default=25e-9, help="monodisperse: radius [m]")
+    g.add_argument("--gsd", type=float_in("--gsd", 1.0, 10.0, lo_open=True), default=None,
+                   help="lognormal: geometric standard deviation [1], > 1 (default: the "
+                        "--particle-material's, seed-paper 1.4)")
+    g.add_argument("--r-min", type=_radius("--r-min"), default=None,
+                   help="lognormal: smallest radius [m] (default: 0.4 x the mean radius, or "
+                        "the median with --median-radius: the seed's 10 nm at 25 nm)")
+    g.add_argument("--r-max", type=_radius("--r-max"), default=None,
+                   help="lognormal: largest radius [m] (default: 2 x the mean or median "
+                        "radius: the seed's 50 nm at 25 nm)")
+    g.add_argument("--radius", type=_radius("--radius"), default=None,
+                   help="monodisperse: radius [m] (default: the --particle-material's mean "
+                        "radius, seed-paper 25e-9)")
     g.add_argument("--histogram", default=None, metavar="CSV",
                    help="histogram: CSV file with columns radius_m and count (number) or "
                         "weight (mass fraction); implies --distribution histogram")
 
     g = p.add_argument_group("core-shell composition")
-    g.add_argument("--shell", type=float_in("--shell", 0.0, _R_MAX, "m"), default=0.0,
+    g.add_argument("--shell", type=float_in("--shell", 0.0, _R_MAX, "m"), default=None,
                    help="Fe3O4 shell thickness [m]; 0 = homogeneous particles with the seed's "
-                        f"{SEED.sigma_s_Am2_kg:g} A m^2/kg")
-    g.add_argument("--core-density", type=_DENSITY("--core-density"),
-                   default=FE.density_kg_m3, help="core density [kg/m^3]")
+                        f"{SEED.sigma_s_Am2_kg:g} A m^2/kg (default: the --particle-material's, "
+                        "seed-paper 0)")
+    g.add_argument("--core-density", type=_DENSITY("--core-density"), default=None,
+                   help="core density [kg/m^3] (default: the --particle-material's, seed-paper "
+                        f"{FE.density_kg_m3:g})")
     g.add_argument("--core-sigma", type=_SIGMA("--core-sigma"), default=None,
-                   help=f"core specific saturation moment [A m^2/kg] (default {FE.sigma_s_Am2_kg:g} "
-                        f"with a shell, {SEED.sigma_s_Am2_kg:g} without)")
+                   help="core specific saturation moment [A m^2/kg] (default: the "
+                        "--particle-material's; seed-paper: "
+                        f"{FE.sigma_s_Am2_kg:g} with a shell, {SEED.sigma_s_Am2_kg:g} without)")
     g.add_argument("--shell-density", type=_DENSITY("--shell-density"),
                    default=FE3O4.density_kg_m3, help="shell density [kg/m^3]")
     g.add_argument("--shell-sigma", type=float_in("--shell-sigma", 0.0, _SIGMA_MAX, "A m^2/kg"),
@@ -114,7 +123,8 @@ def register(sub, formatter):
                    help="shell specific saturation moment [A m^2/kg]")
     g.add_argument("--calibrate-sigma", type=_SIGMA("--calibrate-sigma"), default=None,
                    help="measured mass-averaged specific moment of the powder [A m^2/kg]: "
-                        "the core moment is calibrated to reproduce it")
+                        "the core moment is calibrated to reproduce it (default: the "
+                        "--particle-material's; none for seed-paper)")
 
     g = p.add_argument_group("arrangement")
     g.add_argument("--arrangement", choices=("dispersed", "clusters", "chains"),
@@ -158,13 +168,35 @@ def register(sub, formatter):
                    help="progress bar on stderr (default: on for n >= 20000)")
 
     _add_magnetics_options(p)
+    add_material_options(p, matrix=False,
+                         what="--particle-material fills --mean-radius, --gsd, --radius, "
+                              "--shell, --core-density, --core-sigma, --calibrate-sigma, "
+                              "--rho-particle, --sigma-s and the core material of the "
+                              "intrinsic magnetization laws; --r-min/--r-max follow the "
+                              "radius.")
     p.set_defaults(func=_cmd, outputs=("out", "json", "ply", "glb", "png"),
                    inputs=("load", "histogram"))
     one_line_errors(sub)
 
 
+def apply_particle_preset(args) -> None:
+    """Fill the particle options not given from ``--particle-material`` (the defaults of
+    ``seed-paper`` are the former fixed defaults, bit for bit) and the lognormal's bounds from
+    the mean (or median) radius (:func:`micro.materials.radius_bounds_m`)."""
+    p = particle_preset(getattr(args, "particle_material", "seed-paper"))
+    fill_from_preset(args, {
+        "mean_radius": p.mean_radius_m, "gsd": p.gsd, "radius": p.mean_radius_m,
+        "shell": p.shell_m, "core_density": p.density_kg_m3, "core_sigma": p.core_sigma_Am2_kg,
+        "calibrate_sigma": p.calibrate_sigma_Am2_kg, "rho_kg_m3": p.density_kg_m3,
+        "sigma_s_Am2_kg": p.powder_sigma_Am2_kg})
+    lo, hi = radius_bounds_m(args.median_radius if args.median_radius is not None
+                             else args.mean_radius)
+    fill_from_preset(args, {"r_min": lo, "r_max": hi})
+
+
 def generator_kwargs(args) -> dict:
     """Keyword arguments of :func:`micro.particles.generate_rve` from parsed CLI options."""
+    apply_particle_preset(args)
 
     kind = "histogram" if args.histogram else args.distribution
     if kind == "histogram":
@@ -238,6 +270,7 @@ def _fmt_summary(s: dict) -> str:
 def _cmd(args) -> int:
 
     _check_outputs(args)
+    apply_particle_preset(args)          # the manifest records the numbers used
     if args.load:
         rve = RVE.load(args.load)
         note = check_sidecar_manifest(args.load)
@@ -338,13 +371,15 @@ def _add_magnetics_options(parser) -> None:
                    help="the seed's powder concentration c for d_eff = phi_eff / c [-] "
                         "(default: 0.035)")
     g.add_argument("--rho-particle", dest="rho_kg_m3", type=_DENSITY("--rho-particle"),
-                   default=SEED.particle_density_kg_m3,
+                   default=None,
                    help="density of the saturated reference material in phi_eff [kg/m^3] "
-                        f"(default: {SEED.particle_density_kg_m3:g})")
+                        "(default: the --particle-material's, seed-paper "
+                        f"{SEED.particle_density_kg_m3:g})")
     g.add_argument("--sigma-s", dest="sigma_s_Am2_kg", type=_SIGMA("--sigma-s"),
-                   default=SEED.sigma_s_Am2_kg,
+                   default=None,
                    help="specific saturation moment of the reference material [A m^2/kg] "
-                        f"(default: {SEED.sigma_s_Am2_kg:g})")
+                        "(default: the --particle-material's powder moment, seed-paper "
+                        f"{SEED.sigma_s_Am2_kg:g})")
 
 
 def _magnetics_summary(args, rve) -> dict:
@@ -369,8 +404,22 @@ def _magnetics_summary(args, rve) -> dict:
     }
 
 
+def _core_law_params(args) -> tuple:
+    """The core material of a non-iron --particle-material for the intrinsic laws that take
+    one (regime: ``material``; approach: K1, Ms; stoner-wohlfarth: K); none for iron cores, so
+    that the iron presets keep the laws' own defaults bit for bit."""
+    core = particle_preset(getattr(args, "particle_material", "seed-paper")).core
+    if core is FE:
+        return ()
+    law = {"frohlich-kennelly": "apparent-fk"}.get(args.law, args.law)
+    return {"regime": (("material", core.name),),
+            "approach": (("K1_J_m3", core.K1_J_m3), ("Ms_core_A_m", core.Ms_A_m)),
+            "stoner-wohlfarth": (("K_J_m3", abs(core.K1_J_m3)),)}.get(law, ())
+
+
 def field_config(args) -> FieldConfig:
     """The magnetic stage's configuration from the options of ``mapsim rve``."""
+    apply_particle_preset(args)
     B = float(args.B_T)
     if getattr(args, "B_direction", None) is not None:
         d = np.asarray(args.B_direction, dtype=float)
@@ -382,6 +431,7 @@ def field_config(args) -> FieldConfig:
                                        ("chi_i", args.chi_i),
                                        ("measurement_time_s", args.measurement_time_s))
                    if v is not None)
+    params += _core_law_params(args)
     get_law(args.law, **dict(params))          # unknown law parameters fail here, before work
     return FieldConfig(B_T=B, gradB_T_per_m=args.gradB_T_per_m, law=args.law,
                        law_params=params, demag_factor=args.demag_factor, tol=args.tol,

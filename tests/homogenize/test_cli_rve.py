@@ -128,3 +128,64 @@ def test_negative_number_pattern_and_parser_class():
     assert a.magnet_position == [20e-3, 2.5e-3, -15.5e-3]
     a = parser.parse_args(["rve", "--chain-direction", "-1e-3", "0", "-1"])
     assert a.chain_direction == [-1e-3, 0.0, -1.0]
+
+
+def test_micron_mean_radius_takes_its_own_bounds(tmp_path, capsys):
+    # the bounds used to stay at the seed's [10, 50] nm: "mean radius must lie strictly inside"
+    assert main(["rve", "--phi", "0.10", "--n", "20", "--mean-radius", "1e-6", "--json",
+                 str(tmp_path / "s.json")]) == 0
+    d = json.loads((tmp_path / "s.json").read_text())
+    cfg = d["manifest"]["config"]
+    assert (cfg["r_min"], cfg["r_max"]) == pytest.approx((0.4e-6, 2e-6), rel=1e-15)
+    r = d["summary"]["radius_m"]
+    assert 0.4e-6 <= r["min"] and r["max"] <= 2e-6
+    assert cfg["inputs"] == {} and cfg["outputs"] == {"json": str(tmp_path / "s.json")}
+    # one bound given: the other still follows the radius
+    assert main(["rve", "--n", "20", "--mean-radius", "1e-6", "--r-max", "3e-6", "--json",
+                 str(tmp_path / "t.json")]) == 0
+    cfg = json.loads((tmp_path / "t.json").read_text())["manifest"]["config"]
+    assert (cfg["r_min"], cfg["r_max"]) == pytest.approx((0.4e-6, 3e-6), rel=1e-15)
+
+
+def test_seed_paper_preset_is_the_old_default_bit_for_bit(tmp_path):
+    base = ["rve", "--n", "150", "--seed", "5", "--B", "0.1"]
+    assert main(base + ["--out", str(tmp_path / "a.h5"), "--json", str(tmp_path / "a.json")]) == 0
+    assert main(base + ["--particle-material", "seed-paper", "--mean-radius", "25e-9",
+                        "--r-min", "1e-8", "--r-max", "5e-8", "--gsd", "1.4",
+                        "--core-density", "7870", "--rho-particle", "7870", "--sigma-s", "178",
+                        "--out", str(tmp_path / "b.h5"), "--json",
+                        str(tmp_path / "b.json")]) == 0
+    assert RVE.load(tmp_path / "a.h5") == RVE.load(tmp_path / "b.h5")
+    a, b = (json.loads((tmp_path / f).read_text()) for f in ("a.json", "b.json"))
+    assert a["summary"] == b["summary"]                  # the magnetics too, bit for bit
+    cfg = a["manifest"]["config"]
+    assert (cfg["r_min"], cfg["r_max"], cfg["mean_radius"], cfg["gsd"]) == (10e-9, 50e-9, 25e-9,
+                                                                             1.4)
+    assert (cfg["core_density"], cfg["core_sigma"], cfg["shell"]) == (7870.0, None, 0.0)
+    assert (cfg["rho_kg_m3"], cfg["sigma_s_Am2_kg"]) == (7870.0, 178.0)
+
+
+def test_particle_material_presets_and_explicit_options_win(tmp_path):
+    assert main(["rve", "--n", "40", "--particle-material", "carbonyl-iron", "--json",
+                 str(tmp_path / "c.json")]) == 0
+    d = json.loads((tmp_path / "c.json").read_text())
+    assert d["summary"]["specific_moment_Am2_kg"] == pytest.approx(210.0)
+    assert 0.4e-6 <= d["summary"]["radius_m"]["min"] and d["summary"]["radius_m"]["max"] <= 2e-6
+    assert d["manifest"]["config"]["core_density"] == 7800.0
+    assert main(["rve", "--n", "40", "--particle-material", "carbonyl-iron", "--core-sigma",
+                 "200", "--mean-radius", "2e-6", "--json", str(tmp_path / "d.json")]) == 0
+    d = json.loads((tmp_path / "d.json").read_text())
+    assert d["summary"]["specific_moment_Am2_kg"] == pytest.approx(200.0)
+    assert d["manifest"]["config"]["r_max"] == pytest.approx(4e-6, rel=1e-15)
+    # magnetite: Fe3O4 core in the regime law, its own moment
+    assert main(["rve", "--n", "30", "--particle-material", "magnetite", "--B", "0.1", "--json",
+                 str(tmp_path / "m.json")]) == 0
+    d = json.loads((tmp_path / "m.json").read_text())
+    assert d["summary"]["specific_moment_Am2_kg"] == pytest.approx(92.0)
+    assert d["manifest"]["config"]["sigma_s_Am2_kg"] == 92.0
+
+
+def test_unknown_particle_material_exit_2(capsys):
+    assert main(["rve", "--particle-material", "unobtainium"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mapsim rve: error:") and "carbonyl-iron" in err and "\n" not in err
