@@ -12,7 +12,12 @@ HERE = Path(__file__).resolve().parent
 DATA = HERE / "data"
 NAMES = ("seed_paper_cantilever", "diguet2010_magnetostriction", "rtv615_tensile")
 
-diagnoses = {name: diagnose(load_experiment(DATA / f"{name}.toml")) for name in NAMES}
+#: the magnetostriction data set is also predicted as measured (its change of length) by the
+#: specimen solver, three models, nothing fitted (report section "The specimen predicted as
+#: measured"); the other kinds have no specimen account
+SPECIMEN_MESH = "normal"
+diagnoses = {name: diagnose(load_experiment(DATA / f"{name}.toml"), specimen_mesh=SPECIMEN_MESH)
+             for name in NAMES}
 seed_point = diagnoses["seed_paper_cantilever"].as_dict()
 diguet = diagnoses["diguet2010_magnetostriction"].as_dict()
 rtv615 = diagnoses["rtv615_tensile"].as_dict()

@@ -70,10 +70,12 @@ def read_rtv615(path) -> dict:
 
 def write_diguet(raw, toml_path) -> None:
     cols = read_diguet(raw)
-    # matrix: shear modulus ~230 kPa, nearly incompressible (Stewart & Anand 2025 fit) -> E = 3G
+    # matrix: E0 = 0.14 MPa, the silicone matrix's modulus that Diguet's thesis reports
+    # (theses.fr 2010GRENY002, abstract), nearly incompressible; NOT the 690 kPa = 3 x 230 kPa
+    # that Stewart & Anand 2025 fitted to this curve (a fitted value is never an input)
     write_experiment(toml_path, "magnetostriction", cols,
                      title="Diguet et al. 2010, soft MRE cylinder L/D = 0.80, axial strain",
-                     matrix=Matrix(E_Pa=690e3, nu=0.49, density_kg_m3=1050.0),
+                     matrix=Matrix(E_Pa=140e3, nu=0.499, density_kg_m3=1050.0),
                      particles=Particles(density_kg_m3=FE.density_kg_m3,
                                          sigma_s_Am2_kg=FE.sigma_s_Am2_kg,
                                          radius_mean_m=2.0e-6, radius_min_m=0.5e-6,

@@ -86,6 +86,7 @@ class Diagnosis:
     folds: list | None
     round_bases: list = field(default_factory=list)   # model each round started from
     microstructure: dict | None = None    # magnetostriction: the coupled RVE's account
+    specimen: dict | None = None          # magnetostriction: the specimen solver's account
 
     @property
     def gain(self) -> float:
@@ -109,6 +110,7 @@ class Diagnosis:
             "gain": self.gain if self.steps else 1.0,
             **({"microstructure_evolution": self.microstructure}
                if self.microstructure is not None else {}),
+            **({"specimen": self.specimen} if self.specimen is not None else {}),
         }
 
 
@@ -362,8 +364,21 @@ def _paired_p(e_cur, e_new):
 # the diagnosis
 
 def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPHA,
-             max_folds: int = 8, progress: bool = False) -> Diagnosis:
-    """Cross-validated forward selection of causes on top of the seed model (module doc)."""
+             max_folds: int = 8, progress: bool = False,
+             specimen_mesh: str | None = None) -> Diagnosis:
+    """Cross-validated forward selection of causes on top of the seed model (module doc).
+
+    specimen_mesh : for a magnetostriction experiment, also predict the measured change of
+        length through the specimen solver, three models, nothing fitted
+        (:func:`homogenize.experiments.specimen_account.specimen_account`, a minute or two);
+        "coarse" | "normal", or None: not done
+    """
+    if specimen_mesh is not None:
+        from .specimen_account import MESHES
+        if specimen_mesh not in MESHES:
+            from micro._validate import InputError
+            raise InputError(f"specimen_mesh must be one of {sorted(MESHES)} or None, got "
+                             f"{specimen_mesh!r}")
     folds = make_folds(exp, max_folds=max_folds)
     seed = ModelSpec(exp.kind)
     current = _candidate(seed, "seed", exp, folds)
@@ -481,7 +496,13 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
         bar.close()
     ms = microstructure_account(exp, folds, baseline, current) \
         if exp.kind == "magnetostriction" else None
-    return Diagnosis(exp, baseline, current, steps, rounds, skipped, folds, round_bases, ms)
+    sp = None
+    if exp.kind == "magnetostriction" and specimen_mesh is not None:
+        from .specimen_account import specimen_account
+        say = (lambda text: print(text, file=sys.stderr)) if progress else None
+        sp = specimen_account(exp, final_cv_pred=current.cv_pred, mesh=specimen_mesh,
+                              progress=say)
+    return Diagnosis(exp, baseline, current, steps, rounds, skipped, folds, round_bases, ms, sp)
 
 
 def microstructure_account(exp: Experiment, folds, baseline: Candidate,

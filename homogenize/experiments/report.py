@@ -234,6 +234,11 @@ def write_report(d: Diagnosis, out_dir, *, discussion: str | None = None) -> Pat
         lines += ["Entries ending in `_predicted` are not fitted: they are the project's physics "
                   "at the final fit (row means), shown next to the fitted parameters.", ""]
     lines += _microstructure_section(d.microstructure)
+    if d.specimen is not None and d.specimen.get("available"):
+        _plot_specimen(d, out / "specimen.png")
+        lines += _specimen_section(d.specimen)
+    else:
+        (out / "specimen.png").unlink(missing_ok=True)
     c0 = residual_correlations(exp, d.baseline.cv_pred - exp.y)
     c1 = residual_correlations(exp, d.final.cv_pred - exp.y)
     if c0:
@@ -309,3 +314,103 @@ def _microstructure_section(ms: dict | None) -> list:
            f"`{ms['accepted_form']}`{', a FITTED constant' if ms['accepted_form'] == 'fitted' else ''})."
            if ms["accepted"] else "was not accepted in the selection."), ""]
     return lines
+
+
+_MODEL_TEXT = {"continuum": "continuum (Kelvin loads only, no microstructural stress)",
+               "affine": "affine (plus the particles' interaction stress, particles fixed)",
+               "relaxed": "relaxed (plus what particles that move add: relax table)"}
+
+
+def _specimen_section(sp: dict) -> list:
+    """The specimen solver's account: the measured change of length predicted, three models."""
+    lines = ["## The specimen predicted as measured: change of length, nothing fitted", "",
+             "Specimen solver (`homogenize.macro.specimen`): the field in and around the "
+             "deforming cylinder, Kelvin tractions and magnetic pressure, a finite-strain "
+             "nearly incompressible neo-Hookean body; measured quantity: "
+             f"{sp['measured_quantity']}. Nothing fitted: {sp['nothing_fitted']}.", ""]
+    for g in sp["groups"]:
+        lo, hi = g["composite_E_Pa_ci95"]
+        lines += [f"- L/D = {g['aspect_ratio_L_over_D']:g}, phi = {g['phi']:g} "
+                  f"({g['rows']} rows): matrix E = {g['matrix_E_Pa'] / 1e6:.4g} MPa (the "
+                  f"TOML's), filler stiffening {g['filler_stiffness_ratio']:.3f} +- "
+                  f"{g['filler_stiffness_ratio_se']:.3f} (cell FEM) -> composite E = "
+                  f"{g['composite_E_Pa'] / 1e6:.4g} MPa (95 %: [{lo / 1e6:.4g}, "
+                  f"{hi / 1e6:.4g}]); M(H_in) of {g['composite_law']['realizations']} random "
+                  f"RVEs of {g['composite_law']['n_particles']} particles (initial "
+                  f"susceptibility {g['composite_law']['chi_initial']:.3g}); mesh "
+                  f"{g['specimen']['mesh']}."]
+        rt = g["relax_table"]
+        if isinstance(rt, dict) and rt.get("available") is False:
+            lines.append(f"  Relaxed model not evaluated: {rt['why']}")
+        elif rt:
+            lines.append(f"  Relax table `{rt.get('table')}` ({rt.get('realizations')} RVEs of "
+                         f"{rt.get('n_particles')} particles, {rt.get('voxels')}^3 voxels).")
+        for m, r in g["models"].items():
+            if r.get("available") and r.get("failed"):
+                lines.append(f"  {m}: stopped after B = "
+                             f"{(r['B_applied_T'] or [0.0])[-1]:.3g} T: {r['failed']}")
+    lines += ["", "| model | at B [T] | measured | predicted (end faces' mean) | 95 % "
+              "(modulus, linearized) | on the axis | mean strain | share explained | RMSE, "
+              "nothing fitted | kappa_extra still FITTED | held-out RMSE with it | held-out "
+              "gain over the diagnosis |", "|---|---:|---:|---:|---|---:|---:|---:|---:|---|"
+              "---:|---:|"]
+    for m, r in sp["models"].items():
+        if not r.get("available"):
+            lines.append(f"| {m} | - | - | not evaluated: {r.get('why', '')[:80]} | | | | | | "
+                         f"| | |")
+            continue
+        f = r.get("fitted", {})
+        lo, hi = r["predicted_end_mean_ci95_modulus_linearized"]
+        kx = (f"{f['kappa_extra']:.3g} +- {f['kappa_extra_se']:.2g}" if f else "-")
+        gain = r.get("heldout_gain_with_fitted_kappa")
+        lines.append(
+            f"| {_MODEL_TEXT[m]} | {r['at']['B_T']:.3g} | {r['measured']:.4g} | "
+            f"{r['predicted_end_mean']:.4g} | [{lo:.4g}, {hi:.4g}] | {r['predicted_axis']:.4g} "
+            f"| {r['predicted_mean_strain']:.4g} | {100 * r['fraction_explained']:.3g} % | "
+            f"{r['rmse_nothing_fitted']:.4g} | {kx} | "
+            f"{f.get('heldout_rmse', math.nan):.4g} | "
+            f"{'-' if gain is None else f'{gain:.3g}'} |")
+    lines += ["", "The held-out gain compares the diagnosis's final model (mean strain, its own "
+              "fitted parameters) with the specimen prediction plus one fitted kappa_extra "
+              "(leave-one-out), on the same rows. Model error: "
+              + "; ".join(sp["model_error"]) + ".", "",
+              "![the specimen's predicted change of length against the measured one]"
+              "(specimen.png)", ""]
+    return lines
+
+
+def _plot_specimen(d: Diagnosis, path: Path):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    exp, sp = d.exp, d.specimen
+    fig = Figure(figsize=(7.5, 4.8))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    B = np.asarray(exp.columns["B_T"], float)
+    for down, mk, lab in ((False, "o", "measured, rising field"),
+                          (True, "^", "measured, falling field")):
+        m = exp.down == down
+        if m.any():
+            ax.plot(B[m], 100 * exp.y[m], mk, color="k", mfc="none", label=lab)
+    colors = {"continuum": "C3", "affine": "C0", "relaxed": "C2"}
+    for g in sp["groups"]:
+        for m, r in g["models"].items():
+            if not r.get("available") or not r["B_applied_T"]:
+                continue
+            Bs = [0.0] + list(r["B_applied_T"])
+            lab = f"{m}" + (f", L/D {g['aspect_ratio_L_over_D']:g}" if len(sp["groups"]) > 1
+                            else "")
+            ax.plot(Bs, [0.0] + [100 * v for v in r["strain_end_mean"]], "-",
+                    color=colors[m], label=f"{lab}: end faces' mean")
+            ax.plot(Bs, [0.0] + [100 * v for v in r["strain_axis"]], "--", color=colors[m],
+                    lw=0.9, label=f"{lab}: on the axis")
+    ax.axhline(0.0, color="0.6", lw=0.6)
+    ax.set_xlabel("applied field mu0 H0 [T]")
+    ax.set_ylabel("axial strain: change of length / length [%]")
+    ax.set_title("specimen solver, nothing fitted, against the measured change of length",
+                 fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")

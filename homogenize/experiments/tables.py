@@ -516,6 +516,8 @@ class Restructuring:
     x_relaxed: np.ndarray
     x_affine: np.ndarray
     provenance: dict
+    M_relaxed_A_per_m: np.ndarray | None = None     # (K, R) the relaxed RVEs' M_eff along B
+    E_parallel_Pa: np.ndarray | None = None         # (K, R) their E along the field
 
     def delta_strain(self, B_T, k_shape) -> np.ndarray:
         """Mean over realizations of the restructuring strain ``d_eps_rve + k_shape d_x`` at
@@ -580,7 +582,8 @@ def _restructuring_from(path: Path, phi: float, E_Pa: float, rtol: float):
             "git_revision": (_json.loads(man).get("git_revision") if man else None)}
     return Restructuring(path=str(path), phi=phi, E_Pa=E_Pa, B_T=B, d_eps_rve=eps_r - eps_a,
                          d_x=x_r - x_a, eps_rve_relaxed=eps_r, eps_rve_affine=eps_a,
-                         x_relaxed=x_r, x_affine=x_a, provenance=prov), ""
+                         x_relaxed=x_r, x_affine=x_a, provenance=prov,
+                         M_relaxed_A_per_m=M_r, E_parallel_Pa=E_r), ""
 
 
 @functools.lru_cache(maxsize=16)
