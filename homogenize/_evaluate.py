@@ -35,7 +35,7 @@ import numpy as np
 import micro
 from micro import magnetization
 from micro._validate import InputError
-from micro.materials import PDMS, SEED
+from micro.materials import PDMS, SEED, radius_bounds_m
 from micro.particles import CoreShell, LogNormal, Monodisperse
 import itertools
 from micro.dipoles import solve
@@ -217,9 +217,11 @@ class SyntheticEvaluator:
 _FIELD_AXES = ("phi", "B_T", "gradB_T_per_m", "law")
 DEFAULT_LAW = magnetization.DEFAULT_LAW
 # Study keys that build the size distribution and the composition passed to generate_rve
-# (they may be grid axes or [rve] keys). Defaults: the seed paper's powder.
-_DIST_KEYS = {"distribution": "lognormal", "mean_radius_m": 25e-9, "gsd": 1.4,
-              "r_min_m": 10e-9, "r_max_m": 50e-9}
+# (they may be grid axes or [rve] keys). Defaults: the seed paper's powder; the bounds
+# r_min_m, r_max_m follow the mean radius unless given (micro.materials.radius_bounds_m:
+# 0.4 and 2 x the mean, the seed's [10, 50] nm at its 25 nm).
+_DIST_KEYS = {"distribution": "lognormal", "mean_radius_m": SEED.radius_m, "gsd": SEED.gsd,
+              "r_min_m": SEED.r_min_m, "r_max_m": SEED.r_max_m}
 _COMP_KEYS = {"shell_thickness_m": "shell_m", "core_density_kg_m3": "core_density_kg_m3",
               "core_sigma_Am2_kg": "core_sigma_Am2_kg",
               "shell_density_kg_m3": "shell_density_kg_m3",
@@ -270,7 +272,9 @@ def _particle_keys(generate_rve) -> set:
 def _rve_kwargs(params: dict) -> dict:
     """Keywords of generate_rve from the study's RVE keys (distribution, composition, rest)."""
     p = dict(params)
-    d = {k: p.pop(k, v) for k, v in _DIST_KEYS.items()}
+    d = {k: p.pop(k, v) for k, v in _DIST_KEYS.items() if k not in ("r_min_m", "r_max_m")}
+    lo, hi = radius_bounds_m(float(d["mean_radius_m"]))
+    d["r_min_m"], d["r_max_m"] = p.pop("r_min_m", lo), p.pop("r_max_m", hi)
     if d["distribution"] == "lognormal":
         dist = LogNormal.from_mean(float(d["mean_radius_m"]), float(d["gsd"]),
                                    float(d["r_min_m"]), float(d["r_max_m"]))
@@ -316,7 +320,8 @@ class RVEEvaluator:
     (default: :data:`micro.magnetization.DEFAULT_LAW`, each particle the intrinsic law of its
     regime). The size distribution (``distribution`` = lognormal or
     monodisperse, ``mean_radius_m``, ``gsd``, ``r_min_m``, ``r_max_m``; default the seed's
-    powder: mean 25 nm in [10, 50] nm, gsd 1.4), the composition (``shell_thickness_m``,
+    powder: mean 25 nm, gsd 1.4; bounds unless given 0.4 and 2 x the mean radius, [10, 50] nm
+    for the seed), the composition (``shell_thickness_m``,
     ``core_sigma_Am2_kg``, ``calibrate_sigma_Am2_kg``, ...; see :class:`micro.particles.CoreShell`)
     and the other keywords of :func:`micro.particles.generate_rve` (``arrangement``, ``gap_m``,
     ``cluster_size``, ...) may be grid axes or ``[rve]`` keys; ``[law]`` goes to

@@ -5,6 +5,8 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
     [study]
     name = "seed conditions"       # free text
     seed = 20130402                # study seed (integer >= 0)
+    particle_material = "carbonyl-iron"   # optional presets of micro.materials (default
+    matrix_material = "sylgard184-10to1"  # "seed-paper"): they fill the keys below not given
     realizations = 8               # random RVEs per grid point (>= 2, for a standard deviation)
     n_particles = 200              # particles per RVE (the RVE size)
     evaluator = "rve"              # "rve" (particles -> dipoles -> FEM), "relax" (particles
@@ -36,6 +38,16 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
     quantity = "f_eff_N_m3"
     component = "z"
     target_rel_precision = 0.02
+
+``particle_material`` fills, where neither the grid nor the table gives them, the ``[rve]``
+keys ``mean_radius_m``, ``gsd``, ``shell_thickness_m``, ``core_density_kg_m3``,
+``core_sigma_Am2_kg``, ``calibrate_sigma_Am2_kg``, the ``[magnetics]`` reference
+``rho_kg_m3``, ``sigma_s_Am2_kg`` (rve evaluator), the core ``material`` of the ``regime``
+law (non-iron cores) and, with ``fem = true``, ``[cell] particle_E_Pa``, ``particle_nu``;
+``matrix_material`` fills ``[cell] matrix_E_Pa``, ``matrix_nu`` (rve evaluator, ``fem =
+true``) or ``[relax] matrix_E_Pa``, ``matrix_nu`` (relax evaluator). The filled numbers are
+part of the study's settings (and of every realization's hash); ``"seed-paper"`` fills nothing
+(its numbers are the defaults).
 
 The grid is the Cartesian product of the axes, taken in the canonical order of
 :data:`AXIS_ORDER` (then alphabetical for other axes), C order (last axis fastest). Grid point
@@ -79,6 +91,7 @@ AXIS_UNITS = {"phi": "1", "mean_radius_m": "m", "shell_thickness_m": "m", "B_T":
 _STUDY_KEYS = {
     "name": str, "seed": int, "realizations": int, "n_particles": int, "evaluator": str,
     "fem": bool, "voxels": int, "confidence": float, "description": str,
+    "particle_material": str, "matrix_material": str,
 }
 _TABLES = ("study", "grid", "rve", "law", "magnetics", "cell", "relax", "rve_size", "synthetic")
 _RVE_SIZE_KEYS = {"n_particles": list, "realizations": int, "quantity": str, "component": str,
@@ -474,6 +487,7 @@ def parse_study(text: str, path: str = "<study>") -> Study:
                 raise InputError(f"{path}: [{t}] {k} is also a grid axis; give it in one place")
             _check_rule(f"{path}: [{t}] {k}", k, v, _CELL_RULES if t == "cell" else None)
         tables[t] = dict(tab)
+    _apply_presets(path, s, dict(axes), tables, evaluator)
     _check_study_size(path, math.prod(len(v) for _, v in axes), s["realizations"], n_particles,
                       s.get("fem", False), voxels)
 
@@ -527,6 +541,54 @@ def parse_study(text: str, path: str = "<study>") -> Study:
                   axes=tuple(axes), rve_size=rve_size, synthetic=synth, **tables)
     _evaluate.get_evaluator(evaluator).check(study)
     return study
+
+
+def _apply_presets(path: str, s: dict, axes: dict, tables: dict, evaluator: str) -> None:
+    """Fill the keys of ``[study] particle_material`` / ``matrix_material`` (named presets of
+    :mod:`micro.materials`) that neither the grid nor their table gives (see the module doc)."""
+    from micro.materials import (DEFAULT_PRESET, FE, MATRIX_PRESETS, PARTICLE_PRESETS,
+                                 matrix_preset, particle_preset)
+    names = {k: s[k] for k in ("particle_material", "matrix_material") if k in s}
+    for key, table in (("particle_material", PARTICLE_PRESETS),
+                       ("matrix_material", MATRIX_PRESETS)):
+        if key in names and names[key] not in table:
+            raise InputError(f"{path}: [study] {key} must be one of {', '.join(table)}; got "
+                             f"{names[key]!r}")
+    names = {k: v for k, v in names.items() if v != DEFAULT_PRESET}
+    if names and evaluator not in ("rve", "relax"):
+        raise InputError(f"{path}: [study] {next(iter(names))} needs evaluator \"rve\" or "
+                         f"\"relax\" (the {evaluator} evaluator takes no material parameters)")
+    fem = s.get("fem", False)
+
+    def fill(table: str, values: dict) -> None:
+        t = tables[table]
+        for k, v in values.items():
+            if v is not None and k not in t and k not in axes:
+                t[k] = v
+
+    if "particle_material" in names:
+        p = particle_preset(names["particle_material"])
+        fill("rve", {"mean_radius_m": p.mean_radius_m, "gsd": p.gsd,
+                     "shell_thickness_m": p.shell_m, "core_density_kg_m3": p.density_kg_m3,
+                     "core_sigma_Am2_kg": p.core_sigma_Am2_kg,
+                     "calibrate_sigma_Am2_kg": p.calibrate_sigma_Am2_kg})
+        if evaluator == "rve":
+            fill("magnetics", {"rho_kg_m3": p.density_kg_m3,
+                               "sigma_s_Am2_kg": p.powder_sigma_Am2_kg})
+            if fem:
+                fill("cell", {"particle_E_Pa": p.E_Pa, "particle_nu": p.nu})
+        laws = axes.get("law", ("regime",))
+        if p.core is not FE and all(law == "regime" for law in laws):
+            fill("law", {"material": p.core.name})
+    if "matrix_material" in names:
+        m = matrix_preset(names["matrix_material"])
+        if evaluator == "relax":
+            fill("relax", {"matrix_E_Pa": m.E_Pa, "matrix_nu": m.nu})
+        elif fem:
+            fill("cell", {"matrix_E_Pa": m.E_Pa, "matrix_nu": m.nu})
+        else:
+            raise InputError(f"{path}: [study] matrix_material needs fem = true (the matrix "
+                             f"enters only the cell FEM)")
 
 
 def _check_study_size(path, n_points: int, realizations: int, n_particles: int, fem: bool,

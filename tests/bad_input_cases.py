@@ -537,6 +537,24 @@ CASES = [
       words=("--shear-modulus-Pa", "--matrix-E-Pa")),
     C(*_SPEC, "--B", "0.2", "--n-mesh", "4", "--n-boundary", "24", "--json", "s.json",
       "--quiet", code=0, creates=("s.json",)),
+    # ------------------------------------------------------------------ issue 36
+    # negative numbers in scientific notation reach the range check (argparse read them as
+    # options: "expected one argument", "expected 3 arguments")
+    C("rve", "--mean-radius", "-1e-6", words=("--mean-radius", "[1e-10, 0.001] m")),
+    C("rve", "--chain-direction", "-1e-3", "0", "-1e9", "--arrangement", "chains",
+      words=("--chain-direction", "-1e9")),
+    C("beam", "--magnet", "cuboid", "--magnet-size", "1e-2", "1e-2", "1e-2", "--remanence-T",
+      "1.3", "--magnet-position", "20e-3", "2.5e-3", "-15.5e3",
+      words=("--magnet-position", "[-10, 10] m", "-15.5e3")),
+    C("beam", "--body-force-N-m3", "-1E+10", words=("--body-force-N-m3", "-1E+10")),
+    C("channel", "--outlet-pressure-Pa", "-1e9", words=("--outlet-pressure-Pa",)),
+    C("rve", "--particle-material", "unobtainium", words=("--particle-material",
+                                                          "carbonyl-iron")),
+    C("rve", "--phi", "0.10", "--n", "20", "--mean-radius", "1e-6", "--json", "m.json", code=0,
+      creates=("m.json",), note="a micron powder: the bounds follow the mean radius"),
+    C("beam", "--model", "eb", "--magnet", "cuboid", "--magnet-size", "1e-2", "1e-2", "1e-2",
+      "--remanence-T", "1.3", "--magnet-position", "20e-3", "2.5e-3", "-15.5e-3", code=0,
+      note="a magnet below the strip: a negative coordinate in scientific notation"),
 ]
 
 # Every key of every table of a study file, each with one bad value (the rve evaluator, which
@@ -587,6 +605,8 @@ STUDY_KEYS = [
     ("rve_size", "quantity", '"speed"', ("quantity", "speed")),
     ("rve_size", "n_particles", "[10, 20, 0]", ("n_particles",)),
     ("rve_size", "target", "1", ("target",)),
+    ("study", "particle_material", '"unobtainium"', ("particle_material", "carbonyl-iron")),
+    ("study", "matrix_material", '"jelly"', ("matrix_material", "sylgard184-10to1")),
 ]
 
 

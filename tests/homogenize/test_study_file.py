@@ -131,3 +131,70 @@ def test_rve_size_table():
     assert s.rve_size.n_particles == (50, 100, 200)
     assert s.rve_size.realizations == 5 and s.rve_size.quantity == "f_eff_N_m3"
     assert s.rve_size.target_rel_precision == 0.05
+
+
+# --------------------------------------------------------------------------- presets (issue 36)
+_RVE = """
+[study]
+seed = 1
+realizations = 2
+n_particles = 20
+{extra}
+[grid]
+phi = 0.05
+B_T = [0.1, 0.2]
+gradB_T_per_m = 1.78
+{grid}
+"""
+
+
+def _rve_study(extra="", grid=""):
+    return parse_study(_RVE.format(extra=extra, grid=grid), "p.toml")
+
+
+def test_material_presets_fill_the_keys_not_given():
+    s = _rve_study('particle_material = "carbonyl-iron"\nmatrix_material = "sylgard184-10to1"\n'
+                   'fem = true\nvoxels = 8\n[rve]\ncore_sigma_Am2_kg = 200.0')
+    assert s.rve == {"core_sigma_Am2_kg": 200.0, "mean_radius_m": 1e-6, "gsd": 1.5,
+                     "shell_thickness_m": 0.0, "core_density_kg_m3": 7800.0}   # explicit wins
+    assert s.magnetics == {"rho_kg_m3": 7800.0, "sigma_s_Am2_kg": 210.0}
+    assert s.cell == {"particle_E_Pa": 211e9, "particle_nu": 0.29, "matrix_E_Pa": 2e6,
+                      "matrix_nu": 0.49}
+    # a grid axis is not overwritten; magnetite sets the regime law's core material
+    s = _rve_study('particle_material = "magnetite"', "mean_radius_m = [20e-9, 40e-9]")
+    assert "mean_radius_m" not in s.rve and s.law == {"material": "Fe3O4"}
+    # the relax evaluator takes the matrix in [relax]
+    s = parse_study(_RVE.format(extra='evaluator = "relax"\nmatrix_material = "ecoflex-00-30"',
+                                grid="").replace("gradB_T_per_m = 1.78", ""), "r.toml")
+    assert s.relax == {"matrix_E_Pa": 0.118e6, "matrix_nu": 0.49}
+
+
+def test_seed_paper_preset_changes_nothing():
+    a = _rve_study()
+    b = _rve_study('particle_material = "seed-paper"\nmatrix_material = "seed-paper"')
+    assert a.settings() == b.settings()
+    assert [t.key("x") for t in a.tasks()] == [t.key("x") for t in b.tasks()]
+
+
+def test_bounds_follow_a_micron_mean_radius_in_a_study():
+    from homogenize._evaluate import _rve_kwargs
+    s = _rve_study(grid="mean_radius_m = 1e-6")         # failed before: bounds [10, 50] nm
+    d = _rve_kwargs({**s.rve, "mean_radius_m": 1e-6})["distribution"]
+    assert (d.r_min_m, d.r_max_m) == pytest.approx((0.4e-6, 2e-6), rel=1e-15)
+    d = _rve_kwargs({})["distribution"]
+    assert (d.r_min_m, d.r_max_m) == (10e-9, 50e-9)     # the seed's, bit for bit
+
+
+@pytest.mark.parametrize("extra, words", [
+    ('particle_material = "unobtainium"', ["particle_material", "carbonyl-iron"]),
+    ('matrix_material = "jelly"', ["matrix_material", "sylgard184-10to1"]),
+    ('matrix_material = "rtv615"', ["matrix_material", "fem = true"]),
+    ('particle_material = 3', ["particle_material", "string"]),
+])
+def test_bad_material_presets_are_refused(extra, words):
+    with pytest.raises(InputError) as e:
+        _rve_study(extra)
+    for w in words:
+        assert w in str(e.value)
+    with pytest.raises(InputError, match="synthetic"):
+        parse_study(GOOD.replace("[study]", '[study]\nparticle_material = "magnetite"'))
