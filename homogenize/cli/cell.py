@@ -10,14 +10,16 @@ from micro._io import manifest, write_json
 from micro._validate import InputError, check_finite, check_positive
 from micro.dipoles import solve
 from micro.magnetization import DEFAULT_LAW, LAW_NAMES, get_law
-from micro.materials import FE, PDMS
+from micro.materials import FE, PDMS, matrix_preset, particle_preset
 from micro.materials import ElasticMaterial as Material
 from micro.rve import RVE
 
 from homogenize._cell_output import plot_slice, write_pvd
 from homogenize.cell import CellConfig, _choose_solver, homogenize
 from homogenize.cut import check_cut_memory
-from homogenize.cli._common import check_memory, config_of, float_in, int_in
+from homogenize.cli.rve import _core_law_params
+from homogenize.cli._common import (add_material_options, check_memory, config_of,
+                                    fill_from_preset, float_in, int_in)
 from homogenize.studies.cell_studies import (dilute_convergence_study, phi_study,
                                              plot_dilute_convergence, plot_phi_study)
 
@@ -82,6 +84,9 @@ def _cmd(args) -> int:
         raise InputError(f"--voxels {args.voxels}: {exc}") from None
     if solver != "matrix-free":
         _check_voxels("--voxels", args.voxels)
+    p, m = particle_preset(args.particle_material), matrix_preset(args.matrix_material)
+    fill_from_preset(args, {"matrix_E": m.E_Pa, "matrix_nu": m.nu, "particle_E": p.E_Pa,
+                            "particle_nu": p.nu})
     cfg = CellConfig(voxels=args.voxels, matrix=Material(args.matrix_E, args.matrix_nu),
                      particle=Material(args.particle_E, args.particle_nu), rigid=args.rigid,
                      method=args.method, tol=args.tol, solver=solver)
@@ -89,7 +94,9 @@ def _cmd(args) -> int:
     if args.B is not None:
         B = _parse_vec(args.B, "B", "T")
         G = _parse_vec(args.gradB if args.gradB is not None else "0", "gradB", "T/m")
-        get_law(args.law)
+        core = dict(_core_law_params(args))           # a non-iron preset's core material
+        law = get_law(args.law, **core) if core else args.law
+        get_law(law)
         field = (B, G)
     elif args.gradB is not None:
         raise InputError("--gradB needs --B (the applied flux density [T])")
@@ -97,7 +104,7 @@ def _cmd(args) -> int:
     state = mag = None
     if field is not None:
         B, G = field
-        state = solve(rve, B, G, args.law)
+        state = solve(rve, B, G, law)
         mag = {"B_T": B, "gradB_T_per_m": G, "law": state.law,
                "virial_stress_Pa": np.asarray(state.virial_stress_Pa),
                "f_eff_dipoles_N_m3": np.asarray(state.f_eff_N_m3),
@@ -227,20 +234,24 @@ def register(sub, formatter):
     p.add_argument("--law", default=DEFAULT_LAW, choices=LAW_NAMES,
                    help="magnetization law of one particle")
     p.add_argument("--matrix-E", dest="matrix_E", type=float_in("--matrix-E", *_MODULUS, "Pa"),
-                   default=PDMS.E_Pa,
-                   help="matrix Young's modulus [Pa]")
+                   default=None,
+                   help="matrix Young's modulus [Pa] (default: the --matrix-material's, "
+                        f"seed-paper {PDMS.E_Pa:g})")
     p.add_argument("--matrix-nu", dest="matrix_nu",
                    type=float_in("--matrix-nu", -1.0, 0.5, lo_open=True, hi_open=True),
-                   default=PDMS.nu,
-                   help="matrix Poisson's ratio [1], in (-1, 0.5)")
+                   default=None,
+                   help="matrix Poisson's ratio [1], in (-1, 0.5) (default: the "
+                        f"--matrix-material's, seed-paper {PDMS.nu:g})")
     p.add_argument("--particle-E", dest="particle_E",
                    type=float_in("--particle-E", *_MODULUS, "Pa"),
-                   default=FE.E_Pa,
-                   help="particle Young's modulus [Pa] (Fe)")
+                   default=None,
+                   help="particle Young's modulus [Pa] (default: the --particle-material's, "
+                        f"seed-paper Fe {FE.E_Pa:g})")
     p.add_argument("--particle-nu", dest="particle_nu",
                    type=float_in("--particle-nu", -1.0, 0.5, lo_open=True, hi_open=True),
-                   default=FE.nu,
-                   help="particle Poisson's ratio [1]")
+                   default=None,
+                   help="particle Poisson's ratio [1] (default: the --particle-material's, "
+                        f"seed-paper Fe {FE.nu:g})")
     p.add_argument("--rigid", action="store_true", help="rigid particles (stiff limit)")
     p.add_argument("--method", default="composite",
                    choices=("composite", "laminate", "centre", "fraction"),
@@ -267,4 +278,8 @@ def register(sub, formatter):
                         "collection, one step per load case) and FILE_<case>.vtu beside it")
     p.add_argument("--png", type=Path, default=None, help="write a slice figure (PNG)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and summary on stderr")
+    add_material_options(p, what="--particle-material fills --particle-E, --particle-nu and "
+                                  "the core material of the intrinsic magnetization laws (the "
+                                  "particles' sizes and moments come with the RVE file); "
+                                  "--matrix-material fills --matrix-E, --matrix-nu.")
     p.set_defaults(func=_cmd, outputs=("json", "vtu", "png"), inputs=("rve",))

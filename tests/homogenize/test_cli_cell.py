@@ -116,3 +116,25 @@ def test_dilute_study_cli_cut_voxels(tmp_path, monkeypatch):
     assert main(["cell-dilute-study", "--voxels", "8,64", "--method", "cut", "--json", str(big),
                  "--quiet"]) == 2
     assert not big.exists()
+
+
+def test_material_presets_and_the_seed_default(rve_file, tmp_path):
+    """--matrix-material / --particle-material fill the moduli not given (issue 36); without
+    them the numbers are the seed's, bit for bit."""
+    runs = {"default": [], "explicit": ["--matrix-E", "2e6", "--matrix-nu", "0.45",
+                                        "--particle-E", "211e9", "--particle-nu", "0.29"],
+            "sylgard": ["--matrix-material", "sylgard184-20to1", "--particle-material",
+                        "carbonyl-iron"],
+            "override": ["--matrix-material", "sylgard184-20to1", "--matrix-E", "3e6"]}
+    d = {}
+    for name, extra in runs.items():
+        out = tmp_path / f"{name}.json"
+        assert main(["homogenize", str(rve_file), "--voxels", "8", "--json", str(out),
+                     "--quiet"] + extra) == 0
+        d[name] = json.loads(out.read_text())
+    assert d["default"]["C_eff_Pa"] == d["explicit"]["C_eff_Pa"]
+    cfg = d["sylgard"]["manifest"]["config"]
+    assert (cfg["matrix_E"], cfg["matrix_nu"], cfg["particle_E"]) == (1e6, 0.49, 211e9)
+    assert cfg["inputs"] == {"rve": str(rve_file)}
+    assert d["sylgard"]["E_eff_Pa"] < 0.6 * d["default"]["E_eff_Pa"]
+    assert d["override"]["manifest"]["config"]["matrix_E"] == 3e6
