@@ -75,7 +75,8 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._io import atomic_path, hdf5_agree, manifest as _manifest, write_json
+from micro._io import (atomic_path, hdf5_agree, is_regular_file, manifest as _manifest,
+                       open_regular, write_json)
 from micro._validate import InputError
 
 from ._evaluate import QUANTITIES, get_evaluator
@@ -124,24 +125,47 @@ def _write_part(path: Path, task: Task, key: str, result: dict) -> None:
 
 
 #: what a damaged part file raises on reading (truncated zip, zero length, bad array header)
-_DAMAGED = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile)
+_DAMAGED = (OSError, ValueError, TypeError, KeyError, EOFError, zipfile.BadZipFile)
 
 
-def _read_part(path: Path, key: str) -> dict | None:
+def check_part(out: dict, key: str, stored_key, seed: int | None = None) -> dict:
+    """Validate a part read back as strictly as a fresh result of an evaluator: the key it
+    was stored under, the seed of its task, known quantities only, each of its shape and
+    finite. Raises ``ValueError`` naming the first problem."""
+    if str(stored_key) != key:
+        raise ValueError(f"stored key {str(stored_key)!r} is not {key!r}")
+    if seed is not None and out.get("__seed__") != seed:
+        raise ValueError(f"stored seed {out.get('__seed__')} is not the task's seed {seed}")
+    qs = [q for q in out if q != "__seed__"]
+    if not qs:
+        raise ValueError("no quantities stored")
+    for q in qs:
+        if q not in QUANTITIES:
+            raise ValueError(f"unknown quantity {q!r}")
+        a = out[q]
+        if a.shape != QUANTITIES[q][1] or not np.issubdtype(a.dtype, np.floating):
+            raise ValueError(f"{q} has shape {a.shape} and type {a.dtype}, expected float "
+                             f"{QUANTITIES[q][1]}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{q} is not finite ({a.ravel()[:3]}...)")
+    return out
+
+
+def _read_part(path: Path, key: str, seed: int | None = None) -> dict | None:
     """The stored result, or None if there is none usable (then it is recomputed).
 
-    A part that exists but cannot be read (zero length or truncated by a crash, a key that
-    does not match its name) is quarantined: renamed to ``quarantine/<name>`` in the parts
-    directory, never deleted, and a note goes to stderr.
+    A part that exists but cannot be read (zero length or truncated by a crash, not a regular
+    file, a key that does not match its name) or whose values fail :func:`check_part` (NaN, a
+    wrong shape or seed) is quarantined: renamed to ``quarantine/<name>`` in the parts
+    directory, never deleted, and a note goes to stderr. A FIFO or device is never opened
+    in blocking mode (:func:`micro._io.open_regular`).
     """
     try:
         # our own handle: np.load leaks the one it opens when the file is empty
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
-            if str(z["key"]) != key:
-                raise ValueError(f"stored key {str(z['key'])!r} is not {key!r}")
+        with open_regular(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             out = {k[2:]: z[k].copy() for k in z.files if k.startswith("q_")}
             out["__seed__"] = int(z["seed"])
-            return out
+            return check_part(out, key, z["key"], seed)
     except FileNotFoundError:
         return None
     except _DAMAGED as exc:
@@ -150,7 +174,7 @@ def _read_part(path: Path, key: str) -> dict | None:
 
 
 def _quarantine(path: Path, why: str) -> None:
-    """Move an unreadable part aside (``quarantine/`` beside it) so that it is recomputed."""
+    """Move an unusable part aside (``quarantine/`` beside it) so that it is recomputed."""
     qdir = path.parent / "quarantine"
     try:
         qdir.mkdir(exist_ok=True)
@@ -163,7 +187,7 @@ def _quarantine(path: Path, why: str) -> None:
     except OSError as exc:
         raise InputError(f"{path}: unreadable part ({why}) that cannot be moved aside "
                          f"({exc.strerror}); remove it by hand") from None
-    print(f"mapsim: unreadable part {path.name} ({why.splitlines()[0][:120]}) moved to {dest}; "
+    print(f"mapsim: unusable part {path.name} ({why.splitlines()[0][:120]}) moved to {dest}; "
           f"it is recomputed", file=sys.stderr)
 
 
@@ -209,7 +233,20 @@ def _batch_lock(out: Path):
 
 
 def _check_existing_table(out: Path, study: Study, clean: bool) -> None:
-    """Refuse to replace an existing file that is not this study's table (unless ``clean``)."""
+    """Refuse to replace an existing file that is not this study's table (unless ``clean``),
+    and any of the table's companions (the side-car manifest, the parts directory) that
+    exists as something else than a regular file or a directory (never opened: a FIFO would
+    block)."""
+    side = out.with_name(out.stem + ".manifest.json")
+    for p, want_dir in ((out, False), (side, False), (parts_dir_for(out), True)):
+        if not os.path.lexists(p):
+            continue
+        ok = os.path.isdir(p) if want_dir else is_regular_file(p)
+        if not ok:
+            what = "a directory" if want_dir else "a regular file"
+            raise InputError(f"{p} exists and is not {what} (a FIFO, device, link to nothing "
+                             f"or the wrong kind); the table {out} needs it as {what}: move it "
+                             f"away")
     if not out.exists():
         return
     try:
@@ -258,7 +295,8 @@ def reconcile_manifest(table) -> str | None:
     except ValueError:
         return None
     try:
-        have = json.loads(side.read_text(encoding="utf-8"))
+        with open_regular(side, "r", encoding="utf-8") as fh:
+            have = json.loads(fh.read())
     except (OSError, ValueError):
         have = None
     if have == want:
@@ -410,7 +448,7 @@ def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, c
     tasks = study.tasks()
     keys = [t.key(evaluator.id) for t in tasks]
     todo = [(t, k) for t, k in zip(tasks, keys)
-            if _read_part(_part_path(parts, t, k), k) is None]
+            if _read_part(_part_path(parts, t, k), k, t.seed_int()) is None]
     n_done = len(tasks) - len(todo)
     failures = []
     if todo:
@@ -504,7 +542,7 @@ def aggregate(study: Study, parts: Path, evaluator_id: str) -> dict:
     names = None
     for t in tasks:
         k = t.key(evaluator_id)
-        res = _read_part(_part_path(parts, t, k), k)
+        res = _read_part(_part_path(parts, t, k), k, t.seed_int())
         if res is None:
             raise BatchError(f"realization {t.realization} of grid point {t.grid_index} is "
                              f"missing from {parts}")
@@ -726,9 +764,50 @@ def read_table(path) -> Table:
 
     The returned :class:`Table` is flat over the grid points (C order over the axes), whatever
     the file layout: version 2 files store one dimension per grid axis, version 1 files a flat
-    ``point`` dimension.
+    ``point`` dimension. What is read back is validated as strictly as a study typed by a user
+    (:func:`check_table`): a damaged or edited table raises :class:`InputError`.
     """
     path = Path(path)
+    try:
+        return check_table(_read_table(path))
+    except (KeyError, ValueError, TypeError, IndexError) as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(f"{path}: damaged table, cannot be read ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0][:160] if str(exc) else ''})") from None
+
+
+def check_table(t: Table) -> Table:
+    """Refuse a table whose values or attributes no run of :func:`run_batch` can have written:
+    a confidence level outside (0, 1), realization counts below 2, per-realization values
+    that are not finite or of the wrong shape, grid axes without values."""
+    where = t.path
+    if not (0.0 < t.confidence < 1.0):
+        raise InputError(f"{where}: attribute confidence = {t.confidence:g} is not in (0, 1) "
+                         f"(the table was edited or damaged)")
+    P = len(t.points)
+    if P == 0 or any(len(v) == 0 for v in t.axes.values()):
+        raise InputError(f"{where}: a grid axis has no values (the table is damaged)")
+    n = np.asarray(t.n)
+    if n.shape != (P,) or not np.issubdtype(n.dtype, np.integer) or np.any(n < 2):
+        raise InputError(f"{where}: dataset n must hold an integer >= 2 per grid point "
+                         f"({P}), got {n.ravel()[:5].tolist()}")
+    if not t.values:
+        raise InputError(f"{where}: the table holds no quantities")
+    for q, v in t.values.items():
+        want = QUANTITIES[q][1]
+        if v.ndim != 2 + len(want) or v.shape[0] != P or v.shape[2:] != want \
+                or v.shape[1] < int(n.max()):
+            raise InputError(f"{where}: dataset {q} has shape {v.shape}, expected ({P}, R"
+                             f"{''.join(f', {d}' for d in want)}) with R >= {int(n.max())}")
+        if not np.all(np.isfinite(v)):
+            i = np.argwhere(~np.isfinite(v))[0]
+            raise InputError(f"{where}: dataset {q} holds a non-finite value at grid point "
+                             f"{int(i[0])} realization {int(i[1])} (the table is damaged)")
+    return t
+
+
+def _read_table(path: Path) -> Table:
     with open_hdf5(path, "table") as h:
         if h.attrs.get("format") != FORMAT:
             raise InputError(f"{path} is not a mapsim table (format attribute "

@@ -30,7 +30,9 @@ import numpy as np
 from scipy import special
 
 from . import _kernels as K
-from ._validate import InputError, check_positive, check_range, check_choice
+from ._io import open_regular
+from ._validate import (InputError, check_choice, check_header, check_positive, check_range,
+                        check_regular_file)
 from .materials import FE, FE3O4, SEED
 from .rve import RVE, minimum_image
 from scipy.optimize import brentq
@@ -277,16 +279,18 @@ class Histogram(_Distribution):
         ``#`` in the first column are comments.
         """
         path = Path(path)
-        if not path.is_file():
-            raise InputError(f"radius histogram file {path} does not exist")
-        with path.open(newline="", encoding="utf-8") as fh:
-            rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+        check_regular_file(path, f"radius histogram file {path}", 64 * 2 ** 20)
+        try:
+            with open_regular(path, "r", newline="", encoding="utf-8") as fh:
+                rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise InputError(f"radius histogram file {path}: cannot be read ({exc})") from None
         if not rows:
             raise InputError(f"{path}: empty file, expected a header 'radius_m,count'")
-        header = [h.strip() for h in rows[0]]
-        if "radius_m" not in header or not ({"count", "weight"} & set(header)):
-            raise InputError(f"{path}, row 1: header must contain 'radius_m' and 'count' or "
-                             f"'weight', got {','.join(header)}")
+        # a count (number) and a weight (mass) column both given: which one is meant is not
+        # said, and they give different distributions
+        header = check_header(f"{path}, row 1", rows[0], required=("radius_m",),
+                              one_of=("count", "weight"))
         wcol = "count" if "count" in header else "weight"
         ir, iw = header.index("radius_m"), header.index(wcol)
         radii, weights = [], []

@@ -119,6 +119,8 @@ class RVE:
             raise InputError("RVE.core_radii_m must lie in [0, radii_m] m")
         if np.any(self.mass_kg < 0):
             raise InputError("RVE.mass_kg must be >= 0 kg")
+        if np.any(self.m_sat_Am2 < 0):
+            raise InputError("RVE.m_sat_Am2 must be >= 0 A m^2 (a saturation moment)")
         # Positions on the far face are the same points as on the near face: wrap them.
         wrapped = np.mod(self.centers_m, box)
         wrapped[wrapped >= box] = 0.0
@@ -292,6 +294,7 @@ class RVE:
                 raise InputError(f"RVE file {path}: attribute params_json must hold a JSON "
                                  f"object, got {type(params).__name__}")
             n_attr = f.attrs.get("n")
+            phi_attr = f.attrs.get("phi")
         try:
             rve = cls(box_m=box, seed=seed, params=params, **kw)
         except InputError as exc:
@@ -299,6 +302,10 @@ class RVE:
         if n_attr is not None and int(n_attr) != rve.n:
             raise InputError(f"RVE file {path}: attribute n = {int(n_attr)} disagrees with the "
                              f"{rve.n} particles in its arrays")
+        if phi_attr is not None and not math.isclose(float(phi_attr), rve.phi, rel_tol=1e-6):
+            raise InputError(f"RVE file {path}: attribute phi = {float(phi_attr):g} disagrees "
+                             f"with the volume fraction {rve.phi:.6g} of its particles and box "
+                             f"(the file was edited or damaged)")
         pair = _first_overlap(rve)
         if pair is not None:
             i, j, depth = pair

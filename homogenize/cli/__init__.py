@@ -20,6 +20,7 @@ import argparse
 import os
 import sys
 
+from micro._io import protected_inputs
 from micro._validate import EXIT_CONVERGENCE, EXIT_INPUT, ConvergenceError, InputError
 
 from homogenize.cli import bench, cell, experiments, macro, relax, rve, specimen, tables
@@ -54,8 +55,9 @@ def _check_paths(args) -> None:
     inputs = [getattr(args, d, None) for d in getattr(args, "inputs", ())]
     check_outputs([(_flag(d), getattr(args, d, None)) for d in getattr(args, "outputs", ())],
                   inputs)
+    writes = getattr(args, "output_dir_writes", {})
     for d in getattr(args, "output_dirs", ()):
-        check_output_dir(_flag(d), getattr(args, d, None))
+        check_output_dir(_flag(d), getattr(args, d, None), inputs, writes.get(d))
 
 
 def main(argv=None) -> int:
@@ -66,7 +68,9 @@ def main(argv=None) -> int:
         return int(exc.code or 0)
     try:
         _check_paths(args)
-        return int(args.func(args) or 0)
+        # no write of this run may replace one of its inputs (atomic_path refuses)
+        with protected_inputs(getattr(args, d, None) for d in getattr(args, "inputs", ())):
+            return int(args.func(args) or 0)
     except InputError as exc:
         print(f"mapsim {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_INPUT

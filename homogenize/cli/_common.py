@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import os
 import re
 import stat
@@ -192,14 +193,42 @@ def check_input_file(opt: str, path, max_bytes: int = 64 * 2 ** 20) -> None:
     check_regular_file(path, f"{opt} {Path(path)}", max_bytes)
 
 
-def check_output_dir(opt: str, path) -> None:
-    """Refuse an output directory that exists as a non-directory or cannot be written."""
+def _inside(path: Path, directory: Path) -> Path | None:
+    """``path`` relative to ``directory`` if it lies inside it (after resolving links)."""
+    try:
+        return Path(os.path.realpath(path)).relative_to(os.path.realpath(directory))
+    except ValueError:
+        return None
+
+
+def check_output_dir(opt: str, path, inputs=(), writes=None) -> None:
+    """Refuse an output directory that exists as a non-directory or cannot be written, or that
+    would overwrite an input of the same run.
+
+    ``inputs``: paths the command reads; ``writes``: the names (glob patterns, relative to the
+    directory; a directory name covers everything under it) the command writes there. An
+    input that is one of them is refused; with ``writes`` None (not declared) every input
+    inside the directory is refused.
+    """
     if path is None:
         return
     p = Path(path)
     _check_name(opt, p)
     if _exists(p) and not p.is_dir():
         raise InputError(f"{opt} {p} exists and is not a directory")
+    for q in inputs:
+        if q is None or str(q) == "-" or not _exists(Path(q)):
+            continue
+        rel = _inside(Path(q), p)
+        if rel is None:
+            continue
+        hit = writes is None or any(
+            fnmatch.fnmatchcase(str(rel), pat) or fnmatch.fnmatchcase(rel.parts[0], pat)
+            for pat in writes)
+        if hit:
+            raise InputError(f"{q} is an input of this command and lies in the output "
+                             f"directory {opt} {p}, where this run writes {rel}; refusing to "
+                             f"overwrite it: give another {opt} or move the input")
     anc = p
     while not _exists(anc):
         anc = anc.parent

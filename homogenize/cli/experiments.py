@@ -4,10 +4,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from micro._io import manifest, write_json
+from micro._io import manifest, protect_inputs, write_json
 from micro._validate import InputError
 
-from homogenize.cli._common import check_input_file, check_outputs, int_in, one_line_errors
+from homogenize.cli._common import (check_input_file, check_output_dir, check_outputs, int_in,
+                                    one_line_errors)
 from homogenize.experiments.diagnose import diagnose
 from homogenize.experiments.io import load_experiment
 from homogenize.experiments.study import run_study, summarize, write_study
@@ -41,12 +42,20 @@ of the diagnosis model, 1-3 % noise) and report the confusion matrix, the false-
 the median gain (study.json, confusion.csv, confusion.png, manifest.json in --out)."""
 
 
+#: what ``--report DIR`` writes into DIR (an input there under one of these names is refused)
+_REPORT_FILES = ("report.md", "data.png", "residuals.png", "diagnosis.json", "manifest.json",
+                 ".*.tmp")
+
+
 def _diagnose(args) -> int:
     if args.discussion and not args.report:
         raise InputError("--discussion is appended to the report: give --report DIR too")
     check_input_file("--discussion", args.discussion, 4 * 2 ** 20)
     exp = load_experiment(args.experiment)
     check_outputs([("--json", args.json)], [exp.data_path, args.experiment])
+    # the data file named inside the experiment is an input too
+    check_output_dir("--report", args.report, [exp.data_path], _REPORT_FILES)
+    protect_inputs([exp.data_path])
     d = diagnose(exp, progress=not args.quiet)
     res = d.as_dict()
     if args.json:
@@ -137,6 +146,7 @@ def register(sub, formatter):
                    help="Markdown file appended to the report as its Discussion section")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_diagnose, outputs=("json",), output_dirs=("report",),
+                   output_dir_writes={"report": _REPORT_FILES},
                    inputs=("experiment", "discussion"))
 
     q = sub.add_parser("diagnose-study", formatter_class=formatter, description=_STUDY_DOC,

@@ -511,6 +511,17 @@ QUICK = {
 }
 
 
+def check_strip(width_m, thickness_m, params: SeedParameters | None = None) -> Strip:
+    """The Euler-Bernoulli strip of the seed's premise (4 mm at the Abaqus force) for the
+    assumed width and thickness: refuses (:class:`micro.InputError`) a strip that is not
+    slender, before anything is written (a thickness in metres for one in millimetres)."""
+    sp = SEED if params is None else params
+    w = check_positive("width_m", width_m, "m")
+    t = check_positive("thickness_m", thickness_m, "m")
+    L_eb = (sp.deflection_m * 2.0 * sp.E_Pa * t ** 2 / (3.0 * sp.abaqus_force_N_m3)) ** 0.25
+    return Strip(L_eb, w, t)
+
+
 def run_paper(width_m=5e-3, thickness_m=1e-3, *, quick=False, quiet=False,
               params: SeedParameters | None = None, ccx: str | None = None,
               workdir=None) -> dict:
@@ -1061,6 +1072,7 @@ def write_paper(out_dir, json_path=None, *, quick=False, quiet=False, width_m=5e
     Floats are rounded to :data:`micro._io.RESULT_DIGITS` significant digits; a figure whose
     rounded numbers did not change is not redrawn.
     """
+    check_strip(width_m, thickness_m)            # before anything is written
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     # CalculiX decks of the element study: a temporary directory inside ``out``, removed after
@@ -1098,6 +1110,7 @@ def write_calculix_peer(out_dir, *, quick=False, quiet=False, width_m=5e-3, thic
     if not el.ccx_available(ccx):
         raise InputError(f"CalculiX {ccx!r} is not installed (Debian: apt-get install "
                          f"calculix-ccx, or `make peers`)")
+    check_strip(width_m, thickness_m)            # before anything is written
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     res = run_paper(width_m, thickness_m, quick=quick, quiet=quiet, ccx=ccx, workdir=out)

@@ -54,6 +54,28 @@ def _isclose_text(g, v: str) -> bool:
         return False
 
 
+def check_quantity(quantity: str, component: str | None) -> str:
+    """The full name of ``quantity`` (a name or unique prefix of a table quantity), refusing
+    an unknown one or a ``component`` its shape does not have (x, y, z or norm for vectors,
+    xx..zz for tensors), before anything is computed."""
+    from homogenize._evaluate import QUANTITIES
+    hits = [q for q in QUANTITIES if q == quantity or q.startswith(f"{quantity}_")]
+    if quantity in QUANTITIES:
+        hits = [quantity]
+    if len(hits) != 1:
+        raise InputError(f"quantity {quantity!r} must be one of (or a unique prefix of) "
+                         f"{', '.join(QUANTITIES)}")
+    q = hits[0]
+    nd = len(QUANTITIES[q][1])
+    if component not in (None, "") and nd:
+        ok = (component == "norm" and nd == 1) or (
+            len(component) == nd and all(c in "xyz" for c in component))
+        if not ok:
+            allowed = "x, y, z, norm" if nd == 1 else "xx, xy, ..., zz"
+            raise InputError(f"component {component!r} of {q}: allowed {allowed}")
+    return q
+
+
 def rve_size_study(study, out_dir, *, evaluator=None, workers=None, scheduler=None,
                    processes=True, client=None, progress=True, quantity=None, component=None,
                    target=None, at: str | None = None) -> dict:
@@ -73,6 +95,7 @@ def rve_size_study(study, out_dir, *, evaluator=None, workers=None, scheduler=No
     quantity = quantity or spec.quantity
     component = spec.component if component is None else component
     target = spec.target_rel_precision if target is None else target
+    check_quantity(quantity, component)      # before any table is computed or written
     out_dir = Path(out_dir)
     tables = {}
     with contextlib.ExitStack() as stack:
