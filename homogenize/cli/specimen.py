@@ -11,7 +11,7 @@ import numpy as np
 from micro._io import atomic_path, manifest, write_json
 from micro._validate import ConvergenceError, InputError
 
-from homogenize.cli._common import config_of, float_in, int_in
+from homogenize.cli._common import check_input_file, config_of, float_in, int_in, parse_at
 from homogenize.experiments.tables import affine_kappa
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
@@ -39,7 +39,12 @@ give it with --kappa; it must come from relax tables (`mapsim relax`), this comm
 compute it.
 
 The law parameters (--chi, or --chi0 with --Ms-A-per-m) are those of the COMPOSITE (its M(H)
-measured or from `mapsim homogenize`), not of the particles. The body's elasticity: its shear
+measured or from `mapsim homogenize`), not of the particles. Or the law from the project's own
+RVEs: --law table (M_eff of a `mapsim batch` table at --phi against its B_T, the internal field
+of the metallic-boundary RVE; --table-bound low/high for the ends of its interval; never
+extrapolated: a field beyond the table is refused) or --law rve (self-consistent dipoles in 3
+random RVEs of 100 particles of --particle-material at --phi, tabulated up to 1.5 x the largest
+--B; about 10-30 s). The body's elasticity: its shear
 modulus, or Young's modulus with Poisson's ratio (default 0.499: nearly incompressible,
 K = 500 G; 0.5 itself is not accepted).
 
@@ -59,7 +64,7 @@ between the end-face means, diameter change and lateral strain, volume-mean axia
 staggered and Newton iterations; a manifest), --png (strains against B) and --vtu (the
 deformed mechanics mesh of the last step with displacement and mean stress, for ParaView)."""
 
-_LAWS = ("linear", "froehlich-kennelly", "langevin", "tanh")
+_LAWS = ("linear", "froehlich-kennelly", "langevin", "tanh", "table", "rve")
 
 # Ranges (exit 2 at parse time): wide enough for any real specimen and composite, narrow
 # enough that a typo (a 1e30 Pa modulus, a 1 km specimen) is caught before meshing.
@@ -93,7 +98,47 @@ def _steps(text: str) -> np.ndarray:
     return B
 
 
-def _law(args):
+def _law_from_data(args, B_max_T):
+    """--law table (a batch table's M_eff at --phi) or rve (dipole RVEs of --particle-material
+    at --phi): the composite's M(H_in) as a TableLaw, never extrapolated."""
+    if args.phi is None:
+        raise InputError(f"--law {args.law} needs --phi (the particle volume fraction)")
+    if args.law == "table":
+        if args.table is None:
+            raise InputError("--law table needs --table T.h5 (a batch table with M_eff along "
+                             "B_T)")
+        from homogenize.macro.effective import magnetization_table_law
+        from homogenize.tables import read_table
+        check_input_file("--table", args.table, 4 * 2 ** 30)
+        return magnetization_table_law(read_table(args.table), args.phi,
+                                       bound=args.table_bound, **parse_at(args.table_at))
+    from homogenize.experiments.specimen_account import TABLE_HEADROOM, composite_law
+    from micro.materials import particle_preset
+    pre = particle_preset(args.particle_material or "seed-paper")
+    sigma = pre.core_sigma_Am2_kg if pre.core_sigma_Am2_kg is not None \
+        else pre.powder_sigma_Am2_kg
+
+    class _Particles:              # what composite_law reads of a particle description
+        density_kg_m3 = pre.density_kg_m3
+        sigma_s_Am2_kg = sigma
+        radius_mean_m = pre.mean_radius_m
+    law, _, _ = composite_law(args.phi, _Particles, B_max_T=max(TABLE_HEADROOM * B_max_T, 0.1))
+    return law
+
+
+def _law(args, B_max_T=1.0):
+    if args.law != "table" and (args.table is not None or args.table_bound != "mean"
+                                or args.table_at is not None):
+        raise InputError(f"--table, --table-bound and --at belong to --law table, not --law "
+                         f"{args.law}")
+    if args.law != "rve" and args.particle_material is not None:
+        raise InputError(f"--particle-material belongs to --law rve, not --law {args.law}")
+    if args.law in ("table", "rve"):
+        extra = [k for k, v in (("--chi", args.chi), ("--chi0", args.chi0),
+                                ("--Ms-A-per-m", args.Ms_A_per_m)) if v is not None]
+        if extra:
+            raise InputError(f"--law {args.law} takes its law from data, not {', '.join(extra)}")
+        return _law_from_data(args, B_max_T)
     given = {"--chi": args.chi, "--chi0": args.chi0, "--Ms-A-per-m": args.Ms_A_per_m}
     need = ("--chi",) if args.law == "linear" else ("--chi0", "--Ms-A-per-m")
     missing = [k for k in need if given[k] is None]
@@ -121,9 +166,12 @@ def _solid(args):
 
 
 def _kappa(args):
-    if args.model != "affine" and (args.phi is not None or args.particle_Ms_A_per_m is not None):
-        raise InputError(f"--phi and --particle-Ms-A-per-m belong to --model affine, not "
+    if args.model != "affine" and args.particle_Ms_A_per_m is not None:
+        raise InputError(f"--particle-Ms-A-per-m belongs to --model affine, not "
                          f"--model {args.model}")
+    if args.model != "affine" and args.phi is not None and args.law not in ("table", "rve"):
+        raise InputError(f"--phi belongs to --model affine or --law table/rve, not --model "
+                         f"{args.model} with --law {args.law}")
     if args.model != "relaxed" and args.kappa is not None:
         raise InputError(f"--kappa belongs to --model relaxed, not --model {args.model}")
     if args.model == "affine":
@@ -180,9 +228,9 @@ def _cmd(args) -> int:
     # everything checked before any work
     B = _steps(args.B)
     spec = _specimen(args)
-    law = _law(args)
     solid = _solid(args)
     kappa = _kappa(args)
+    law = _law(args, float(B[-1]))
     t0 = time.perf_counter()
 
     def progress(i, n, b):
@@ -264,7 +312,21 @@ def register(sub, formatter) -> None:
                         "fine meshes)")
     g = p.add_argument_group("material (the composite)")
     g.add_argument("--law", required=True, choices=_LAWS,
-                   help="the composite's magnetization law M(H)")
+                   help="the composite's magnetization law M(H): a closed form with its "
+                        "parameters, 'table' (M_eff of a batch table against its B_T = mu0 "
+                        "H_in, at --phi; never extrapolated) or 'rve' (self-consistent dipoles "
+                        "in 3 random RVEs of 100 particles of --particle-material at --phi)")
+    g.add_argument("--table", default=None,
+                   help="batch table (HDF5) with M_eff_A_per_m along B_T (--law table)")
+    g.add_argument("--table-bound", dest="table_bound", choices=("mean", "low", "high"),
+                   default="mean", help="which end of the table's confidence interval of "
+                                        "M_eff (--law table; run low and high for the "
+                                        "interval of the strains)")
+    g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
+                   help="values of the table's other grid axes (--law table), e.g. "
+                        "arrangement=dispersed")
+    g.add_argument("--particle-material", dest="particle_material", default=None,
+                   help="particle preset of micro.materials (--law rve; default seed-paper)")
     g.add_argument("--chi", type=_CHI, default=None,
                    help="susceptibility [-] of --law linear (M = chi H)")
     g.add_argument("--chi0", type=_CHI0, default=None,
@@ -317,4 +379,4 @@ def register(sub, formatter) -> None:
     g.add_argument("--vtu", default=None, help="the deformed mechanics mesh of the last field "
                                                "step (VTU: displacement, mean stress)")
     g.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    p.set_defaults(func=_cmd, outputs=("json", "png", "vtu"))
+    p.set_defaults(func=_cmd, outputs=("json", "png", "vtu"), inputs=("table",))

@@ -24,7 +24,7 @@ from homogenize.tables import (Estimate, Table, body_force_from_table, interpola
 
 __all__ = ["TipDeflection", "tip_deflection_from_table", "EffectiveMaterial",
            "effective_material_from_table", "beam_with_interval",
-           "magnetization_from_table", "soft_sphere_magnetization"]
+           "magnetization_from_table", "magnetization_table_law", "soft_sphere_magnetization"]
 
 
 @dataclass(frozen=True)
@@ -169,15 +169,9 @@ def beam_with_interval(strip: Strip, material: EffectiveMaterial, models, *, ord
     return rows
 
 
-def magnetization_from_table(table, phi: float, *, bound: str = "mean", **other_axes):
-    """The composite's ``M_eff(H)`` [A/m] from a batch table at ``phi``, for the macro solvers.
-
-    The table's RVEs have a metallic boundary, so its ``B_T`` axis is ``mu0 H`` of the field
-    inside the specimen; ``M_eff`` (z component, along the field) is interpolated in the table
-    and linearly between its ``B_T`` values, with ``M(0) = 0``. Fields beyond the table's largest
-    ``B_T`` are refused (:class:`micro.InputError`), never extrapolated. ``bound``: "mean",
-    "low" or "high" (ends of the confidence interval of each grid value).
-    """
+def _table_M_nodes(table, phi, bound, other_axes):
+    """(B_T nodes, M_eff nodes [A/m]) of a batch table at ``phi`` (z component, the field's
+    direction), from the ``bound`` ("mean", "low", "high") of each grid value's estimate."""
     check_choice("bound", bound, ("mean", "low", "high"))
     if not isinstance(table, Table):
         table = read_table(table)
@@ -190,8 +184,34 @@ def magnetization_from_table(table, phi: float, *, bound: str = "mean", **other_
     attr = {"mean": "mean", "low": "ci_low", "high": "ci_high"}[bound]
     M = [getattr(interpolate(table, "M_eff_A_per_m", component="z", phi=phi, B_T=b, **others),
                  attr) for b in B]
-    return tabulated_magnetization(np.concatenate([[0.0], B / MU0]),
-                                   np.concatenate([[0.0], np.maximum(M, 0.0)]))
+    return B, np.maximum(np.asarray(M, float), 0.0)
+
+
+def magnetization_from_table(table, phi: float, *, bound: str = "mean", **other_axes):
+    """The composite's ``M_eff(H)`` [A/m] from a batch table at ``phi``, for the macro solvers.
+
+    The table's RVEs have a metallic boundary, so its ``B_T`` axis is ``mu0 H`` of the field
+    inside the specimen; ``M_eff`` (z component, along the field) is interpolated in the table
+    and linearly between its ``B_T`` values, with ``M(0) = 0``. Fields beyond the table's largest
+    ``B_T`` are refused (:class:`micro.InputError`), never extrapolated. ``bound``: "mean",
+    "low" or "high" (ends of the confidence interval of each grid value).
+    """
+    B, M = _table_M_nodes(table, phi, bound, other_axes)
+    return tabulated_magnetization(np.concatenate([[0.0], B / MU0]), np.concatenate([[0.0], M]))
+
+
+def magnetization_table_law(table, phi: float, *, bound: str = "mean", **other_axes):
+    """The same nodes as :func:`magnetization_from_table` as a
+    :class:`homogenize.macro.magnetostatics.TableLaw` (monotone cubic through ``(0, 0)`` and the
+    nodes, with the slope Newton needs) for the specimen solver; the node at ``B_T = 0`` is
+    dropped (the law passes through the origin). ``M_eff`` of a few random RVEs can dip between
+    neighbouring fields by its sampling noise; the law takes the running maximum (a magnetization
+    curve does not decrease), so such a dip is flattened, not refused."""
+    from homogenize.macro.magnetostatics import TableLaw
+    B, M = _table_M_nodes(table, phi, bound, other_axes)
+    keep = B > 0.0
+    return TableLaw(B[keep] / MU0, np.maximum.accumulate(M[keep]),
+                    source=f"M_eff of the batch table at phi = {phi:g} ({bound})")
 
 
 def soft_sphere_magnetization(phi: float, Ms_A_m: float = SEED.Ms_A_m):

@@ -344,3 +344,38 @@ def test_ctrl_c_on_the_command_then_rerun_resumes(scheduler, tmp_path):
     for task in study.tasks():
         assert np.array_equal(t.values["f_eff_N_m3"][task.grid_index, task.realization],
                               SyntheticEvaluator()(task)["f_eff_N_m3"])
+
+
+def test_specimen_with_the_table_law(table, tmp_path, capsys):
+    """mapsim specimen --law table: the composite's M(H_in) from a batch table's M_eff, the
+    same nodes as the beam's magnetization_from_table, never extrapolated."""
+    from homogenize.macro.effective import magnetization_from_table, magnetization_table_law
+    t = read_table(table)
+    law = magnetization_table_law(t, 0.035, arrangement="dispersed")
+    f = magnetization_from_table(t, 0.035, arrangement="dispersed")
+    H = np.asarray(law.H_nodes_A_per_m)
+    # identical nodes (both read the same interpolated table values): round-off only
+    assert np.allclose(law.M_A_per_m(H), f(H), rtol=1e-12, atol=0)
+    lo = magnetization_table_law(t, 0.035, bound="low", arrangement="dispersed")
+    hi = magnetization_table_law(t, 0.035, bound="high", arrangement="dispersed")
+    assert np.all(np.asarray(lo.M_nodes_A_per_m) <= np.asarray(hi.M_nodes_A_per_m))
+    out = tmp_path / "s.json"
+    rc = main(["specimen", "--shape", "sphere", "--radius-m", "1e-3", "--law", "table",
+               "--table", str(table), "--at", "arrangement=dispersed", "--phi", "0.035",
+               "--shear-modulus-Pa", "1e3",
+               "--B", "0.1,0.2", "--n-mesh", "3", "--n-boundary", "24", "--json", str(out),
+               "--quiet"])
+    assert rc == 0, capsys.readouterr().err
+    res = json.loads(out.read_text())
+    M = [s["M_mean_A_per_m"] for s in res["steps"]]
+    # a sphere's internal field is H0 - M/3 < H0: M below the table's M at the applied field
+    assert 0 < M[0] < M[1] <= law.M_A_per_m(np.array([0.2 / mu_0]))[0]
+    # beyond the table's field range: refused, not extrapolated (exit 2), nothing written
+    out2 = tmp_path / "t.json"
+    rc = main(["specimen", "--shape", "sphere", "--radius-m", "1e-3", "--law", "table",
+               "--table", str(table), "--at", "arrangement=dispersed", "--phi", "0.035",
+               "--shear-modulus-Pa", "1e3",
+               "--B", "0.5", "--n-mesh", "3", "--n-boundary", "24", "--json", str(out2),
+               "--quiet"])
+    assert rc == 2 and not out2.exists()
+    assert "table" in capsys.readouterr().err
