@@ -27,7 +27,7 @@ def test_one_material_on_both_sides_gives_that_material(cc, method, geometry):
     phi = (cc.sphere_fn(np.array([0.53, 0.47, 0.51]), 0.31) if geometry == "sphere"
            else cc.laminate_phi(n))
     C, phi_h, _, _ = cc.cell_problem(phi, n, method, cases=range(6), particle=cc.PDMS_EL)
-    exact = cc.asm.isotropic_voigt(*cc.PDMS_EL.lame_Pa)
+    exact = cc.isotropic_voigt(*cc.PDMS_EL.lame_Pa)
     assert np.abs(C - exact).max() < 1e-8 * exact.max()
     if geometry == "sphere":     # the faceted sphere lies inside the true one
         assert 0.9 < phi_h / (4.0 / 3.0 * np.pi * 0.31 ** 3) < 1.0
