@@ -10,9 +10,10 @@ from micro._validate import InputError, check_positive
 import numpy as np
 
 from micro.demag import prism_demag_factors
-from micro.materials import PDMS, SEED
+from micro.materials import PDMS, SEED, matrix_preset, particle_preset
 
-from homogenize.cli._common import (check_memory, config_of, float_in, int_in, parse_at,
+from homogenize.cli._common import (add_material_options, check_memory, config_of,
+                                    fill_from_preset, float_in, int_in, parse_at,
                                     write_snippet)
 from homogenize.cli.tables import (add_beam_table_options, add_export_table_options,
                                    beam_from_table, wrap_export)
@@ -116,10 +117,22 @@ def _magnet_law(args):
     if args.table:
         return (magnetization_from_table(read_table(args.table), phi,
                                          **parse_at(args.table_at)), phi, "table")
-    return soft_sphere_magnetization(phi), phi, "soft spheres (dilute)"
+    if args.particle_material == "seed-paper":
+        return soft_sphere_magnetization(phi), phi, "soft spheres (dilute)"
+    p = particle_preset(args.particle_material)
+    return (soft_sphere_magnetization(phi, Ms_A_m=p.Ms_A_m), phi,
+            f"soft spheres (dilute), {p.name} Ms {p.Ms_A_m:.4g} A/m")
+
+
+def _fill_matrix(args) -> None:
+    """--E-Pa, --nu, --density-kg-m3 not given: the --matrix-material's (the matrix alone:
+    the particles' stiffening and weight come with --table, or give the composite's numbers)."""
+    m = matrix_preset(args.matrix_material)
+    fill_from_preset(args, {"E_Pa": m.E_Pa, "nu": m.nu, "density_kg_m3": m.density_kg_m3})
 
 
 def _beam(args) -> int:
+    _fill_matrix(args)
     _check_beam_size(args)
     if getattr(args, "table", None) and args.magnet is None:
         return beam_from_table(args)       # uniform force + interval from a batch table
@@ -175,7 +188,23 @@ def _beam(args) -> int:
     return 0
 
 
+def _field_interval(table, phi, gradB, others, f_need, B_range, target):
+    """The applied field that gives ``f_need`` at both ends of the table's force interval
+    (the stronger force needs less field): ``(low, high)``, None for an end the table's B range
+    does not reach."""
+    from homogenize.macro.flow import _invert_field
+    ends = []
+    for end in ("ci_high", "ci_low"):
+        try:
+            ends.append(_invert_field(lambda B, end=end: getattr(body_force_from_table(
+                table, phi, float(B), gradB, **others), end), f_need, B_range, "T", target))
+        except InputError:
+            ends.append(None)
+    return tuple(ends)
+
+
 def _channel(args) -> int:
+    _fill_matrix(args)
     _check_channel_size(args)
     geo = ChannelGeometry(args.a_m, args.b_m, args.c_m, args.d_m, args.wall_m)
     mat = Material(args.E_Pa, args.nu, args.density_kg_m3)
@@ -184,16 +213,18 @@ def _channel(args) -> int:
         raise InputError("--target-gap-m needs --flow-rate-m3-s or --pressure-drop-Pa")
     if None not in operating:
         raise InputError("give either --flow-rate-m3-s or --pressure-drop-Pa, not both")
-    r = solve_channel(geo, mat, args.body_force_N_m3, order=args.order, nc=args.nc,
-                      gravity_m_s2=args.gravity_m_s2)
-    out = {"result": r.to_dict()}
-    print(json.dumps({k: v for k, v in r.to_dict().items()
-                      if not isinstance(v, (list, tuple))}, indent=1))
-    if r.closes:
-        print("note: the linear ceiling deflection exceeds the channel height b: the channel "
-              "closes (contact); the linear solution beyond contact is not physical",
-              file=sys.stderr)
-    if operating != (None, None):
+    out = {}
+    if operating == (None, None):        # the ceiling under the body force, no liquid
+        r = solve_channel(geo, mat, args.body_force_N_m3, order=args.order, nc=args.nc,
+                          gravity_m_s2=args.gravity_m_s2)
+        out["result"] = r.to_dict()
+        print(json.dumps({k: v for k, v in r.to_dict().items()
+                          if not isinstance(v, (list, tuple))}, indent=1))
+        if r.closes:
+            print("note: the linear ceiling deflection exceeds the channel height b: the "
+                  "channel closes (contact); the linear solution beyond contact is not "
+                  "physical", file=sys.stderr)
+    else:                                # what was asked: the flow (and the target gap)
         liquid = Liquid("given", args.viscosity_Pa_s, "--viscosity-Pa-s") \
             if args.viscosity_Pa_s is not None else BLOOD_PLASMA
         ceiling = CeilingModel.from_fem(geo, mat, nc=max(args.nc, 3), order=args.order)
@@ -216,11 +247,24 @@ def _channel(args) -> int:
             t = field_for_target_gap(ceiling, geo.d_m, args.target_gap_m, **op, **field)
             flow = t.flow
             out["target_gap"] = t.to_dict()
+            interval = ""
+            if t.field is not None:
+                lo, hi = _field_interval(table, args.phi, args.gradB_T_per_m, others,
+                                         t.body_force_N_m3, field["field_range"],
+                                         args.target_gap_m)
+                conf = body_force_from_table(table, args.phi, t.field, args.gradB_T_per_m,
+                                             **others).confidence
+                out["target_gap"]["field_interval_T"] = [lo, hi]
+                out["target_gap"]["field_interval_confidence"] = conf
+                interval = (f" ({100 * conf:g} % interval ["
+                            + ", ".join("beyond the table's B range" if v is None
+                                        else f"{v:.4g}" for v in (lo, hi))
+                            + "] T, from the table's force interval)")
             print(f"target smallest gap {args.target_gap_m:.4g} m: body force "
                   f"{t.body_force_N_m3:.4g} N/m^3"
                   + ("" if t.field is None else
-                     f" = B {t.field:.4g} T inside the polymer (the block's own demagnetization is not "
-                     f"included) at phi {args.phi:g}, dB/dz "
+                     f" = B {t.field:.4g} T{interval} inside the polymer (the block's own "
+                     f"demagnetization is not included) at phi {args.phi:g}, dB/dz "
                      f"{args.gradB_T_per_m:g} T/m (table {args.table})")
                   + f", reached at x = {t.x_target_m:.4g} m")
         else:
@@ -297,12 +341,15 @@ def _channel_geometry_options(g) -> None:
 
 
 def _material_options(p):
-    p.add_argument("--E-Pa", dest="E_Pa", type=_E, default=PDMS.E_Pa,
-                   help="Young's modulus of the composite [Pa]")
-    p.add_argument("--nu", type=_NU, default=PDMS.nu, help="Poisson ratio [-], in (-1, 0.5)")
-    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=_RHO,
-                   default=PDMS.density_kg_m3,
-                   help="mass density [kg/m^3] (self-weight, with --gravity-m-s2)")
+    p.add_argument("--E-Pa", dest="E_Pa", type=_E, default=None,
+                   help="Young's modulus of the composite [Pa] (default: the "
+                        f"--matrix-material's, seed-paper {PDMS.E_Pa:g})")
+    p.add_argument("--nu", type=_NU, default=None,
+                   help="Poisson ratio [-], in (-1, 0.5) (default: the --matrix-material's, "
+                        f"seed-paper {PDMS.nu:g})")
+    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=_RHO, default=None,
+                   help="mass density [kg/m^3] (self-weight, with --gravity-m-s2) (default: the "
+                        f"--matrix-material's, seed-paper {PDMS.density_kg_m3:g})")
     p.add_argument("--gravity-m-s2", dest="gravity_m_s2", type=_G, default=0.0,
                    help="gravity along the body force [m/s^2]; 0 = no self-weight")
 
@@ -454,6 +501,10 @@ def register(sub, formatter) -> None:
                         "19.4 x 5 x 1 mm)")
     g.add_argument("--stations", type=int_in("--stations", 3, 2001), default=101,
                    help="stations along the strip where the field is sampled")
+    add_material_options(p, what="--matrix-material fills --E-Pa, --nu, --density-kg-m3 (the "
+                                 "matrix's: with --table the force and, with --E-from-table, E "
+                                 "come from the table); --particle-material sets the saturation "
+                                 "of the soft spheres of --magnet without --table.")
     p.set_defaults(func=_beam, outputs=("json",), inputs=("table",))
 
     p = sub.add_parser(
@@ -503,4 +554,6 @@ def register(sub, formatter) -> None:
     g.add_argument("--at", dest="table_at", default=None, metavar="AXIS=VALUE,...",
                    help="values of other grid axes of --table (default: none)")
     p.add_argument("--json", default=None, help="write the result to this JSON file")
+    add_material_options(p, particle=False,
+                         what="--matrix-material fills --E-Pa, --nu, --density-kg-m3.")
     p.set_defaults(func=_channel, outputs=("json", "png"), inputs=("table",))

@@ -72,24 +72,31 @@ def _cmd_batch(args) -> int:
         print(f"mapsim batch: {exc}", file=sys.stderr)
         return 1
     print(f"wrote {out} ({study.n_points} grid points x {study.realizations} realizations)")
-    _print_force_summary(out)
+    _print_summary(out)
     return 0
 
 
-def _print_force_summary(path, max_rows: int = 40) -> None:
-    """f_eff (z) per grid point with its interval: a first look at the table."""
+def _print_summary(path, max_rows: int = 40) -> None:
+    """Every quantity of the table per grid point, its mean and interval (vectors: the z
+    component, tensors: zz; all components through xarray or ``mapsim compare``)."""
     t = read_table(path)
-    if "f_eff_N_m3" not in t.values or len(t.points) > max_rows:
+    if len(t.points) > max_rows:
+        print(f"{len(t.points)} grid points: more than {max_rows}, no summary here (open the "
+              f"table with xarray; `mapsim compare` for two points)")
         return
-    vals = t.component_values("f_eff_N_m3", "z")
     varying = [a for a, v in t.axes.items() if len(v) > 1]
     lvl = f"{100 * t.confidence:g} %"
-    print(f"{'point':>5}  {'  '.join(f'{a:>14}' for a in varying)}  {'f_eff_z [N/m^3]':>15}  "
-          f"{lvl} interval")
-    for i, point in enumerate(t.points):
-        s = summarize(vals[i], t.confidence)
-        cols = "  ".join(f"{point[a]!s:>14}" for a in varying)
-        print(f"{i:>5}  {cols}  {s['mean']:15.6g}  [{s['ci_low']:.6g}, {s['ci_high']:.6g}]")
+    for q in t.values:
+        comp = {1: "_z", 2: "_zz"}.get(t.values[q].ndim - 2, "")
+        vals = t.component_values(q)
+        head = f"{q}{comp} [{t.units.get(q, '1')}]"
+        w = max(15, len(head))
+        print(f"{'point':>5}  {'  '.join(f'{a:>14}' for a in varying)}  {head:>{w}}  "
+              f"{lvl} interval")
+        for i, point in enumerate(t.points):
+            s = summarize(vals[i], t.confidence)
+            cols = "  ".join(f"{point[a]!s:>14}" for a in varying)
+            print(f"{i:>5}  {cols}  {s['mean']:{w}.6g}  [{s['ci_low']:.6g}, {s['ci_high']:.6g}]")
 
 
 def _cmd_rve_size(args) -> int:

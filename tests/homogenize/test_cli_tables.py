@@ -379,3 +379,32 @@ def test_specimen_with_the_table_law(table, tmp_path, capsys):
                "--quiet"])
     assert rc == 2 and not out2.exists()
     assert "table" in capsys.readouterr().err
+
+
+def test_batch_summary_prints_every_quantity_with_its_interval(tmp_path, capsys):
+    """The batch summary: mean and interval of every quantity, E_eff too (issue 36; it
+    printed f_eff_z only). Parts made in-process: the batch finds them all and needs no Dask."""
+    from homogenize._evaluate import get_evaluator
+    from homogenize._study import parse_study
+    from homogenize.tables import _part_path, _write_part
+    text = STUDY.split("[rve_size]")[0].replace('evaluator = "synthetic"',
+                                                'evaluator = "synthetic"\nfem = true')
+    (tmp_path / "s.toml").write_text(text)
+    out = tmp_path / "t.h5"
+    study = parse_study(text, str(tmp_path / "s.toml"))
+    ev = get_evaluator("synthetic")
+    for t in study.tasks():
+        k = t.key(ev.id)
+        _write_part(_part_path(parts_dir_for(out), t, k), t, k, ev(t))
+    capsys.readouterr()
+    assert main(["batch", str(tmp_path / "s.toml"), "--out", str(out), "--no-progress"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    tab = read_table(out)
+    for q in tab.values:
+        head = [ln for ln in lines if f" {q}" in ln and "95 % interval" in ln]
+        assert len(head) == 1, q
+        i = lines.index(head[0])
+        rows = lines[i + 1:i + 1 + len(tab.points)]
+        assert all(r.rstrip().endswith("]") and "[" in r for r in rows), q
+    assert any("E_eff_Pa [Pa]" in ln for ln in lines)
+    assert any("f_eff_N_m3_z [N/m^3]" in ln for ln in lines)

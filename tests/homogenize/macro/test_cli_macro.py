@@ -78,3 +78,82 @@ def test_channel_flow_and_target_gap(tmp_path, capsys):
     # bad input: both operating points, a target without flow
     assert main(["channel", "--flow-rate-m3-s", str(q), "--pressure-drop-Pa", "10"]) == 2
     assert main(["channel", "--target-gap-m", "30e-6"]) == 2
+
+
+# --------------------------------------------------------------------------- issue 36
+_SYNTH = """
+[study]
+name = "syn"
+seed = 7
+realizations = 4
+n_particles = 20
+evaluator = "synthetic"
+[grid]
+phi = [0.02, 0.05]
+B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
+gradB_T_per_m = 1.78
+"""
+
+
+def _synthetic_table(path):
+    """A finished table of the synthetic evaluator, made in-process (no Dask)."""
+    from homogenize._evaluate import get_evaluator
+    from homogenize._study import parse_study
+    from homogenize.tables import _part_path, _write_part, parts_dir_for, run_batch
+    study = parse_study(_SYNTH, str(path.with_suffix(".toml")))
+    ev = get_evaluator("synthetic")
+    parts = parts_dir_for(path)
+    for t in study.tasks():
+        k = t.key(ev.id)
+        _write_part(_part_path(parts, t, k), t, k, ev(t))
+    run_batch(study, path, progress=False)
+    return path
+
+
+def test_channel_prints_what_was_asked_with_the_field_interval(tmp_path, capsys):
+    table = _synthetic_table(tmp_path / "t.h5")
+    out = tmp_path / "ch.json"
+    assert main(["channel", "--flow-rate-m3-s", "1.6667e-10", "--target-gap-m", "30e-6",
+                 "--table", str(table), "--phi", "0.05", "--gradB", "30", "--nc", "1",
+                 "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    # no JSON block of the dry ceiling at the default 40 kN/m^3 (a case not asked for)
+    assert "f_N_m3" not in text and "pressure_Pa" not in text and "{" not in text
+    assert text.startswith("target smallest gap 3e-05 m") and "% interval [" in text
+    d = json.loads(out.read_text())
+    lo, hi = d["target_gap"]["field_interval_T"]
+    assert lo < d["target_gap"]["field"] < hi and "result" not in d
+    assert d["manifest"]["config"]["inputs"] == {"table": str(table)}
+    # without a table: the manifest lists no input (it listed ["table"])
+    assert main(["channel", "--a-m", "2e-3", "--nc", "1", "--d-m", "4e-3", "--json",
+                 str(out)]) == 0
+    assert '"max_deflection_m"' in capsys.readouterr().out        # the asked dry case
+    cfg = json.loads(out.read_text())["manifest"]["config"]
+    assert cfg["inputs"] == {} and cfg["outputs"] == {"json": str(out)}
+    assert (cfg["E_Pa"], cfg["nu"], cfg["density_kg_m3"]) == (2e6, 0.45, 1210.0)
+
+
+def test_matrix_material_in_beam_and_channel(tmp_path, capsys):
+    def tip(*extra):
+        out = tmp_path / "b.json"
+        assert main(["beam", "--model", "eb", "--json", str(out), *extra]) == 0
+        d = json.loads(out.read_text())
+        return d["results"][0]["tip_m"], d["material"]
+    t0, m0 = tip()
+    t1, m1 = tip("--matrix-material", "seed-paper", "--E-Pa", "2e6", "--nu", "0.45")
+    assert t0 == t1 and m0 == m1 == {"E_Pa": 2e6, "nu": 0.45, "density_kg_m3": 1210.0}
+    t2, m2 = tip("--matrix-material", "sylgard184-20to1")
+    assert m2 == {"E_Pa": 1e6, "nu": 0.49, "density_kg_m3": 1030.0}
+    assert t2 == pytest.approx(2 * t0)                     # Euler-Bernoulli: 1 / E
+    t3, m3 = tip("--matrix-material", "sylgard184-20to1", "--E-Pa", "4e6")
+    assert m3["E_Pa"] == 4e6 and m3["density_kg_m3"] == 1030.0
+    assert main(["channel", "--matrix-material", "ecoflex", "--nc", "1"]) == 2
+    assert "--matrix-material" in capsys.readouterr().err
+
+
+def test_beam_magnet_below_the_strip_negative_scientific_notation(capsys):
+    assert main(["beam", "--model", "eb", "--magnet", "cuboid", "--magnet-size", "1e-2", "1e-2",
+                 "1e-2", "--remanence-T", "1.3", "--magnet-position", "20e-3", "2.5e-3",
+                 "-15.5e-3", "--particle-material", "carbonyl-iron"]) == 0
+    text = capsys.readouterr().out
+    assert "(0.02, 0.0025, -0.0155)" in text and "carbonyl-iron" in text
