@@ -9,10 +9,11 @@ import numpy as np
 from micro._io import atomic_path, manifest, write_json
 from micro._validate import InputError
 from micro.magnetization import DEFAULT_LAW, LAW_NAMES
-from micro.materials import PDMS, ElasticMaterial
+from micro.materials import PDMS, ElasticMaterial, matrix_preset
 from micro.rve import RVE
 
-from homogenize.cli._common import config_of, float_in, int_in
+from homogenize.cli._common import (add_material_options, config_of, fill_from_preset,
+                                    float_in, int_in)
 from homogenize.relax import relax
 
 _DOC = """\
@@ -85,6 +86,8 @@ def _mean_strain(text, boundary):
 def _cmd(args) -> int:
     steps = _steps(args.B)
     E = _mean_strain(args.mean_strain, args.boundary)
+    m = matrix_preset(args.matrix_material)
+    fill_from_preset(args, {"matrix_E": m.E_Pa, "matrix_nu": m.nu})
     matrix = ElasticMaterial(args.matrix_E, args.matrix_nu)
     rve = RVE.load(args.rve)
     res = relax(rve, steps, law=args.law, matrix=matrix, boundary=args.boundary,
@@ -146,11 +149,13 @@ def register(sub, formatter):
     p.add_argument("--law", default=DEFAULT_LAW, choices=LAW_NAMES,
                    help="magnetization law of one particle")
     p.add_argument("--matrix-E", dest="matrix_E",
-                   type=float_in("--matrix-E", 1e2, 1e10, "Pa"), default=PDMS.E_Pa,
-                   help="matrix Young's modulus [Pa]")
+                   type=float_in("--matrix-E", 1e2, 1e10, "Pa"), default=None,
+                   help="matrix Young's modulus [Pa] (default: the --matrix-material's, "
+                        f"seed-paper {PDMS.E_Pa:g})")
     p.add_argument("--matrix-nu", dest="matrix_nu",
                    type=float_in("--matrix-nu", -1.0, 0.5, "", lo_open=True, hi_open=True),
-                   default=PDMS.nu, help="matrix Poisson's ratio [-]")
+                   default=None, help="matrix Poisson's ratio [-] (default: the "
+                                      f"--matrix-material's, seed-paper {PDMS.nu:g})")
     p.add_argument("--boundary", choices=("free", "strain"), default="free",
                    help="zero mean stress (free magnetostriction) or the prescribed mean "
                         "strain --mean-strain (default zero: clamped)")
@@ -175,4 +180,7 @@ def register(sub, formatter):
     p.add_argument("--out", default=None, help="write the relaxed RVE (HDF5) here")
     p.add_argument("--png", default=None, help="plot of strain and displacement against B")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_material_options(p, particle=False,
+                         what="--matrix-material fills --matrix-E, --matrix-nu (the particles "
+                              "come with the RVE file).")
     p.set_defaults(func=_cmd, outputs=("json", "out", "png"), inputs=("rve",))

@@ -56,3 +56,18 @@ def test_relax_near_field_and_prescribed_strain(tmp_path, capsys):
     # zero field: the mean stress is the elastic one, C_eff : E, tension along x
     assert d["steps"][0]["mean_stress_Pa"][0][0] > 0
     assert "stress_zz" in capsys.readouterr().out
+
+
+def test_relax_matrix_material(tmp_path):
+    """--matrix-material fills --matrix-E / --matrix-nu not given (issue 36)."""
+    rve = generate_rve(0.05, 6, 5, distribution=Monodisperse(25e-9))
+    src = tmp_path / "r.h5"
+    rve.save(src)
+    for extra, want in (([], (2e6, 0.45)), (["--matrix-material", "ecoflex-00-30"],
+                                            (0.118e6, 0.49)),
+                        (["--matrix-material", "rtv615", "--matrix-nu", "0.4"], (1.96e6, 0.4))):
+        out = tmp_path / "o.json"
+        assert main(["relax", str(src), "--B", "0,0.2", "--voxels", "8", "--json", str(out),
+                     "--quiet", *extra]) == 0
+        cfg = json.loads(out.read_text())["manifest"]["config"]
+        assert (cfg["matrix_E"], cfg["matrix_nu"]) == want
