@@ -101,7 +101,7 @@ def open_regular(path, mode: str = "rb", **kwargs):
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
             kind = "a directory" if stat.S_ISDIR(st.st_mode) else "a device, pipe or socket"
-            raise NotRegularFile(f"{path} is not a regular file (it is {kind})")
+            raise NotRegularFile(f"not a regular file (it is {kind}): {path}")
         os.set_blocking(fd, True)
         return os.fdopen(fd, mode, **kwargs)
     except BaseException:

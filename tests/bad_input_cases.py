@@ -194,6 +194,8 @@ def build_fixtures(d: Path) -> Path:
         k = t.key(ev.id)
         _write_part(_part_path(parts, t, k), t, k, ev(t))
     run_batch(study, d / "table.h5", progress=False)
+    for hook in FIXTURE_HOOKS:              # more fixtures, defined with their cases below
+        hook(d)
     return d
 
 
@@ -636,6 +638,122 @@ for _t, _k, _v, _w in STUDY_KEYS:
 # every realization fails the same way in the workers
 STUDIES["s_run_jam.toml"] = RVE_STUDY.replace("phi = 0.02", "phi = 0.55").replace(
     "n_particles = 10", "n_particles = 40") + '[rve]\nplacement = "rsa"\nmax_attempts = 200\n'
+
+
+# --------------------------------------------------------------------------- issue 38
+# The holes found by trying things as a new user would: an output that is an input of the same
+# run (also inside an output directory), values read back (tables, RVE files) trusted, a FIFO
+# opened, geometry that contradicts a model's slender-body assumption, ambiguous inputs, and
+# a refusal that leaves a directory behind.
+FIXTURE_HOOKS: list = []
+
+_CHAIN_STUDY = STUDY.replace("B_T = 0.1", "B_T = [0.1, 0.2]")
+STUDIES.update({
+    "s_chain.toml": _CHAIN_STUDY,
+    "s_chain_relax.toml": _CHAIN_STUDY.replace('evaluator = "synthetic"', 'evaluator = "relax"'),
+    "s_chain_multi.toml": _CHAIN_STUDY.replace("[grid]", '[grid]\nlaw = ["linear", "regime"]'),
+    "s_rs_ok.toml": STUDY + "[rve_size]\nn_particles = [10, 20, 40]\nrealizations = 3\n",
+})
+EXPERIMENTS.update(_exp("e_empty", "specimen,phi,strain,stress_Pa\n"))
+EXPERIMENTS.update(_exp(
+    "e_long", "specimen,phi,length_m,width_m,thickness_m,B_T,gradB_T_per_m,deflection_m\n"
+    "A,0.02,0.02,0.005,0.001,0.1,1.78,0.001\nA,0.02,0.02,0.005,0.001,0.2,1.78,0.03\n",
+    kind="deflection"))
+EXPERIMENTS["e_fifo.toml"] = 'kind = "tensile"\ndata = "fifo"\n'
+EXPERIMENTS["e_inrep.toml"] = 'kind = "tensile"\ndata = "myrep/data.png"\n'
+EXPERIMENTS["h_both.csv"] = "radius_m,count,weight\n1e-6,3,0.5\n2e-6,4,0.5\n"
+EXPERIMENTS["h_dup.csv"] = "radius_m,count,radius_m\n1e-6,3,1e-6\n2e-6,4,2e-6\n"
+EXPERIMENTS["h_none.csv"] = "radius_m,amount\n1e-6,3\n2e-6,4\n"
+
+
+def _issue38_fixtures(d: Path) -> None:
+    """A report directory holding the user's notes and data, a chain directory holding the
+    study, tables and RVE files edited after they were written, a table whose side-car is a
+    directory and whose parts directory is a file."""
+    import numpy as np
+    (d / "myrep").mkdir()
+    (d / "myrep" / "report.md").write_text("my discussion, written by hand\n")
+    (d / "myrep" / "data.png").write_text(TENSILE_CSV)
+    (d / "chdir").mkdir()
+    (d / "chdir" / "summary.md").write_text(_CHAIN_STUDY)
+    for name, edit in (("t_conf", lambda h: h.attrs.__setitem__("confidence", 2.0)),
+                       ("t_nan", lambda h: h["f_eff_N_m3"].__setitem__(
+                           Ellipsis, np.where(np.arange(h["f_eff_N_m3"].size).reshape(
+                               h["f_eff_N_m3"].shape) == 4, np.nan, h["f_eff_N_m3"][()]))),
+                       ("t_n", lambda h: h["n"].__setitem__(
+                           Ellipsis, np.zeros(h["n"].shape, dtype=h["n"].dtype)))):
+        shutil.copy(d / "table.h5", d / f"{name}.h5")
+        with h5py.File(d / f"{name}.h5", "r+") as h:
+            edit(h)
+    for name, edit in (("r_msat", lambda f: f["m_sat_Am2"].__setitem__(0, -1.0)),
+                       ("r_phi", lambda f: f.attrs.__setitem__("phi", 0.5))):
+        shutil.copy(d / "rve.h5", d / f"{name}.h5")
+        with h5py.File(d / f"{name}.h5", "r+") as f:
+            edit(f)
+    shutil.copy(d / "table.h5", d / "tside.h5")
+    (d / "tside.manifest.json").mkdir()
+    shutil.copy(d / "table.h5", d / "tparts.h5")
+    (d / "tparts.parts").write_text("not a directory\n")
+
+
+FIXTURE_HOOKS.append(_issue38_fixtures)
+
+_TABLE_POINT = ("--phi", "0.01", "--B", "0.1", "--gradB", "1.78")
+CASES += [
+    # an output that is an input of the same run, through a directory option
+    C("diagnose", "exp.toml", "--report", "myrep", "--discussion", "myrep/report.md",
+      words=("myrep/report.md", "input", "--report")),
+    C("diagnose", "e_inrep.toml", "--report", "myrep", words=("data.png", "input", "--report")),
+    C("chain", "chdir/summary.md", "--out", "chdir", words=("summary.md", "input", "--out")),
+    # values read back, validated like typed ones
+    C("compare", "t_conf.h5", "0", "1", words=("t_conf.h5", "confidence", "(0, 1)")),
+    C("compare", "t_nan.h5", "0", "1", words=("t_nan.h5", "f_eff_N_m3", "non-finite")),
+    C("compare", "t_n.h5", "0", "1", words=("t_n.h5", "n must")),
+    C("beam", "--table", "t_conf.h5", *_TABLE_POINT, words=("confidence", "(0, 1)")),
+    C("export", "--to", "abaqus", "--table", "t_nan.h5", *_TABLE_POINT, "--out", "-",
+      words=("t_nan.h5", "non-finite")),
+    C("rve", "--load", "r_msat.h5", words=("r_msat.h5", "m_sat_Am2", ">= 0")),
+    C("rve", "--load", "r_phi.h5", words=("r_phi.h5", "phi", "disagrees")),
+    C("batch", "study.toml", "--out", "tside.h5", words=("tside.manifest.json", "regular file")),
+    C("batch", "study.toml", "--out", "tparts.h5", words=("tparts.parts", "directory")),
+    # no blocking open of anything that is not a regular file
+    C("rve", "--load", "fifo", words=("fifo", "regular file")),
+    C("homogenize", "fifo", "--json", "h.json", words=("fifo", "regular file")),
+    C("relax", "fifo", "--json", "o.json", words=("fifo", "regular file")),
+    C("compare", "fifo", "0", "1", words=("fifo", "regular file")),
+    C("beam", "--table", "fifo", *_TABLE_POINT, words=("fifo", "regular file")),
+    C("batch", "fifo", "--out", "t.h5", words=("fifo", "regular file")),
+    C("chain", "fifo", "--out", "ch", words=("fifo", "regular file")),
+    C("rve", "--n", "20", "--histogram", "fifo", words=("--histogram", "regular file")),
+    C("diagnose", "e_fifo.toml", words=("fifo", "regular file")),
+    C("diagnose", "exp.toml", "--report", "rr", "--discussion", "fifo",
+      words=("--discussion", "regular file")),
+    # geometry against the slender-body assumptions, both dimensions named
+    C("beam", "--thickness-m", "1", "--model", "eb", words=("thickness_m = 1 m", "length_m")),
+    C("beam", "--length-m", "3e-3", "--model", "eb", words=("thickness_m", "length_m = 0.003")),
+    C("channel", "--c-m", "0.5", words=("c_m", "0.5 m", "a_m", "0.005")),
+    C("channel", "--d-m", "1e-300", words=("d_m", "b_m")),
+    C("channel", "--b-m", "0.01", words=("b_m", "0.01 m", "d_m")),
+    C(*_EXPORT, "--deck", "cantilever", "--thickness-m", "0.5", "--out", "d.inp",
+      words=("thickness_m", "length_m")),
+    C(*_EXPORT, "--deck", "channel", "--c-m", "0.5", "--out", "d.inp", words=("c_m", "a_m")),
+    C("paper", "--thickness-m", "1", "--quick", "--out", "pp", words=("thickness_m", "length_m")),
+    C("chain", "s_chain.toml", "--thickness", "1", "--out", "ch",
+      words=("thickness_m", "length_m")),
+    # ambiguous inputs: refused with the choice to make
+    C("rve", "--n", "20", "--histogram", "h_both.csv", words=("count", "weight", "ambiguous")),
+    C("rve", "--n", "20", "--histogram", "h_dup.csv", words=("radius_m", "duplicate")),
+    C("rve", "--n", "20", "--histogram", "h_none.csv", words=("count", "weight")),
+    # implausible measurements
+    C("diagnose", "e_empty.toml", words=("e_empty.csv", "no data rows")),
+    C("diagnose", "e_long.toml", words=("row 3", "deflection_m", "length")),
+    # nothing created before the input is validated (no --out directory left behind)
+    C("chain", "study.toml", "--out", "ch", words=("B_T", "two values")),
+    C("chain", "s_chain_relax.toml", "--out", "ch", words=("relax", "gradB_T_per_m")),
+    C("chain", "s_chain_multi.toml", "--out", "ch", words=("law", "several")),
+    C("rve-size", "s_rs_ok.toml", "--out", "rs", "--quantity", "zzz", words=("zzz",)),
+    C("rve-size", "s_rs_ok.toml", "--out", "rs", "--component", "q", words=("component", "'q'")),
+]
 
 
 # --------------------------------------------------------------------------- running a case

@@ -197,3 +197,36 @@ def test_rve_sidecar_manifest_follows_the_file(tmp_path, capsys):
     assert "does not describe" in check_sidecar_manifest(out)
     assert main(["rve", "--load", str(out)]) == 0
     assert "does not describe" in capsys.readouterr().err
+
+
+def test_untrusted_parts_are_quarantined_and_recomputed(study, client1, tmp_path, capsys):
+    """Issue 38: a part whose values are NaN (or of the wrong seed) is never trusted on resume,
+    and a FIFO among the parts is moved aside without being opened (it would block forever);
+    the table equals the uninterrupted one."""
+    ref = tmp_path / "ref.h5"
+    run_batch(study, ref, client=client1, progress=False)
+    out = tmp_path / "t.h5"
+    parts = parts_dir_for(out)
+    parts.mkdir()
+    for p in parts_dir_for(ref).iterdir():
+        (parts / p.name).write_bytes(p.read_bytes())
+    names = sorted(p.name for p in parts.glob("*.npz"))
+    with np.load(parts / names[0]) as z:
+        arrays = {k: z[k] for k in z.files}
+    nan = {k: (np.full_like(v, np.nan) if k.startswith("q_") else v) for k, v in arrays.items()}
+    with open(parts / names[0], "wb") as fh:
+        np.savez(fh, **nan)                                              # NaN values
+    with np.load(parts / names[1]) as z:
+        arrays = {k: z[k] for k in z.files}
+    with open(parts / names[1], "wb") as fh:
+        np.savez(fh, **{**arrays, "seed": np.int64(int(arrays["seed"]) + 1)})  # wrong seed
+    (parts / names[2]).unlink()
+    os.mkfifo(parts / names[2])                                          # a FIFO
+    run_batch(study, out, client=client1, progress=False)
+    assert sorted(p.name for p in (parts / "quarantine").iterdir()) == sorted(names[:3])
+    err = capsys.readouterr().err
+    assert "not finite" in err and "seed" in err and "not a regular file" in err
+    (va, na), (vb, nb) = _values(ref), _values(out)
+    assert np.array_equal(na, nb)
+    for k in va:
+        assert np.array_equal(va[k], vb[k]), k
