@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import errno
 import fcntl
 import json
 import math
@@ -89,7 +90,8 @@ from micro._io import open_hdf5
 import itertools
 
 __all__ = ["run_batch", "aggregate", "read_table", "Table", "Estimate", "BatchError",
-           "parts_dir_for", "interpolate", "body_force_from_table", "modulus_from_table",
+           "StorageError", "parts_dir_for", "interpolate", "body_force_from_table",
+           "modulus_from_table",
            "load_study"]
 
 FORMAT = "mapsim-table"
@@ -99,6 +101,31 @@ _COMPONENTS = ("x", "y", "z")
 
 class BatchError(RuntimeError):
     """Some realizations failed for good (after retries); the others are stored."""
+
+
+class StorageError(BatchError):
+    """A result or the table could not be written (disk full, quota, I/O error). Every part
+    stored before is kept, nothing half-written is left or trusted (atomic writes), and the
+    same command run again computes only what is missing (exit 1, like :class:`BatchError`)."""
+
+
+#: errno values for which the remedy is to make room
+_NO_ROOM = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+
+
+def _storage_error(path: Path, exc: OSError, n_stored: int, n_tasks: int,
+                   parts: Path) -> StorageError:
+    """One line: the file that could not be written, why, what is kept, what to do."""
+    why = os.strerror(exc.errno) if exc.errno else (str(exc).splitlines() or [""])[0]
+    missing = n_tasks - n_stored
+    kept = (f"all {n_tasks} realizations are stored in {parts}" if not missing else
+            f"{n_stored} of {n_tasks} realizations are stored in {parts}")
+    todo = ("computes nothing and writes the table" if not missing else
+            f"computes only the {missing} missing")
+    room = ("make room (or give --out on another file system) and "
+            if exc.errno in _NO_ROOM else "")
+    return StorageError(f"cannot write {path}: {why} (errno {exc.errno}); {kept}, nothing "
+                        f"half-written is kept; {room}run the same command again: it {todo}")
 
 
 def parts_dir_for(out) -> Path:
@@ -355,6 +382,13 @@ def _task_groups(todo, evaluator):
     return list(groups.values())
 
 
+#: a task whose worker process dies (SIGKILL, out of memory, a crash in compiled code) is
+#: rescheduled on another worker by the local scheduler up to this many times, then reported as
+#: failed (Dask's ``allowed-failures``; set here, not from the user's Dask configuration). An
+#: external scheduler (``--scheduler``) applies its own setting.
+ALLOWED_WORKER_DEATHS = 3
+
+
 @contextlib.contextmanager
 def _dask_client(scheduler: str | None, workers: int | None, processes: bool):
     from dask.distributed import Client, LocalCluster
@@ -365,11 +399,15 @@ def _dask_client(scheduler: str | None, workers: int | None, processes: bool):
             raise InputError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
                              f"({exc})") from None
         with client:
+            if not client.scheduler_info().get("workers"):     # say why nothing moves
+                print(f"mapsim: no Dask worker is connected to {scheduler} (yet); waiting for "
+                      f"one (start workers with: dask worker {scheduler})", file=sys.stderr)
             yield client
         return
     n = workers or min(2, os.cpu_count() or 1)
     kwargs = dict(n_workers=n, threads_per_worker=1, processes=processes,
-                  dashboard_address="127.0.0.1:0")
+                  dashboard_address="127.0.0.1:0",
+                  scheduler_kwargs={"allowed_failures": ALLOWED_WORKER_DEATHS})
     if processes:
         # loopback only; one numba/BLAS thread per worker process (no oversubscription)
         # workers log errors only: their warnings on cancelled tasks after Ctrl-C are noise
@@ -415,14 +453,17 @@ def run_batch(study, out, *, evaluator=None, workers: int | None = None,
         Use this client (and its cluster) instead of creating one.
     retries : int
         How often a realization whose task raised is resubmitted (a worker that dies is
-        replaced by its nanny and its tasks rescheduled by the scheduler).
+        replaced by its nanny and its tasks rescheduled by the scheduler, up to
+        :data:`ALLOWED_WORKER_DEATHS` times per task).
     clean : bool
         Remove the parts directory once the table is written.
 
     Returns
     -------
     Path of the table. Raises :class:`BatchError` if realizations failed for good (the table is
-    then not written; the finished realizations are kept for the next run).
+    then not written; the finished realizations are kept for the next run), and its subclass
+    :class:`StorageError` when a part or the table cannot be written (disk full: the message
+    names the file; every part stored before is kept, none is half-written).
     """
     if not isinstance(study, Study):
         study = load_study(study)
@@ -490,11 +531,16 @@ def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, c
                     if isinstance(res, _Failure):
                         failures.append((t, res))
                     elif exc is not None:
-                        failures.append((t, _Failure(type(exc).__name__,
-                                                     (str(exc).strip().splitlines() or [""])[0],
-                                                     False)))
+                        failures.append((t, _failure_of(exc)))
                     else:
-                        _write_part(_part_path(parts, t, k), t, k, res)
+                        path = _part_path(parts, t, k)
+                        try:           # atomic: on failure no part, and no temporary, is left
+                            _write_part(path, t, k, res)
+                        except OSError as e:       # disk full: stop, say where, keep the rest
+                            with contextlib.suppress(Exception):
+                                cl.cancel(futures)         # a shared cluster: free it
+                            raise _storage_error(path, e, n_done + stored, len(tasks),
+                                                 parts) from None
                         stored += 1
                         bar.update(1)
                 fut.release()
@@ -505,17 +551,45 @@ def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, c
     data = aggregate(study, parts, evaluator.id)
     man = _manifest(study.config(), study.seed, started_utc=started, finished_utc=_utcnow(),
                     evaluator=evaluator.id, table=str(out))
-    write_table(out, study, data, man, evaluator.id)
-    write_json(out.with_name(out.stem + ".manifest.json"), man)
+    side = out.with_name(out.stem + ".manifest.json")
+    target = out
+    try:                      # atomic writes: on failure the previous file (or none) stays
+        write_table(out, study, data, man, evaluator.id)
+        target = side
+        write_json(side, man)
+    except OSError as e:
+        raise _storage_error(target, e, len(tasks), len(tasks), parts) from None
     if clean:
         shutil.rmtree(parts, ignore_errors=True)
     return out
+
+
+#: the kind of failure of a task whose scheduler went away (it is not the task's fault)
+_LOST = "SchedulerLost"
+
+
+def _failure_of(exc: BaseException) -> _Failure:
+    """What the user is told about a task that raised on the cluster (after Dask's retries)."""
+    name = type(exc).__name__
+    if name == "KilledWorker":    # Dask's allowed-failures: the task killed several workers
+        n = getattr(exc, "allowed_failures", 0) + 1
+        return _Failure(name, f"the worker process computing it died {n} times (killed for "
+                              f"memory, or a crash in compiled code); see the workers' logs",
+                        False)
+    if getattr(exc, "reason", None) == "scheduler-connection-lost":
+        return _Failure(_LOST, "the connection to the Dask scheduler was lost", False)
+    return _Failure(name, (str(exc).strip().splitlines() or [""])[0], False)
 
 
 def _raise_failures(failures, n_tasks: int, parts: Path):
     """One line when every failure is an input error (exit 2); else :class:`BatchError`
     listing the first ten (exit 1)."""
     t, f0 = failures[0]
+    if all(f.kind == _LOST for _, f in failures):     # the scheduler went away: one line
+        raise BatchError(f"lost the connection to the Dask scheduler (it stopped or restarted) "
+                         f"with {len(failures)} of {n_tasks} realizations not done; the others "
+                         f"are stored in {parts}; run the same command again (with the "
+                         f"scheduler and its workers up): it computes only the missing ones")
     if all(f.input_error for _, f in failures):      # the study asks for the impossible
         raise InputError(f"{len(failures)} of {n_tasks} realizations refused their input, first "
                          f"at grid point {t.grid_index} ({_fmt_point(t.point)}): {f0.message}")
@@ -593,6 +667,11 @@ TABLE_ROUNDOFF_RTOL = 1e-8
 
 
 def _write_table_file(tmp, study: Study, data: dict, man: dict, evaluator_id: str) -> None:
+    """Build the table in memory (HDF5's core driver, no backing store), then write its bytes
+    to ``tmp`` with one plain write: HDF5 never writes to the disk itself, so a full disk is one
+    ``OSError(ENOSPC)`` here and never a failure inside the HDF5 library (which, out of space,
+    floods stderr with ignored errors from its handles or crashes the process). The bytes are
+    those that HDF5 would write to a file."""
     grid_shape = tuple(study.grid_shape)
     axis_names = study.axis_names
     dimsizes = [(a, len(v)) for a, v in study.axes]
@@ -602,7 +681,7 @@ def _write_table_file(tmp, study: Study, data: dict, man: dict, evaluator_id: st
         arr = np.asarray(arr)
         return arr.reshape(grid_shape + arr.shape[1:])
 
-    with h5py.File(tmp, "w") as h:
+    with h5py.File(str(tmp), "w", driver="core", backing_store=False) as h:
         h.attrs["Conventions"] = CONVENTIONS
         h.attrs["title"] = f"mapsim effective-parameter table of study {study.name}"
         h.attrs["source"] = f"mapsim batch run, evaluator {evaluator_id}"
@@ -662,6 +741,10 @@ def _write_table_file(tmp, study: Study, data: dict, man: dict, evaluator_id: st
                 desc + f" (lower end of the {lvl} Student-t interval of the mean)")
             put(f"{q}_ci_high", grid(s["ci_high"]), gdims + comp, unit,
                 desc + f" (upper end of the {lvl} Student-t interval of the mean)")
+        h.flush()
+        image = h.id.get_file_image()
+    with open(tmp, "wb") as fh:
+        fh.write(image)
 
 
 # --------------------------------------------------------------------------- reading

@@ -7,7 +7,8 @@ configurations from the options, calls the library and prints. No physics lives 
 Exit codes (documented in the README):
 
 * 0 -- done;
-* 1 -- some batch realizations failed (the others are kept);
+* 1 -- some batch realizations failed, or a result could not be stored (disk full: the message
+  names the file); the others are kept and the same command run again computes the rest;
 * 2 -- unusable input (:class:`micro.InputError`: one line naming the parameter, file, row or
   column and the allowed range), also argparse's own usage errors;
 * 3 -- a numerical solve did not converge (:class:`micro.ConvergenceError`, with the last
@@ -37,8 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="mapsim", formatter_class=Formatter,
         description="Particle-resolved micromechanics of magnetic active polymers. "
                     "All quantities in SI units (m, Pa, T, A/m, N/m^3). Exit codes: 0 done, "
-                    "1 some batch realizations failed, 2 bad input, 3 a solve did not "
-                    "converge, 130 interrupted.")
+                    "1 some batch realizations failed or could not be stored (rerun to "
+                    "resume), 2 bad input, 3 a solve did not converge, 130 interrupted.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for group in _GROUPS:
         group.register(sub, Formatter)
