@@ -20,15 +20,18 @@ falling branch). Every input below comes from a source independent of that curve
   self-consistent dipoles (:func:`micro.dipoles.solve`, metallic boundary: the internal field),
   three realizations, tabulated as a :class:`homogenize.macro.magnetostatics.TableLaw`;
 * the microstructural stress coefficient kappa(phi, m) of the affine model: the project's dipole
-  virial times the cell FEM's share (:func:`homogenize.experiments.tables.affine_kappa`).
+  virial times the cell FEM's share (:func:`homogenize.experiments.tables.affine_kappa`);
+* the relaxed model's change of kappa: the coupled RVE (particles that move in the matrix of
+  modulus E0) from ``homogenize/experiments/data/relax_diguet2010_E0.h5``
+  (:func:`homogenize.experiments.specimen_account.relaxed_kappa`).
 
 Not used: the shear modulus 230 kPa (E = 0.69 MPa), susceptibility 2.5 and Ms = 0.40 MA/m that
 Stewart & Anand (J. Mech. Phys. Solids 194, 105934, 2025) FITTED to these data with a continuum
 model, and the ``kappa_extra`` that ``mapsim diagnose`` fits.
 
 The specimen solver (:mod:`homogenize.macro.specimen`) predicts the change of length for the
-continuum model (Kelvin loads only) and the affine model (plus the RVE's microstructural
-stress), on the cylinder (rim rounded with 0.1 R, the solver's default) and, for comparison, on
+continuum model (Kelvin loads only), the affine model (plus the RVE's microstructural
+stress) and the relaxed model (plus what the restructuring RVE adds), on the cylinder (rim rounded with 0.1 R, the solver's default) and, for comparison, on
 the spheroid of the same L/D (no edge). The cylinders of L/D = 0.33 and 1.46 of the same study
 are predicted too; their data are not public.
 """
@@ -45,7 +48,9 @@ from pathlib import Path
 import numpy as np
 from scipy.constants import mu_0 as MU0
 
-from homogenize.experiments.tables import (affine_kappa, filler_stiffness_ratio,
+from homogenize.experiments.specimen_account import relaxed_kappa
+from homogenize.experiments.tables import (Unavailable, affine_kappa, filler_stiffness_ratio,
+                                           restructuring_table,
                                            stiffness_table)
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
@@ -101,13 +106,13 @@ def composite_law(phi, seeds=(1, 2, 3), n=100):
     return law, H, M
 
 
-def run_case(shape, aspect, model, law, solid, kappa, B, n_mesh, n_boundary):
+def run_case(shape, aspect, model, law, solid, kappas, B, n_mesh, n_boundary):
     R = 5e-3
     spec = Specimen(shape, R, length_m=2 * R * aspect, n_mesh=n_mesh, n_boundary=n_boundary)
     t0 = time.perf_counter()
     try:
-        res = solve_specimen(spec, law, solid, B, model=model,
-                             kappa=kappa if model == "affine" else None, load_steps=3)
+        res = solve_specimen(spec, law, solid, B, model=model, kappa=kappas.get(model),
+                             load_steps=3)
         steps, failed = res.steps, None
     except ConvergenceError as exc:
         steps, failed = exc.steps_converged, str(exc)
@@ -153,7 +158,16 @@ def run(out_dir=HERE, quick=False):
     E = INPUTS["matrix_E_Pa"][0] * ratio
     solid = fs.NeoHookeanSolid.from_poisson(E / (2 * (1 + INPUTS["matrix_nu"][0])),
                                             INPUTS["matrix_nu"][0])
-    kappa = affine_kappa(phi, INPUTS["particle_mu0_Ms_T"][0] / MU0)
+    Ms_p = INPUTS["particle_mu0_Ms_T"][0] / MU0
+    kappas = {"continuum": None, "affine": affine_kappa(phi, Ms_p)}
+    try:      # the coupled RVE at the independent matrix modulus (relax_diguet2010_E0.toml)
+        relax = restructuring_table(phi, INPUTS["matrix_E_Pa"][0])
+        kappas["relaxed"] = relaxed_kappa(phi, Ms_p, relax)
+        relax_info = {"table": relax.provenance, "kappa_nodes_M_A_per_m":
+                      [float(v) for v in kappas["relaxed"].nodes[0]],
+                      "kappa_change_nodes": [float(v) for v in kappas["relaxed"].nodes[1]]}
+    except Unavailable as exc:
+        relax_info = {"available": False, "why": str(exc)}
     n_mesh, n_boundary = (4, 24) if quick else (8, 48)
     if quick:
         B = B[:2]
@@ -162,8 +176,8 @@ def run(out_dir=HERE, quick=False):
     if not quick:
         plan += [("cylinder", 0.33), ("cylinder", 1.46)]
     for shape, aspect in plan:
-        for model in ("continuum", "affine"):
-            c = run_case(shape, aspect, model, law, solid, kappa, B, n_mesh, n_boundary)
+        for model in [m for m in ("continuum", "affine", "relaxed") if m in kappas]:
+            c = run_case(shape, aspect, model, law, solid, kappas, B, n_mesh, n_boundary)
             c["vs_measured"] = _compare(c, B_up, eps_up) if aspect == 0.8 else None
             cases.append(c)
             print(f"{shape} L/D {aspect} {model}: {len(c['steps'])}/{len(B)} steps, "
@@ -182,6 +196,7 @@ def run(out_dir=HERE, quick=False):
                           "chi_initial": float(M_tab[:, 0].mean() / H_tab[0]),
                           "seconds": t_law},
         "measured": {br: {"B_T": b, "strain": e} for br, (b, e) in data.items()},
+        "relax": relax_info,
         "cases": cases, "quick": bool(quick)})
     out = Path(out_dir)
     write_json(out / "diguet.json", res)
@@ -198,7 +213,7 @@ def _plot(path, res):
         m = res["measured"][br]
         ax1.plot(m["B_T"], 100 * np.asarray(m["strain"]), mk, mfc="none",
                  label=f"measured ({'rising' if br == 'up' else 'falling'} field)")
-    colors = {"continuum": "tab:red", "affine": "tab:blue"}
+    colors = {"continuum": "tab:red", "affine": "tab:blue", "relaxed": "tab:green"}
     for c in res["cases"]:
         if c["aspect_ratio_L_over_D"] != 0.8 or not c["steps"]:
             continue
@@ -224,7 +239,7 @@ def _plot(path, res):
             continue
         B = [s["B_applied_T"] for s in c["steps"]]
         ax2.plot(B, [100 * s["strain_end_mean"] for s in c["steps"]],
-                 "-" if c["model"] == "affine" else "--",
+                 {"affine": "-", "continuum": "--", "relaxed": ":"}[c["model"]],
                  label=f"L/D = {c['aspect_ratio_L_over_D']:g}, {c['model']}")
     ax2.set_xlabel("applied field mu0 H0 [T]")
     ax2.set_ylabel("end faces' mean axial strain [%]")
