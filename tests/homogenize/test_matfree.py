@@ -372,12 +372,12 @@ def test_coupled_block_cg_cuts_iterations():
     and leaves the magnetic column's recursion alone (its single-column iterations); "coupled"
     puts the magnetic column in the block too (fewer for it as well on this RVE). The same C_eff
     and magnetic stress to the solver tolerance in every mode."""
-    from homogenize.bench.cell import _rve
+    from homogenize.bench.cell import bench_rve
     assert SolverOptions().block_cg == "strains"
     # the block CG alone: particle patches (the default since session 14) cut the iterations of
     # every mode to where the modes' differences are within one or two iterations
     opts = SolverOptions(patch_shell_voxels=None)
-    rve = _rve(64)
+    rve = bench_rve(64)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     out = {}
     for mode in ("independent", "strains", "coupled"):

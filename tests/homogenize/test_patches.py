@@ -168,8 +168,8 @@ def test_patches_cut_iterations_on_small_particles():
     to SolverOptions.patch_tol_factor x tol) the patches need fewer iterations in every column, the
     magnetic one most, and their C_eff and magnetic stress are no further from a tight reference
     than the default's (within 2x: the two stopping points differ by chance)."""
-    from homogenize.bench.cell import _rve
-    rve = _rve(64)
+    from homogenize.bench.cell import bench_rve
+    rve = bench_rve(64)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     ref = C.homogenize_rve(rve, 32, solver="matrix-free", forces_N=forces, tol=1e-11,
                            tol_magnetic=1e-10, options=SolverOptions(patch_shell_voxels=None))
