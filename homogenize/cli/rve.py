@@ -21,7 +21,8 @@ import numpy as np
 
 from micro._io import manifest, write_json
 from homogenize.cli._common import (add_material_options, check_input_file, check_memory,
-                                    fill_from_preset, float_in, int_in, one_line_errors)
+                                    config_of, fill_from_preset, float_in, int_in,
+                                    one_line_errors)
 from micro._validate import InputError, check_finite
 from micro.dipoles import METHODS, PME_ABOVE_N, SUMMATIONS, FieldConfig, magnetize
 from micro.magnetization import DEFAULT_LAW, LAW_NAMES, get_law
@@ -293,7 +294,7 @@ def _cmd(args) -> int:
     if "magnetics" in summary:
         print("magnetics            " + json.dumps(summary["magnetics"], default=str))
 
-    config = {k: v for k, v in vars(args).items() if k != "func"}
+    config = config_of(args)
     if args.out:
         man = manifest(config, rve.seed)
         rve.save(args.out, manifest=man)          # the copy inside the file is authoritative
