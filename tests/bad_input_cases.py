@@ -694,6 +694,7 @@ def _issue38_fixtures(d: Path) -> None:
     (d / "tside.manifest.json").mkdir()
     shutil.copy(d / "table.h5", d / "tparts.h5")
     (d / "tparts.parts").write_text("not a directory\n")
+    (d / "dk_mesh").write_text("not the mesh directory of dk.sif\n")
 
 
 FIXTURE_HOOKS.append(_issue38_fixtures)
@@ -753,7 +754,24 @@ CASES += [
     C("chain", "s_chain_multi.toml", "--out", "ch", words=("law", "several")),
     C("rve-size", "s_rs_ok.toml", "--out", "rs", "--quantity", "zzz", words=("zzz",)),
     C("rve-size", "s_rs_ok.toml", "--out", "rs", "--component", "q", words=("component", "'q'")),
+    # more members: a companion output (side-car, mesh directory) that is an input or a file
+    C("batch", "sc.manifest.json", "--out", "sc.h5", words=("sc.manifest.json", "input")),
+    C("export", "--to", "elmer", *_EXPORT[3:], "--deck", "cantilever", "--out", "dk.sif",
+      words=("dk_mesh", "not a directory")),
+    C("channel", "--wall-m", "1e-9", words=("wall_m", "b_m + c_m")),
+    # an option that means nothing without another one: refused, never silently ignored
+    C("export", "--to", "abaqus", "--table", "table.h5", *_TABLE_POINT, "--E-Pa", "2e6",
+      "--deck", "cantilever", "--out", "d.inp", words=("--deck", "--table")),
+    C("beam", "--model", "eb", "--E-from-table", words=("--E-from-table", "--table")),
+    C("beam", "--model", "eb", "--phi", "0.01", words=("--phi", "--table or --magnet")),
+    C("beam", "--model", "eb", "--remanence-T", "1.2", words=("--remanence-T", "--magnet")),
+    C("channel", "--phi", "0.01", words=("--phi", "--table")),
+    C("channel", "--table", "table.h5", words=("--table", "--target-gap-m")),
+    C("channel", "--png", "x.png", words=("--png", "--flow-rate-m3-s")),
+    C(*_EXPORT, "--thickness-m", "2e-3", "--out", "-", words=("--thickness-m", "--deck")),
+    C(*_EXPORT, "--phi", "0.01", "--out", "-", words=("--phi", "--table")),
 ]
+STUDIES["sc.manifest.json"] = STUDY
 
 
 # --------------------------------------------------------------------------- running a case

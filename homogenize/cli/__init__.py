@@ -25,7 +25,8 @@ from micro._io import protected_inputs
 from micro._validate import EXIT_CONVERGENCE, EXIT_INPUT, ConvergenceError, InputError
 
 from homogenize.cli import bench, cell, experiments, macro, relax, rve, specimen, tables
-from homogenize.cli._common import Formatter, Parser, check_output_dir, check_outputs
+from homogenize.cli._common import (Formatter, Parser, check_option_needs, check_output_dir,
+                                    check_outputs)
 
 __all__ = ["main", "build_parser"]
 
@@ -50,6 +51,16 @@ def _flag(dest: str) -> str:
     return "--" + dest.replace("_", "-")
 
 
+def _check_option_needs(parser, args) -> None:
+    """Options that mean nothing without another one are refused (``option_needs`` of each
+    command), never silently ignored."""
+    needs = getattr(args, "option_needs", None)
+    if not needs:
+        return
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    check_option_needs(args, sub.choices[args.command], needs)
+
+
 def _check_paths(args) -> None:
     """Outputs that are inputs, devices, directories or unwritable are refused before any work
     (each command declares its ``outputs``, ``output_dirs`` and ``inputs`` by option name)."""
@@ -68,6 +79,7 @@ def main(argv=None) -> int:
     except SystemExit as exc:          # usage errors (2) and --help (0): return, do not exit
         return int(exc.code or 0)
     try:
+        _check_option_needs(parser, args)
         _check_paths(args)
         # no write of this run may replace one of its inputs (atomic_path refuses)
         with protected_inputs(getattr(args, d, None) for d in getattr(args, "inputs", ())):

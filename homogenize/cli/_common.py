@@ -161,6 +161,15 @@ def check_outputs(outputs, inputs=()) -> None:
         if str(p) in seen:
             raise InputError(f"{opt} {p}: the same file is also given to {seen[str(p)]}")
         seen[str(p)] = opt
+        # the companions written beside an output (its side-car manifest, a table's parts
+        # directory) are outputs of the same run too
+        for comp in (p.with_name(p.stem + ".manifest.json"), p.with_name(p.stem + ".parts")):
+            for q in ins:
+                same = _inside(q, comp) is not None if _exists(comp) else False
+                if same:
+                    raise InputError(f"{q} is an input of this command, but {opt} {p} writes "
+                                     f"{comp} beside it; refusing to overwrite it: give "
+                                     f"another output name")
         if _exists(p):
             for q in ins:
                 try:
@@ -311,3 +320,26 @@ def fill_from_preset(args, values: dict) -> None:
     for dest, v in values.items():
         if getattr(args, dest, None) is None:
             setattr(args, dest, v)
+
+
+def check_option_needs(args, parser, needs: dict) -> None:
+    """Refuse an option given without the option(s) that give it a meaning: it would be
+    silently ignored (``mapsim beam --E-from-table`` without ``--table``). ``needs`` maps an
+    option's dest to the dests of which at least one must be given (not None/False/default);
+    an option counts as given when its value differs from the parser's default."""
+    def given(dest):
+        v = getattr(args, dest, None)
+        return v is not None and v is not False and v != parser.get_default(dest)
+    for dest, others in needs.items():
+        others = (others,) if isinstance(others, str) else tuple(others)
+        if given(dest) and not any(given(o) for o in others):
+            want = " or ".join("--" + o.replace("_", "-") for o in others)
+            raise InputError(f"{_opt_name(parser, dest)} has no effect without {want}; give "
+                             f"{want} too, or leave it out")
+
+
+def _opt_name(parser, dest: str) -> str:
+    for a in parser._actions:
+        if a.dest == dest and a.option_strings:
+            return max(a.option_strings, key=len)
+    return "--" + dest.replace("_", "-")

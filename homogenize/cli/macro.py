@@ -435,7 +435,12 @@ def register(sub, formatter) -> None:
                    help="cantilever thickness [m]")
     _channel_geometry_options(g)
     add_export_table_options(p)
-    p.set_defaults(func=wrap_export(_export), outputs=("out",), inputs=("table",))
+    p.set_defaults(func=wrap_export(_export), outputs=("out",), inputs=("table",),
+                   option_needs={**{d: "table" for d in ("phi", "B_T", "gradB_T_per_m",
+                                                         "table_at", "bound")},
+                                 **{d: "deck" for d in (
+                                     "element", "deck_nz", "length_m", "width_m",
+                                     "thickness_m", "a_m", "b_m", "c_m", "d_m", "wall_m")}})
 
     p = sub.add_parser(
         "beam", formatter_class=formatter, help="tip deflection of a clamped strip",
@@ -505,7 +510,14 @@ def register(sub, formatter) -> None:
                                  "matrix's: with --table the force and, with --E-from-table, E "
                                  "come from the table); --particle-material sets the saturation "
                                  "of the soft spheres of --magnet without --table.")
-    p.set_defaults(func=_beam, outputs=("json",), inputs=("table",))
+    p.set_defaults(func=_beam, outputs=("json",), inputs=("table",),
+                   option_needs={"E_from_table": "table", "table_at": "table",
+                                 "B_T": "table", "gradB_T_per_m": "table",
+                                 "phi": ("table", "magnet"),
+                                 **{d: "magnet" for d in (
+                                     "magnet_size", "magnet_position", "magnet_direction",
+                                     "magnet_axis", "remanence_T", "current_A", "turns",
+                                     "demag_factor", "stations")}})
 
     p = sub.add_parser(
         "channel", formatter_class=formatter, help="ceiling deflection of a microchannel",
@@ -556,4 +568,8 @@ def register(sub, formatter) -> None:
     p.add_argument("--json", default=None, help="write the result to this JSON file")
     add_material_options(p, particle=False,
                          what="--matrix-material fills --E-Pa, --nu, --density-kg-m3.")
-    p.set_defaults(func=_channel, outputs=("json", "png"), inputs=("table",))
+    p.set_defaults(func=_channel, outputs=("json", "png"), inputs=("table",),
+                   option_needs={"table": "target_gap_m", "phi": "table",
+                                 "gradB_T_per_m": "table", "table_at": "table",
+                                 **{d: ("flow_rate_m3_s", "pressure_drop_Pa") for d in (
+                                     "viscosity_Pa_s", "outlet_pressure_Pa", "png")}})

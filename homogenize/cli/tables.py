@@ -373,6 +373,9 @@ def export_from_table(args) -> int:
             raise InputError(f"{name} is required with --table")
     if args.body_force_N_m3 is not None:
         raise InputError("give either --table or --body-force-N-m3, not both")
+    if getattr(args, "deck", None) is not None:
+        raise InputError(f"--deck {args.deck} is not written from --table (only the material "
+                         f"snippet is); give either --table or --deck, not both")
     others = parse_at(args.table_at)
     mat = effective_material_from_table(read_table(args.table), args.phi, args.B_T,
                                         args.gradB_T_per_m, other_axes=others, E_Pa=args.E_Pa,

@@ -41,6 +41,8 @@ __all__ = ["ChannelGeometry", "ChannelResult", "solve_channel"]
 MIN_LENGTH_TO_HEIGHT = 4.0
 #: largest ceiling thickness / channel width c / a (the paper's sweep reaches 4)
 CEILING_MAX_PER_WIDTH = 10.0
+#: smallest side-wall width / (b + c) (the default wall is at least 2 (b + c))
+MIN_WALL_PER_HEIGHT = 0.1
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,10 @@ class ChannelGeometry:
         check_slender("channel", "a_m (width)", self.a_m, "c_m (ceiling thickness)", self.c_m,
                       1.0 / CEILING_MAX_PER_WIDTH,
                       assumption="a ceiling that bends over the channel")
+        if self.wall_m is not None:
+            check_slender("channel", "wall_m (side wall)", self.wall_m,
+                          "(b_m + c_m) (channel height and ceiling)", self.b_m + self.c_m,
+                          MIN_WALL_PER_HEIGHT, assumption="side walls that carry the ceiling")
 
     @property
     def wall(self) -> float:

@@ -49,6 +49,7 @@ dict of the numbers, so a round trip is checkable.
 """
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass
 
@@ -608,9 +609,13 @@ def write_deck(kind: str, solver: str, spec: ExportSpec, geometry, out_path, *,
     if solver == "elmer" and element != "C3D10":
         raise InputError(f"element {element!r}: Elmer decks use quadratic tetrahedra "
                          f"(element='C3D10', Elmer type 510)")
+    out = Path(out_path)
+    mesh_path = out.parent / (out.stem + "_mesh")
+    if solver == "elmer" and os.path.lexists(mesh_path) and not mesh_path.is_dir():
+        raise InputError(f"{mesh_path} exists and is not a directory; the Elmer deck {out} "
+                         f"writes its mesh there: move it away or give another --out")
     mesh = deck_mesh(kind, geometry, element=element, divisions=divisions, nz=nz,
                      aspect=aspect, nc=nc, channel_aspect=channel_aspect)
-    out = Path(out_path)
     if solver == "abaqus":
         with atomic_path(out) as tmp:
             tmp.write_text(_abaqus_deck(kind, spec, mesh))
