@@ -660,6 +660,8 @@ EXPERIMENTS.update(_exp(
     "A,0.02,0.02,0.005,0.001,0.1,1.78,0.001\nA,0.02,0.02,0.005,0.001,0.2,1.78,0.03\n",
     kind="deflection"))
 EXPERIMENTS["e_fifo.toml"] = 'kind = "tensile"\ndata = "fifo"\n'
+EXPERIMENTS.update(_exp("e_amb", "specimen,phi,strain,stress_Pa,stress_MPa\n"
+                                 "A,0.0,0.01,20000,0.02\nA,0.0,0.05,100000,0.1\n"))
 EXPERIMENTS["e_inrep.toml"] = 'kind = "tensile"\ndata = "myrep/data.png"\n'
 EXPERIMENTS["h_both.csv"] = "radius_m,count,weight\n1e-6,3,0.5\n2e-6,4,0.5\n"
 EXPERIMENTS["h_dup.csv"] = "radius_m,count,radius_m\n1e-6,3,1e-6\n2e-6,4,2e-6\n"
@@ -770,6 +772,7 @@ CASES += [
     C("channel", "--png", "x.png", words=("--png", "--flow-rate-m3-s")),
     C(*_EXPORT, "--thickness-m", "2e-3", "--out", "-", words=("--thickness-m", "--deck")),
     C(*_EXPORT, "--phi", "0.01", "--out", "-", words=("--phi", "--table")),
+    C("diagnose", "e_amb.toml", words=("stress_MPa", "stress_Pa", "ambiguous")),
 ]
 STUDIES["sc.manifest.json"] = STUDY
 
@@ -983,7 +986,16 @@ def report(outcomes: list, baseline: tuple | None = None) -> str:
         "- a deterministic error in an evaluator is evaluated once (not retried) and reported "
         "in one line; `--out` of another study's table is refused unless `--clean`;",
         "- the numba cache falls back to a private temporary directory only when neither the "
-        "source tree nor the user cache can be written.",
+        "source tree nor the user cache can be written;",
+        "- batch resume (issue 38): a part whose values are NaN, a part of another seed and a "
+        "FIFO among the parts are quarantined (the FIFO never opened) and recomputed; the table "
+        "equals the uninterrupted one;",
+        "- the shared roots (tests/test_input_roots.py): `check_slender` (beam: length >= 4 x "
+        "thickness; channel: d >= 4 b, c <= 10 a, wall >= 0.1 (b + c)), `check_header` (a "
+        "repeated column, count and weight both given), `open_regular` (never blocks on a FIFO), "
+        "inputs protected from the run's own atomic writes, `check_output_dir` (an input the "
+        "run would write inside an output directory), `check_part`, `check_table` (an edited "
+        "`confidence`, non-finite values).",
         "",
     ]
     return "\n".join(text)

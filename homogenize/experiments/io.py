@@ -358,6 +358,18 @@ def _read_csv(path: Path, kind: str):
         if h in seen:
             raise InputError(f"{path}, row {head_row}, column '{h}': duplicate column name")
         seen.add(h)
+    # a second column for a quantity the file already gives (stress_MPa beside stress_Pa,
+    # deflection_mm beside deflection_m): which one is meant is not said
+    known = [c for c in REQUIRED[kind] + OPTIONAL[kind] if c in seen]
+    for h in header:
+        if h in known:
+            continue
+        base = h.split("_")[0].lower()
+        twin = [c for c in known if c.split("_")[0].lower() == base]
+        if base and twin:
+            raise InputError(f"{path}, row {head_row}, column '{h}': a second column for "
+                             f"'{twin[0]}' (another unit?); which one to use is ambiguous: keep "
+                             f"only '{twin[0]}' (SI units)")
     for name in REQUIRED[kind]:
         if name not in seen:
             raise InputError(f"{path}, row {head_row}, column '{name}': required column missing "
