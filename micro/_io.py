@@ -165,6 +165,9 @@ def atomic_path(path):
     """
     path = Path(path)
     _refuse_protected(path)
+    if os.path.isdir(path):               # os.replace would fail after the work is done
+        raise InputError(f"{path} exists and is a directory; refusing to replace it with a "
+                         f"file: move it away or give another output name")
     path.parent.mkdir(parents=True, exist_ok=True)
     clean_stale_temps(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)

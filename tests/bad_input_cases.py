@@ -697,6 +697,7 @@ def _issue38_fixtures(d: Path) -> None:
     shutil.copy(d / "table.h5", d / "tparts.h5")
     (d / "tparts.parts").write_text("not a directory\n")
     (d / "dk_mesh").write_text("not the mesh directory of dk.sif\n")
+    (d / "sd.manifest.json").mkdir()                  # where a side-car would be written
 
 
 FIXTURE_HOOKS.append(_issue38_fixtures)
@@ -773,6 +774,8 @@ CASES += [
     C(*_EXPORT, "--thickness-m", "2e-3", "--out", "-", words=("--thickness-m", "--deck")),
     C(*_EXPORT, "--phi", "0.01", "--out", "-", words=("--phi", "--table")),
     C("diagnose", "e_amb.toml", words=("stress_MPa", "stress_Pa", "ambiguous")),
+    C("diagnose", "exp.toml", "--json", "sd.json", words=("sd.manifest.json", "regular file")),
+    C("rve", "--n", "20", "--out", "sd.h5", words=("sd.manifest.json", "regular file")),
 ]
 STUDIES["sc.manifest.json"] = STUDY
 

@@ -163,7 +163,11 @@ def check_outputs(outputs, inputs=()) -> None:
         seen[str(p)] = opt
         # the companions written beside an output (its side-car manifest, a table's parts
         # directory) are outputs of the same run too
-        for comp in (p.with_name(p.stem + ".manifest.json"), p.with_name(p.stem + ".parts")):
+        side = p.with_name(p.stem + ".manifest.json")
+        if _exists(side) and not os.path.isfile(side):
+            raise InputError(f"{opt} {p}: its side-car manifest {side} exists and is not a "
+                             f"regular file; move it away or give another output name")
+        for comp in (side, p.with_name(p.stem + ".parts")):
             for q in ins:
                 same = _inside(q, comp) is not None if _exists(comp) else False
                 if same:
