@@ -776,6 +776,13 @@ CASES += [
     C("diagnose", "e_amb.toml", words=("stress_MPa", "stress_Pa", "ambiguous")),
     C("diagnose", "exp.toml", "--json", "sd.json", words=("sd.manifest.json", "regular file")),
     C("rve", "--n", "20", "--out", "sd.h5", words=("sd.manifest.json", "regular file")),
+    C("rve", "--n", "20", "--radius", "1e-6", words=("--radius", "--distribution monodisperse")),
+    C("rve", "--n", "20", "--distribution", "monodisperse", "--radius", "1e-7", "--gsd", "2",
+      words=("--gsd", "--radius", "ambiguous")),
+    C("rve", "--n", "20", "--median-radius", "1e-8", "--mean-radius", "2e-8",
+      words=("--mean-radius", "--median-radius", "ambiguous")),
+    C("rve", "--n", "20", "--cluster-size", "5", words=("--cluster-size", "--arrangement clusters")),
+    C("rve", "--load", "rve.h5", "--phi", "0.3", words=("--phi", "--load")),
 ]
 STUDIES["sc.manifest.json"] = STUDY
 

@@ -332,14 +332,32 @@ def check_option_needs(args, parser, needs: dict) -> None:
     option's dest to the dests of which at least one must be given (not None/False/default);
     an option counts as given when its value differs from the parser's default."""
     def given(dest):
-        v = getattr(args, dest, None)
-        return v is not None and v is not False and v != parser.get_default(dest)
+        if "=" in dest:                   # "dest=value": that option has that value
+            d, value = dest.split("=", 1)
+            return str(getattr(args, d, None)) == value
+        v, default = getattr(args, dest, None), parser.get_default(dest)
+        if isinstance(v, (list, tuple)) and isinstance(default, (list, tuple)):
+            v, default = tuple(v), tuple(default)
+        return v is not None and v is not False and v != default
+
+    def name(dest):
+        if "=" in dest:
+            d, value = dest.split("=", 1)
+            return f"{_opt_name(parser, d)} {value}"
+        return _opt_name(parser, dest)
     for dest, others in needs.items():
         others = (others,) if isinstance(others, str) else tuple(others)
-        if given(dest) and not any(given(o) for o in others):
-            want = " or ".join("--" + o.replace("_", "-") for o in others)
-            raise InputError(f"{_opt_name(parser, dest)} has no effect without {want}; give "
-                             f"{want} too, or leave it out")
+        if not given(dest):
+            continue
+        for o in (o for o in others if o.startswith("!")):      # "!dest": not together
+            if given(o[1:]):
+                raise InputError(f"{name(dest)} and {name(o[1:])} are both given; which one "
+                                 f"is meant is ambiguous: give only one of them")
+        others = [o for o in others if not o.startswith("!")]
+        if others and not any(given(o) for o in others):
+            want = " or ".join(name(o) for o in others)
+            raise InputError(f"{name(dest)} has no effect without {want}; give {want} too, "
+                             f"or leave it out")
 
 
 def _opt_name(parser, dest: str) -> str:

@@ -65,6 +65,28 @@ def check_rve_size(args) -> None:
     check_memory(f"--n {args.n}", 0.3e9 + per * args.n, "use fewer particles --n")
 
 
+_LOGNORMAL_ONLY = ("!radius", "!histogram", "!distribution=monodisperse",
+                   "!distribution=histogram", "!load")
+#: options of ``mapsim rve`` that mean nothing without another one (or with another one):
+#: refused by the CLI instead of being silently ignored (``--radius`` without ``--distribution
+#: monodisperse``, ``--cluster-size`` without ``--arrangement clusters``, generation options
+#: with ``--load``, ``--mean-radius`` and ``--median-radius`` together)
+_RVE_OPTION_NEEDS = {
+    "radius": ("distribution=monodisperse", "!load"),
+    "mean_radius": ("!median_radius", *_LOGNORMAL_ONLY),
+    "median_radius": _LOGNORMAL_ONLY,
+    **{d: _LOGNORMAL_ONLY for d in ("gsd", "r_min", "r_max")},
+    **{d: ("arrangement=clusters", "!load") for d in ("cluster_size", "cluster_density")},
+    **{d: ("arrangement=chains", "!load") for d in ("chain_length", "chain_direction",
+                                                    "chain_spread")},
+    "agglomerated_fraction": ("arrangement=clusters", "arrangement=chains", "!load"),
+    **{d: ("!load",) for d in ("phi", "n", "seed", "distribution", "histogram", "shell",
+                               "core_density", "core_sigma", "shell_density", "shell_sigma",
+                               "calibrate_sigma", "arrangement", "gap", "max_attempts",
+                               "placement")},
+}
+
+
 def register(sub, formatter):
     p = sub.add_parser("rve", formatter_class=formatter, description=_DESCRIPTION,
                        help="generate a periodic particle RVE and summarise it")
@@ -176,7 +198,8 @@ def register(sub, formatter):
                               "intrinsic magnetization laws; --r-min/--r-max follow the "
                               "radius.")
     p.set_defaults(func=_cmd, outputs=("out", "json", "ply", "glb", "png"),
-                   inputs=("load", "histogram"))
+                   inputs=("load", "histogram"),
+                   option_needs=_RVE_OPTION_NEEDS)
     one_line_errors(sub)
 
 
