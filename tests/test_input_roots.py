@@ -202,3 +202,29 @@ def test_read_table_refuses_edited_tables(tmp_path):
         h[q][...] = a
     with pytest.raises(InputError, match="non-finite"):
         read_table(f)
+
+
+# --------------------------------------------------------------------------- option_needs
+def test_check_option_needs():
+    import argparse
+    from homogenize.cli._common import check_option_needs
+    p = argparse.ArgumentParser()
+    p.add_argument("--table")
+    p.add_argument("--phi", type=float)
+    p.add_argument("--kind", default="a")
+    p.add_argument("--size", type=float)
+    p.add_argument("--vec", type=float, nargs=3, default=(0.0, 0.0, 1.0))
+    needs = {"phi": "table", "size": ("kind=b", "!table"), "vec": "kind=c"}
+    check_option_needs(p.parse_args([]), p, needs)
+    check_option_needs(p.parse_args(["--table", "t", "--phi", "1"]), p, needs)
+    check_option_needs(p.parse_args(["--kind", "b", "--size", "1"]), p, needs)
+    check_option_needs(p.parse_args(["--vec", "0", "0", "1"]), p, needs)   # the default
+    with pytest.raises(InputError, match="--phi has no effect without --table"):
+        check_option_needs(p.parse_args(["--phi", "1"]), p, needs)
+    with pytest.raises(InputError, match="--size has no effect without --kind b"):
+        check_option_needs(p.parse_args(["--size", "1"]), p, needs)
+    with pytest.raises(InputError, match="--size and --table are both given.*ambiguous"):
+        check_option_needs(p.parse_args(["--kind", "b", "--size", "1", "--table", "t"]), p,
+                           needs)
+    with pytest.raises(InputError, match="--vec has no effect without --kind c"):
+        check_option_needs(p.parse_args(["--vec", "1", "0", "0"]), p, needs)
