@@ -59,6 +59,8 @@ read by :func:`read_table`.
 """
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
 import contextlib
 import datetime as _dt
 import errno
@@ -566,6 +568,8 @@ def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, c
 
 #: the kind of failure of a task whose scheduler went away (it is not the task's fault)
 _LOST = "SchedulerLost"
+#: a Dask future's cancellation (its FutureCancelledError derives from the first)
+_CANCELLED = (concurrent.futures.CancelledError, asyncio.CancelledError)
 
 
 def _failure_of(exc: BaseException) -> _Failure:
@@ -576,7 +580,10 @@ def _failure_of(exc: BaseException) -> _Failure:
         return _Failure(name, f"the worker process computing it died {n} times (killed for "
                               f"memory, or a crash in compiled code); see the workers' logs",
                         False)
-    if getattr(exc, "reason", None) == "scheduler-connection-lost":
+    # not asked for by mapsim: a task is cancelled when the client's connection to the
+    # scheduler is lost (reason "scheduler-connection-lost", or none when the reconnection
+    # gave up) or when the scheduler itself went away
+    if isinstance(exc, _CANCELLED) or name == "CommClosedError":
         return _Failure(_LOST, "the connection to the Dask scheduler was lost", False)
     return _Failure(name, (str(exc).strip().splitlines() or [""])[0], False)
 
@@ -586,7 +593,8 @@ def _raise_failures(failures, n_tasks: int, parts: Path):
     listing the first ten (exit 1)."""
     t, f0 = failures[0]
     if all(f.kind == _LOST for _, f in failures):     # the scheduler went away: one line
-        raise BatchError(f"lost the connection to the Dask scheduler (it stopped or restarted) "
+        raise BatchError(f"lost the connection to the Dask scheduler (it stopped, restarted or "
+                         f"cancelled the tasks) "
                          f"with {len(failures)} of {n_tasks} realizations not done; the others "
                          f"are stored in {parts}; run the same command again (with the "
                          f"scheduler and its workers up): it computes only the missing ones")

@@ -3,7 +3,8 @@ worker killed mid-task, the run (with its local scheduler) killed and resumed.
 
 Fast tests: 100 synthetic realizations on a threads cluster with ``OSError(ENOSPC)`` injected
 at the part and the table writes; the messages of killed workers and of a lost scheduler.
-Scenario tests: ``results/reliability/fault_tolerance.py`` (real kills, a real size-limited
+Scenario tests: ``results/reliability/fault_tolerance.py`` (real kills of a worker, of the
+run and of an external scheduler, a real size-limited
 tmpfs where the machine allows a mount, else an injected ENOSPC; the real ``rve`` evaluator on
 2 worker processes, the table compared with an uninterrupted 1-worker run): CI runs 24
 realizations without FEM; MAPSIM_FULL=1 runs the script's 100 realizations with FEM.
@@ -214,7 +215,8 @@ def measured(load_script, tmp_path_factory, request):
 
 
 @pytest.mark.parametrize("full", [pytest.param(True, marks=pytest.mark.slow), False])
-@pytest.mark.parametrize("scenario", ["worker_killed", "run_killed", "disk_full"])
+@pytest.mark.parametrize("scenario", ["worker_killed", "run_killed", "scheduler_restarted",
+                                      "disk_full"])
 def test_fault_scenario_loses_nothing_and_gives_the_reference_table(measured, full, scenario):
     if full and not FULL:
         pytest.skip("full version (100 realizations with FEM): MAPSIM_FULL=1")
@@ -224,7 +226,7 @@ def test_fault_scenario_loses_nothing_and_gives_the_reference_table(measured, fu
     assert ft.verdicts(res)[scenario], r
     if scenario == "worker_killed":
         assert r["kills"] and r["outcome"] == "finished"     # no rerun needed
-    elif scenario == "run_killed":
+    elif scenario in ("run_killed", "scheduler_restarted"):
         assert r["resume"]["recomputed"] == res["study"]["realizations"] - r["parts_after_kill"]
     elif r.get("tmpfs"):
         assert r["parts_full"]["exit"] == 1 and r["table_full"]["exit"] == 1
