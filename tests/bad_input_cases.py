@@ -783,8 +783,38 @@ CASES += [
       words=("--mean-radius", "--median-radius", "ambiguous")),
     C("rve", "--n", "20", "--cluster-size", "5", words=("--cluster-size", "--arrangement clusters")),
     C("rve", "--load", "rve.h5", "--phi", "0.3", words=("--phi", "--load")),
+    # two outputs of one run on the same file (a side-car, a file in an output directory)
+    C("rve", "--n", "20", "--out", "rj.h5", "--json", "rj.manifest.json",
+      words=("rj.manifest.json", "also given")),
+    C("diagnose", "exp.toml", "--json", "dj.json", "--report", "dj.manifest.json",
+      words=("dj.manifest.json", "--report")),
+    C("diagnose", "exp.toml", "--json", "r9/report.md", "--report", "r9",
+      words=("r9/report.md", "--report r9")),
 ]
 STUDIES["sc.manifest.json"] = STUDY
+
+# the specimen's laws from data and its 3D geometry (issue 34)
+_SPEC_LIN = ("specimen", "--radius-m", "1e-3", "--length-m", "1.6e-3", "--law", "linear",
+             "--chi", "1", "--shear-modulus-Pa", "1e5")
+CASES += [
+    C("specimen", "--shape", "cylinder", "--radius-m", "1e-3", "--length-m", "1.6e-3", "--law",
+      "table", "--phi", "0.1", "--shear-modulus-Pa", "1e5", words=("--law table", "--table")),
+    C("specimen", "--shape", "cylinder", "--radius-m", "1e-3", "--length-m", "1.6e-3", "--law",
+      "rve", "--shear-modulus-Pa", "1e5", words=("--law rve", "--phi")),
+    C("specimen", "--shape", "cylinder", "--radius-m", "1e-3", "--length-m", "1.6e-3", "--law",
+      "rve", "--phi", "0.1", "--chi", "1", "--shear-modulus-Pa", "1e5",
+      words=("--law rve", "--chi")),
+    C(*_SPEC_LIN, "--shape", "cylinder", "--table", "t.h5", words=("--table", "--law table")),
+    C(*_SPEC_LIN, "--shape", "cylinder", "--particle-material", "carbonyl-iron",
+      words=("--particle-material", "--law rve")),
+    C(*_SPEC_LIN, "--shape", "box", words=("--shape box", "--geometry 3d")),
+    C("specimen", "--geometry", "3d", "--shape", "sphere", "--radius-m", "1e-3", "--law",
+      "linear", "--chi", "1", "--shear-modulus-Pa", "1e5", words=("--geometry 3d", "sphere")),
+    C(*_SPEC_LIN, "--geometry", "3d", "--shape", "box", "--n-boundary", "24",
+      words=("--n-boundary", "3D")),
+    C(*_SPEC_LIN, "--geometry", "3d", "--shape", "cylinder", "--vtu", "s.vtu",
+      words=("--vtu", "3D")),
+]
 
 
 # --------------------------------------------------------------------------- running a case
@@ -960,6 +990,16 @@ def report(outcomes: list, baseline: tuple | None = None) -> str:
         f"range, before any work, no file written), {n_ok} must run (exit 0, only their own "
         f"outputs).",
         "",
+        "Classes of cases: a value out of its range or of the wrong type (every option and "
+        "study key); outputs that are inputs of the same run, devices, directories or too "
+        "long, also through an output directory or a side-car manifest, and two outputs on "
+        "one file; damaged or edited files read back (RVE files, tables, batch parts); "
+        "inputs that are not regular files (a FIFO, /dev/zero, a directory: never opened); "
+        "geometry against the slender-body assumptions of the beam and channel models; "
+        "ambiguous inputs (two columns for one quantity, options that contradict each other "
+        "or mean nothing without another); implausible measurements (units, empty data); "
+        "runs too large for the machine; refusals that must leave nothing behind.",
+        "",
         "Verdicts: **clean** as expected; **traceback** an exception reached the user; "
         "**silent** exit 0 where a refusal was due (silently wrong); **wrong** another exit "
         "code, more than one line, or a message missing the words; **left** files left "
@@ -1011,6 +1051,22 @@ def report(outcomes: list, baseline: tuple | None = None) -> str:
     return "\n".join(text)
 
 
+_BASELINE_HEAD = "### The same cases on the code before this work"
+
+
+def _keep_baseline(md: str, old: str) -> str:
+    """A run without ``--baseline`` keeps the baseline section of the previous report (it
+    describes the code of its revision, with the cases of that time, and takes long to make)."""
+    if _BASELINE_HEAD not in old or _BASELINE_HEAD in md:
+        return md
+    start = old.index(_BASELINE_HEAD)
+    end = old.find("\n## ", start)
+    section = old[start:] if end < 0 else old[start:end + 1]
+    at = md.find("\n## ")
+    at = len(md) if at < 0 else at + 1
+    return md[:at] + section.rstrip("\n") + "\n\n" + md[at:]
+
+
 def main(argv=None) -> int:
     import argparse
     import tempfile
@@ -1031,6 +1087,8 @@ def main(argv=None) -> int:
             base = (args.baseline, run_all(Path(tmp) / "base", baseline=str(tree)))
     md = report(outcomes, base)
     out = ROOT / "results" / "reliability.md"
+    if base is None and out.is_file():
+        md = _keep_baseline(md, out.read_text(encoding="utf-8"))
     out.parent.mkdir(exist_ok=True)
     out.write_text(md, encoding="utf-8")
     print(md)

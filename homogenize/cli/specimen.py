@@ -16,7 +16,8 @@ from homogenize.experiments.tables import affine_kappa
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
 from homogenize.macro._specimen_output import plot_specimen_strains, write_specimen_vtu
-from homogenize.macro.specimen import MODELS, SHAPES, Specimen, solve_specimen
+from homogenize.macro.specimen import GEOMETRIES, MODELS, SHAPES, SHAPES_3D, Specimen, \
+    solve_specimen
 from homogenize.cli.relax import _steps as _field_steps   # the project's --B syntax
 
 __all__ = ["register"]
@@ -56,7 +57,9 @@ error.
 Verification (tests/homogenize/macro/test_specimen.py): Lamb's sphere, pole strain 5/57 and
 mean strain 1/15 of mu0 M^2/G within 1 %; a cylinder L/D = 0.8, mean strain against the
 virtual work of its demagnetizing energy within 1.5 % at 128 boundary segments, converging at
-first order in the field mesh. Axisymmetric only: no 3D specimen exists yet.
+first order in the field mesh. --geometry 3d (a cylinder or a box): the 3D cylinder agrees
+with the axisymmetric solve within its discretization error (tests/homogenize/macro/
+test_specimen.py); no VTU output in 3D yet.
 
 Prints one line per field step and writes (each optional) --json (per step: B_applied_T,
 M_mean_A_per_m, H_mean_A_per_m, demag_factor, changes of length and strains on the axis and
@@ -189,21 +192,38 @@ def _kappa(args):
 
 
 def _specimen(args):
+    three_d = args.geometry == "3d"
+    if three_d and args.shape not in SHAPES_3D:
+        raise InputError(f"--geometry 3d takes --shape {' or '.join(SHAPES_3D)}, not "
+                         f"{args.shape}")
+    if not three_d and args.shape not in SHAPES:
+        raise InputError(f"--shape {args.shape} is not a body of revolution: add --geometry 3d")
+    if three_d and args.n_boundary is not None:
+        raise InputError("--n-boundary belongs to the axisymmetric field mesh; the 3D field "
+                         "mesh is built from the mechanics mesh (--n-mesh)")
+    if three_d and args.vtu is not None:
+        raise InputError("--vtu writes the axisymmetric mechanics mesh; a 3D specimen's VTU "
+                         "output does not exist yet")
     if args.shape == "sphere" and args.length_m is not None:
         raise InputError("--length-m is not taken for --shape sphere (its length is 2 R); use "
                          "--shape spheroid for another length")
     if args.shape != "sphere" and args.length_m is None:
         raise InputError(f"--shape {args.shape} needs --length-m [m] (its length along the "
                          "field)")
-    if args.shape != "cylinder" and args.edge_radius_m is not None:
-        raise InputError(f"--edge-radius-m is for a cylinder's rim, not --shape {args.shape}")
+    if args.shape not in ("cylinder", "box") and args.edge_radius_m is not None:
+        raise InputError(f"--edge-radius-m is for a cylinder's rim or a box's edges, not "
+                         f"--shape {args.shape}")
     if args.edge_radius_m is not None and \
             args.edge_radius_m >= 0.5 * min(args.radius_m, 0.5 * args.length_m):
         raise InputError(f"--edge-radius-m must be in [0, {0.5 * args.radius_m:g}) m and below "
                          f"half the half-length ({0.25 * args.length_m:g} m), got "
                          f"{args.edge_radius_m:g}")
+    if three_d:
+        return Specimen(args.shape, args.radius_m, args.length_m, n_mesh=args.n_mesh,
+                        edge_radius_m=args.edge_radius_m, geometry="3d")
     return Specimen(args.shape, args.radius_m, args.length_m, n_mesh=args.n_mesh,
-                    n_boundary=args.n_boundary, edge_radius_m=args.edge_radius_m)
+                    n_boundary=48 if args.n_boundary is None else args.n_boundary,
+                    edge_radius_m=args.edge_radius_m)
 
 
 def _json_ready(obj):
@@ -297,10 +317,14 @@ def register(sub, formatter) -> None:
     """Add the ``specimen`` command."""
     p = sub.add_parser("specimen", formatter_class=formatter, description=_DOC,
                        help="change of length of a finite specimen in a uniform field "
-                            "(finite strain, axisymmetric)")
+                            "(finite strain, axisymmetric or 3D)")
     g = p.add_argument_group("specimen")
-    g.add_argument("--shape", required=True, choices=SHAPES, help="body of revolution about "
-                   "the field axis")
+    g.add_argument("--shape", required=True, choices=tuple(dict.fromkeys(SHAPES + SHAPES_3D)),
+                   help="body of revolution about the field axis, or (--geometry 3d) a "
+                        "cylinder or a box (square cross-section of side 2 x --radius-m)")
+    g.add_argument("--geometry", choices=GEOMETRIES, default="axisymmetric",
+                   help="axisymmetric (meridian meshes, fast) or 3d (an eighth of the body and "
+                        "of the space around it, three symmetry planes; minutes)")
     g.add_argument("--radius-m", dest="radius_m", type=_SIZE, required=True,
                    help="radius R (equatorial radius of a spheroid) [m]")
     g.add_argument("--length-m", dest="length_m", type=_LEN, default=None,
@@ -361,8 +385,9 @@ def register(sub, formatter) -> None:
     g.add_argument("--n-mesh", dest="n_mesh", type=int_in("--n-mesh", 2, 64), default=8,
                    help="elements along the radius of the mechanics mesh (quarter section)")
     g.add_argument("--n-boundary", dest="n_boundary", type=int_in("--n-boundary", 16, 1024),
-                   default=48, help="segments of the field mesh along the body's meridian "
-                                    "profile (the Kelvin loads converge at first order in it)")
+                   default=None, help="segments of the field mesh along the body's meridian "
+                                      "profile (the Kelvin loads converge at first order in "
+                                      "it); axisymmetric only (default: 48)")
     g.add_argument("--tol", type=_TOL, default=1e-4,
                    help="relative change of the change of length at which a field step's "
                         "field-mechanics iteration stops [-]")

@@ -139,3 +139,19 @@ def test_no_convergence_exit_3_with_history_and_no_file(tmp_path, capsys):
     assert "residual history (relative): " in err and "did not converge" in err
     assert "B = 0.4 T" in err and "residual history (relative): -" not in err
     assert not j.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_box_in_3d_from_the_command_line(tmp_path, capsys):
+    """--geometry 3d: the eighth of a box and of the space around it; the JSON says so and the
+    box elongates along the field in the linear regime as B^2 (strain ~ mu0 M^2 / G, M ~ B)."""
+    j = tmp_path / "b.json"
+    rc = main(["specimen", "--geometry", "3d", "--shape", "box", "--radius-m", "5e-3",
+               "--length-m", "8e-3", "--law", "linear", "--chi", "0.5", "--shear-modulus-Pa",
+               "1e6", "--B", "0.05,0.1", "--n-mesh", "3", "--json", str(j), "--quiet"])
+    assert rc == 0, capsys.readouterr().err
+    res = json.loads(j.read_text())
+    assert res["specimen"]["geometry"] == "3d"
+    e = [s["strain_axis"] for s in res["steps"]]
+    assert e[0] > 0
+    # small strains (1e-4 .. 1e-3): quadratic in B within a few per cent (geometry change)
+    assert e[1] / e[0] == pytest.approx(4.0, rel=0.03)
