@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from micro._io import protected_inputs
 from micro._validate import EXIT_CONVERGENCE, EXIT_INPUT, ConvergenceError, InputError
@@ -65,11 +66,20 @@ def _check_paths(args) -> None:
     """Outputs that are inputs, devices, directories or unwritable are refused before any work
     (each command declares its ``outputs``, ``output_dirs`` and ``inputs`` by option name)."""
     inputs = [getattr(args, d, None) for d in getattr(args, "inputs", ())]
-    check_outputs([(_flag(d), getattr(args, d, None)) for d in getattr(args, "outputs", ())],
-                  inputs)
+    outputs = [(_flag(d), getattr(args, d, None)) for d in getattr(args, "outputs", ())]
+    # an output written with a side-car manifest <stem>.manifest.json: the side-car is an
+    # output of the run too (it may be neither an input nor another output)
+    for d in getattr(args, "sidecar_outputs", ()):
+        path = getattr(args, d, None)
+        if path is not None and str(path) != "-":
+            p = Path(path)
+            outputs.append((f"{_flag(d)} {p} (its side-car manifest)",
+                            p.with_name(p.stem + ".manifest.json")))
+    check_outputs(outputs, inputs)
     writes = getattr(args, "output_dir_writes", {})
     for d in getattr(args, "output_dirs", ()):
-        check_output_dir(_flag(d), getattr(args, d, None), inputs, writes.get(d))
+        check_output_dir(_flag(d), getattr(args, d, None), inputs, writes.get(d),
+                         other_outputs=outputs)
 
 
 def main(argv=None) -> int:

@@ -158,16 +158,13 @@ def check_outputs(outputs, inputs=()) -> None:
             continue
         p = Path(path)
         _check_name(opt, p)
-        if str(p) in seen:
-            raise InputError(f"{opt} {p}: the same file is also given to {seen[str(p)]}")
-        seen[str(p)] = opt
-        # the companions written beside an output (its side-car manifest, a table's parts
-        # directory) are outputs of the same run too
-        side = p.with_name(p.stem + ".manifest.json")
-        if _exists(side) and not os.path.isfile(side):
-            raise InputError(f"{opt} {p}: its side-car manifest {side} exists and is not a "
-                             f"regular file; move it away or give another output name")
-        for comp in (side, p.with_name(p.stem + ".parts")):
+        key = os.path.realpath(p)
+        if key in seen:
+            raise InputError(f"{opt} {p}: the same file is also given to {seen[key]}; one "
+                             f"output would replace the other: give another name")
+        seen[key] = opt
+        # a table's parts directory beside it is written (and removed by --clean) by the run
+        for comp in (p.with_name(p.stem + ".parts"),):
             for q in ins:
                 same = _inside(q, comp) is not None if _exists(comp) else False
                 if same:
@@ -214,7 +211,7 @@ def _inside(path: Path, directory: Path) -> Path | None:
         return None
 
 
-def check_output_dir(opt: str, path, inputs=(), writes=None) -> None:
+def check_output_dir(opt: str, path, inputs=(), writes=None, other_outputs=()) -> None:
     """Refuse an output directory that exists as a non-directory or cannot be written, or that
     would overwrite an input of the same run.
 
@@ -242,6 +239,20 @@ def check_output_dir(opt: str, path, inputs=(), writes=None) -> None:
             raise InputError(f"{q} is an input of this command and lies in the output "
                              f"directory {opt} {p}, where this run writes {rel}; refusing to "
                              f"overwrite it: give another {opt} or move the input")
+    # another output of the same run that is this directory, or a file the run writes in it
+    for o_opt, o in other_outputs:
+        if o is None or str(o) == "-":
+            continue
+        rel = _inside(Path(o), p)
+        if rel is None:
+            continue
+        if str(rel) == "." or writes is not None and any(
+                fnmatch.fnmatchcase(str(rel), pat) or fnmatch.fnmatchcase(rel.parts[0], pat)
+                for pat in writes):
+            what = o_opt if " " in o_opt else f"{o_opt} {o}"
+            raise InputError(f"{what} is written where the output directory {opt} {p} is "
+                             f"(or writes {rel}); one output would replace the other: give "
+                             f"another name")
     anc = p
     while not _exists(anc):
         anc = anc.parent

@@ -156,7 +156,7 @@ def register(sub, formatter):
                         "segments of the field mesh's profile; coarse: 4 / 24; none: skip)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_diagnose, outputs=("json",), output_dirs=("report",),
-                   output_dir_writes={"report": _REPORT_FILES},
+                   output_dir_writes={"report": _REPORT_FILES}, sidecar_outputs=("json",),
                    inputs=("experiment", "discussion"))
 
     q = sub.add_parser("diagnose-study", formatter_class=formatter, description=_STUDY_DOC,

@@ -198,7 +198,7 @@ def register(sub, formatter):
                               "intrinsic magnetization laws; --r-min/--r-max follow the "
                               "radius.")
     p.set_defaults(func=_cmd, outputs=("out", "json", "ply", "glb", "png"),
-                   inputs=("load", "histogram"),
+                   inputs=("load", "histogram"), sidecar_outputs=("out",),
                    option_needs=_RVE_OPTION_NEEDS)
     one_line_errors(sub)
 

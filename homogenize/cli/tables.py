@@ -188,7 +188,8 @@ def register(sub, formatter):
     p.add_argument("--clean", action="store_true",
                    help="delete the per-realization parts once the table is written "
                         "(default: keep them, so that a changed study reuses them)")
-    p.set_defaults(func=_cmd_batch, outputs=("out",), inputs=("study",))
+    p.set_defaults(func=_cmd_batch, outputs=("out",), inputs=("study",),
+                   sidecar_outputs=("out",))
 
     p = sub.add_parser("rve-size", formatter_class=formatter, description=_RVE_SIZE_DOC,
                        help="representative volume: variance vs RVE size, realizations needed")
