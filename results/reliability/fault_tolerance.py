@@ -660,7 +660,7 @@ def markdown(res: dict) -> str:
     if r:
         rs = r["resume"]
         lines.append(
-            f"| run killed (scheduler restarted) | {r['injected']} | killed run: "
+            f"| run killed (with its local scheduler) | {r['injected']} | killed run: "
             f"{r['parts_after_kill']} parts stored, {len(r['temps_after_kill'])} stale temp, "
             f"{len(r['unusable_parts_after_kill'])} unusable part, "
             f"{len(r['orphans_after_20s'])} orphaned worker; resume exit {rs['exit']}, "
