@@ -1,0 +1,1140 @@
+"""A magnet-driven cantilever with the field on the DEFORMED strip: pull-in, contact, release.
+
+The strip (:class:`~homogenize.macro.cantilever.Strip`, ``[0, L] x [0, w] x [0, t]``, clamped at
+``x = 0``) is pulled down (along ``-z``) by a permanent magnet placed below its tip. The magnet's
+force grows steeply as the strip approaches it, so the field must be taken where the strip IS
+(a follower load), not where it was (the dead load of :func:`~homogenize.macro.magnets.
+body_force_along_strip`); and below a critical gap no free equilibrium exists: the strip snaps
+onto the magnet (pull-in), rests on it (contact), and lets go again only at a larger gap on the
+way back (release; the device's hysteresis).
+
+Model
+-----
+*Mechanics.* A planar, inextensible, unsheared elastica (the large-rotation Euler-Bernoulli
+beam), bending stiffness ``EI`` (:func:`~homogenize.macro.closed_form.bending_stiffness_N_m2`).
+The unknown is the rotation ``theta(s)`` of the cross-sections, ``s`` the arc length, the
+centreline ``r(s) = (0, t/2) + int_0^s (cos theta, sin theta)`` in the ``(x, z)`` plane.
+Discretization (a Ritz method on the total potential energy, so that the discrete Jacobian is
+a symmetric Hessian and stability is the sign of its eigenvalues): ``theta`` piecewise linear on
+``N`` equal segments, ``theta_0 = 0`` at the clamp; the bending energy ``sum EI (theta_i -
+theta_{i-1})^2 / (2 h)`` is exact for it; the node positions by the trapezoidal rule of the
+tangent, and the magnetic energy by the trapezoidal rule over the nodes. Both rules are second
+order: the tip deflection and the pull-in gap converge as ``h^2`` (measured in the tests).
+
+*Magnetic load.* As in :mod:`homogenize.macro.magnets`: ``f = M_eff(H_in) grad |B_a|``
+[N/m^3] with ``H_in`` from the thin-body demagnetizing correction ``H_in + N M(H_in) = |H_a|``
+(one factor ``N`` for the strip, as in :func:`~homogenize.macro.magnets.body_force_along_strip`;
+its direction is not followed as the strip rotates). ``f`` is the gradient of ``W(|B_a|) =
+int_0^{|B_a|} M_eff db``, so the load is conservative; the potential energy of the strip is
+``Pi = int EI theta'^2 / 2 ds - w t <W>`` with ``<.>`` the mean over the cross-section. The
+field is evaluated (magpylib, through :func:`~homogenize.macro.magnets.sample_field`) at
+``n_cross x n_cross`` Gauss points of every DEFORMED cross-section (across the width and
+through the rotated thickness), so both in-plane components of the force, along ``x`` and
+``z``, act, with their moment about the centreline. The lateral component ``f_y`` (zero for a
+magnet centred across the width) and torsion are not modelled.
+
+*Jacobian.* Exact chain rule through the kinematics; the force's own derivative with respect
+to the position, ``d f / d r`` (2 x 2 in ``x, z``), by central differences of ``f`` with the
+step ``FD_HESSIAN_REL * min(t, magnet size)`` (error ~``1e-6`` relative, see
+:data:`FD_HESSIAN_REL`), symmetrised (``f`` is a gradient). Newton converges with it to round-off;
+the equilibria themselves do not depend on the Jacobian's accuracy. Moving the magnet down by
+``dg`` is the same as moving every point up by ``dg``: the derivative with respect to the gap
+is the z column of ``d f / d r``, no extra field evaluation.
+
+*Contact.* The lowest point of the bent strip is the bottom edge of its tip, ``r(L) - (t/2)
+n(L)``; its gap to the magnet's top face (the plane ``z = -g``), ``gamma = z_corner + g``, must
+stay >= 0. On contact ``gamma = 0`` is enforced with a Lagrange multiplier (exact: the tip gap is
+zero to the Newton tolerance, no penalty parameter), the multiplier being the contact force
+[N], >= 0. Contact away from the tip (a magnet under mid-span) is not modelled: it is refused
+(the tip must lie over the magnet's top face) and checked along the path.
+
+Path following
+--------------
+:func:`trace_branch` is a generic pseudo-arc-length continuation of ``R(u, p) = 0`` (tangent
+predictor, Newton corrector on the hyperplane normal to the tangent, step halving on failure or
+on a turn of the tangent by more than ``max_turn_deg``, growth after easy steps). A limit point
+(fold) is a sign change of the parameter component of the tangent between two points; it is
+then located by Brent's method along the step (each trial point corrected onto the branch), to
+the Newton tolerance. Events (the tip touching the magnet, the end of the gap range) are located
+the same way. Arc length, not displacement control, because the same routine must also cross
+the fold of the one-degree-of-freedom spring of the tests, and because it needs no choice of a
+monotone control variable. The cantilever is traced as follows:
+
+1. the free branch from a far gap (where the strip is nearly straight, the force tiny) towards
+   smaller gaps: stable until the fold, the pull-in gap ``g*``; past it the unstable branch
+   comes back to larger gaps as the tip approaches the magnet, until the tip touches the face
+   (``gamma = 0``) at ``g_r``;
+2. the contact branch from ``g_r`` down to the smallest gap asked for: the contact force rises
+   from 0 at ``g_r``. On the way back (gap increasing) the strip stays in contact until the
+   contact force vanishes, at ``g_r``: the release gap, ``g_r > g*`` (hysteresis).
+
+If the tip reaches the face before any fold (a weak magnet, a stiff strip), there is no snap:
+pull-in gap = release gap = that gap (``snap`` False).
+
+Units: SI (m, N, Pa, T, A/m); names carry them.
+
+Realistic case (``docs`` of issue 35)
+-------------------------------------
+Strip 20 x 5 x 1 mm, E = 2 MPa (the seed's PDMS), 3 vol% iron, ``M_eff = min(0.1 H_in,
+0.03 Ms_Fe)`` with the strip's demagnetizing factor across its thickness (``N_z`` = 0.77,
+:func:`micro.demag.prism_demag_factors`), NdFeB cylinder 10 mm x 10 mm, ``B_r`` = 1.3 T, axis
+along z, centred under the tip: see :data:`REALISTIC_CASE` for the numbers found (pull-in and
+release gaps); the test module reproduces them at a coarse discretization.
+
+CLI wiring
+----------
+For ``mapsim beam --magnet ... --gap-m G`` / ``--gap-sweep-m A:B:N`` the CLI should build the
+magnet with :func:`place_magnet` (centred under the tip end by default; ``--magnet-position``'s
+x and y when given) and call :func:`pullin_sweep` with ``gap_sweep_m=numpy.linspace(A, B, N)``
+(a single gap: ``[G]``, which still traces the path down to ``G``), the material
+(:class:`~micro.materials.ElasticMaterial`), ``M_of_H`` from the table
+(:func:`~homogenize.macro.magnets.tabulated_magnetization`) and the demagnetizing factor it
+already uses; print ``sweep_gap_m``/``sweep_tip_deflection_m``/``sweep_contact_force_N``/
+``sweep_branch`` and ``pull_in_gap_m``/``release_gap_m`` (``PullInResult.to_dict()`` is JSON
+ready), plot ``gap_m`` against ``tip_deflection_m`` with the stable/unstable/contact parts and
+the two gaps marked. :class:`~micro._validate.InputError` -> exit 2;
+:class:`PathFollowingError` (a :class:`~micro._validate.ConvergenceError`) -> exit 3, its
+``last_converged`` dict holds the last converged state (gap, deflection, shape) to be written
+and named as such.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.constants import mu_0 as MU0
+from scipy.optimize import brentq, minimize_scalar
+
+from homogenize.macro.cantilever import Strip
+from homogenize.macro.closed_form import bending_stiffness_N_m2
+from homogenize.macro.magnets import (PermanentMagnet, _call_M, _check_overlap, _internal_field,
+                                      sample_field)
+from micro._validate import ConvergenceError, InputError, check_finite, check_positive, \
+    check_range
+from micro.materials import PDMS, ElasticMaterial
+
+__all__ = ["BranchTrace", "LimitPoint", "EventPoint", "PathFollowingError", "trace_branch",
+           "place_magnet", "MagnetElastica", "PullInResult", "pullin_sweep",
+           "one_mode_pullin", "OneModeResult", "FD_HESSIAN_REL", "REALISTIC_CASE"]
+
+#: step of the central differences of the force with respect to position, relative to
+#: ``min(t, smallest magnet dimension)``. The force varies on the distance ``d`` to the magnet
+#: (>= ~0.1 t for the Gauss points of a strip touching it): truncation ~``(step/d)^2`` < 1e-4 and
+#: cancellation ~``1e-10 d / step`` (``f`` carries ~1e-10 relative noise from
+#: ``sample_field``'s own differences) < 1e-6: a Jacobian accurate to ~1e-4 at worst, plenty
+#: for Newton, whose converged point does not depend on it.
+FD_HESSIAN_REL = 1e-3
+
+#: the numbers this module finds for the realistic case of issue 35 (see the module docstring),
+#: filled in from ``pullin_sweep`` at n_segments=40, n_cross=3 (see the test module)
+REALISTIC_CASE = {
+    "strip_m": (20e-3, 5e-3, 1e-3), "E_Pa": PDMS.E_Pa, "chi": 0.1, "phi_Fe": 0.03,
+    "magnet": "NdFeB cylinder 10 mm x 10 mm, B_r 1.3 T, axis z, centred under the tip",
+    "pull_in_gap_m": None, "pull_in_tip_deflection_m": None, "release_gap_m": None,
+}
+
+
+class PathFollowingError(ConvergenceError):
+    """The path could not be followed. ``last_converged``: the last converged state (a dict)."""
+
+    def __init__(self, message, last_converged=None):
+        super().__init__(message)
+        self.last_converged = last_converged or {}
+
+
+# ============================================================================================
+# generic pseudo-arc-length continuation
+
+@dataclass(frozen=True, eq=False)
+class LimitPoint:
+    """A fold of the branch: ``u`` [unknowns], ``p`` [parameter]; ``index`` into the trace."""
+    u: np.ndarray
+    p: float
+    index: int
+
+
+@dataclass(frozen=True, eq=False)
+class EventPoint:
+    """Where an event function crossed zero: its ``name``, ``u``, ``p``, ``index``."""
+    name: str
+    u: np.ndarray
+    p: float
+    index: int
+
+
+@dataclass(frozen=True, eq=False)
+class BranchTrace:
+    """A traced branch of ``R(u, p) = 0``.
+
+    u : (n, n_u) unknowns; p : (n,) parameter; dp_ds : (n,) parameter component of the unit
+    tangent (scaled variables; its sign is the direction of travel in p); stable : (n,) bool;
+    limit_points : tuple of :class:`LimitPoint` (also inserted in the arrays);
+    event : the terminal :class:`EventPoint` (the last point of the arrays) or None;
+    stop_reason : "event" | "max_steps".
+    """
+    u: np.ndarray
+    p: np.ndarray
+    dp_ds: np.ndarray
+    stable: np.ndarray
+    limit_points: tuple
+    event: EventPoint | None
+    stop_reason: str
+
+
+class _Scaled:
+    """``z = (u / u_scale, p / p_scale)``, ``F = R / r_scale``: the continuation's variables."""
+
+    def __init__(self, system, n_u, u_scale, p_scale, r_scale):
+        self.system, self.n = system, n_u
+        self.us = np.broadcast_to(np.asarray(u_scale, float), (n_u,)).copy()
+        self.ps = float(p_scale)
+        self.rs = np.broadcast_to(np.asarray(r_scale, float), (n_u,)).copy()
+
+    def split(self, z):
+        return z[:-1] * self.us, float(z[-1] * self.ps)
+
+    def join(self, u, p):
+        return np.concatenate([np.asarray(u, float) / self.us, [p / self.ps]])
+
+    def eval(self, z):
+        u, p = self.split(z)
+        R, J, Rp = self.system(u, p)
+        F = np.asarray(R, float) / self.rs
+        Jz = np.empty((self.n, self.n + 1))
+        Jz[:, :-1] = np.asarray(J, float) * self.us[None, :] / self.rs[:, None]
+        Jz[:, -1] = np.asarray(Rp, float) * self.ps / self.rs
+        return F, Jz
+
+    def raw_jacobian(self, Jz):
+        return Jz[:, :-1] * self.rs[:, None] / self.us[None, :]
+
+
+def _correct(sc, z_guess, tau, z_anchor, sigma, xtol, ftol, max_newton):
+    """Newton on ``F(z) = 0``, ``tau . (z - z_anchor) = sigma``; None if it fails."""
+    z = z_guess.copy()
+    dz_norm = math.inf
+    for it in range(max_newton + 1):
+        try:
+            F, Jz = sc.eval(z)
+        except (InputError, FloatingPointError, ValueError):
+            return None
+        if not (np.all(np.isfinite(F)) and np.all(np.isfinite(Jz))):
+            return None
+        if dz_norm <= xtol and np.max(np.abs(F), initial=0.0) <= ftol:
+            return z, Jz, it
+        if it == max_newton:
+            return None
+        A = np.vstack([Jz, tau])
+        b = -np.concatenate([F, [tau @ (z - z_anchor) - sigma]])
+        try:
+            dz = np.linalg.solve(A, b)
+        except np.linalg.LinAlgError:
+            return None
+        dz_norm = float(np.max(np.abs(dz)))
+        if not np.isfinite(dz_norm) or dz_norm > 0.5:
+            return None                      # leaving the neighbourhood: a smaller step
+        z = z + dz
+    return None
+
+
+def _tangent(Jz, tau_prev):
+    A = np.vstack([Jz, tau_prev])
+    b = np.zeros(A.shape[0])
+    b[-1] = 1.0
+    t = np.linalg.solve(A, b)
+    return t / np.linalg.norm(t)
+
+
+def _default_stability(u, p, J):
+    return bool(np.all(np.linalg.eigvalsh(0.5 * (J + J.T)) > 0.0))
+
+
+def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max=0.2,
+                 p_min=-math.inf, p_max=math.inf, events=(), u_scale=1.0, p_scale=1.0,
+                 r_scale=1.0, xtol=1e-10, ftol=1e-9, max_newton=12, max_steps=2000,
+                 max_turn_deg=20.0, stability=None, start_fixed_p=True,
+                 stop_at_fold=False) -> BranchTrace:
+    """Follow the branch of ``R(u, p) = 0`` through limit points (pseudo arc length).
+
+    Parameters
+    ----------
+    system : callable ``(u, p) -> (R, J, R_p)`` -- residual (n_u,), its Jacobian dR/du
+        (n_u, n_u) and dR/dp (n_u,)
+    u0, p0 : start (u0 a guess, corrected at fixed p0 when ``start_fixed_p``)
+    direction : initial sign of the change of p
+    ds, ds_min, ds_max : arc-length steps in the scaled variables ``(u / u_scale, p / p_scale)``
+    p_min, p_max : the branch ends (terminal events "p_min" / "p_max") where p leaves them
+    events : sequence of ``(name, fun(u, p) -> float)``; terminal when ``fun`` goes from > 0 to
+        <= 0 along the path; located by Brent's method
+    u_scale, p_scale, r_scale : scales of the unknowns, the parameter, the residual rows
+    xtol, ftol : Newton converged when the last update <= xtol and |R / r_scale| <= ftol
+    max_turn_deg : a step whose tangent turns more than this is halved (keeps the corrector on
+        the same branch near a fold)
+    stability : callable ``(u, p, J) -> bool``; default: ``J`` (a Hessian) positive definite
+    stop_at_fold : end the trace at the first limit point (a terminal event named "fold")
+
+    Returns
+    -------
+    BranchTrace
+
+    Raises
+    ------
+    PathFollowingError -- the step fell below ``ds_min``; ``last_converged`` has u and p
+    """
+    u0 = np.atleast_1d(np.asarray(u0, float))
+    n = u0.size
+    sc = _Scaled(system, n, u_scale, p_scale, r_scale)
+    stab = stability or _default_stability
+    cos_turn = math.cos(math.radians(max_turn_deg))
+    all_events = list(events)
+    if math.isfinite(p_min):
+        all_events.append(("p_min", lambda u, p: p - p_min))
+    if math.isfinite(p_max):
+        all_events.append(("p_max", lambda u, p: p_max - p))
+
+    e_p = np.zeros(n + 1)
+    e_p[-1] = 1.0
+    z0 = sc.join(u0, p0)
+    if start_fixed_p:
+        res = _correct(sc, z0, e_p, z0, 0.0, xtol, ftol, 4 * max_newton)
+    else:
+        res = _correct(sc, z0, e_p, z0, 0.0, xtol, ftol, 4 * max_newton)
+    if res is None:
+        raise PathFollowingError(f"no equilibrium found at the start, p = {p0:g}",
+                                 {"u": u0, "p": p0})
+    z, Jz, _ = res
+    tau = _tangent(Jz, float(np.sign(direction) or -1.0) * e_p)
+
+    def record(z, Jz, tau):
+        u, p = sc.split(z)
+        zs.append(z.copy())
+        taus.append(tau[-1])
+        stables.append(stab(u, p, sc.raw_jacobian(Jz)))
+
+    zs, taus, stables = [], [], []
+    limits = []
+    record(z, Jz, tau)
+    event_vals = [fun(*sc.split(z)) for _, fun in all_events]
+    step = float(ds)
+    for _ in range(max_steps):
+        res = _correct(sc, z + step * tau, tau, z, step, xtol, ftol, max_newton)
+        tau_new = None
+        if res is not None:
+            z_new, J_new, its = res
+            try:
+                tau_new = _tangent(J_new, tau)
+            except np.linalg.LinAlgError:
+                tau_new = None
+            if tau_new is not None and tau_new @ tau < cos_turn:
+                tau_new = None
+        if tau_new is None:
+            step *= 0.5
+            if step < ds_min:
+                u, p = sc.split(z)
+                raise PathFollowingError(
+                    f"path following stopped: step below {ds_min:g} at p = {p:.6g}",
+                    {"u": u, "p": p})
+            continue
+
+        def on_step(sigma, z_a=z, tau_a=tau, z_b=z_new, h=step):
+            guess = z_a + (sigma / h) * (z_b - z_a)
+            r = _correct(sc, guess, tau_a, z_a, sigma, xtol, ftol, 4 * max_newton)
+            if r is None:
+                raise PathFollowingError(f"could not locate a point along the step at "
+                                         f"p = {sc.split(z_a)[1]:.6g}",
+                                         dict(zip(("u", "p"), sc.split(z_a))))
+            return r
+
+        # candidate happenings along this step, by arc length
+        found = []
+        new_vals = [fun(*sc.split(z_new)) for _, fun in all_events]
+        for k, (name, _) in enumerate(all_events):
+            if event_vals[k] > 0.0 >= new_vals[k]:
+                fun = all_events[k][1]
+                sig = brentq(lambda s: fun(*sc.split(on_step(s)[0])) if s < step
+                             else new_vals[k], 0.0, step, xtol=1e-13, rtol=1e-12)
+                found.append((sig, "event", name))
+        if np.sign(tau_new[-1]) != np.sign(tau[-1]) and tau[-1] != 0.0:
+            def tp(s):
+                if s <= 0.0:
+                    return tau[-1]
+                if s >= step:
+                    return tau_new[-1]
+                zz, JJ, _ = on_step(s)
+                return _tangent(JJ, tau)[-1]
+            sig = brentq(tp, 0.0, step, xtol=1e-13, rtol=1e-12)
+            found.append((sig, "fold", None))
+        found.sort(key=lambda x: x[0])
+        for sig, kind, name in found:
+            zz, JJ, _ = on_step(sig) if sig < step else (z_new, J_new, 0)
+            tt = _tangent(JJ, tau)
+            if kind == "fold":
+                record(zz, JJ, tt)
+                u, p = sc.split(zz)
+                limits.append(LimitPoint(u, p, len(zs) - 1))
+                if stop_at_fold:
+                    ev = EventPoint("fold", u, p, len(zs) - 1)
+                    return _pack(sc, zs, taus, stables, limits, ev, "event")
+            else:
+                record(zz, JJ, tt)
+                u, p = sc.split(zz)
+                ev = EventPoint(name, u, p, len(zs) - 1)
+                return _pack(sc, zs, taus, stables, limits, ev, "event")
+        record(z_new, J_new, tau_new)
+        z, tau, event_vals = z_new, tau_new, new_vals
+        if its <= 3:
+            step = min(step * 1.5, ds_max)
+    return _pack(sc, zs, taus, stables, limits, None, "max_steps")
+
+
+def _pack(sc, zs, taus, stables, limits, event, reason):
+    Z = np.array(zs)
+    u = Z[:, :-1] * sc.us[None, :]
+    p = Z[:, -1] * sc.ps
+    return BranchTrace(u, p, np.array(taus), np.array(stables, bool), tuple(limits), event,
+                       reason)
+
+
+# ============================================================================================
+# the magnet and the strip
+
+def _check_axis_z(magnet):
+    if not isinstance(magnet, PermanentMagnet):
+        raise InputError(f"magnet must be a PermanentMagnet, got {type(magnet).__name__}")
+    if abs(abs(magnet.axis[2]) - 1.0) > 1e-12:
+        raise InputError(f"the magnet's axis must be along z (a flat top face under the tip), "
+                         f"got axis={magnet.axis}")
+
+
+def _half_height(magnet):
+    return 0.5 * (magnet.dimensions_m[1] if magnet.shape == "cylinder"
+                  else magnet.dimensions_m[2])
+
+
+def _over_face(magnet, x, y_lo, y_hi):
+    """True where the segment ``{x} x [y_lo, y_hi]`` lies (partly) over the top face."""
+    xm, ym, _ = magnet.position_m
+    dy = np.maximum(0.0, np.maximum(y_lo - ym, ym - y_hi))
+    dx = np.abs(np.asarray(x, float) - xm)
+    if magnet.shape == "cylinder":
+        return dx**2 + dy**2 <= (0.5 * magnet.dimensions_m[0]) ** 2
+    return (dx <= 0.5 * magnet.dimensions_m[0]) & (dy <= 0.5 * magnet.dimensions_m[1])
+
+
+def place_magnet(magnet: PermanentMagnet, strip: Strip, gap_m: float, *,
+                 tip_offset_m: float = 0.0, lateral_offset_m: float = 0.0) -> PermanentMagnet:
+    """The magnet with its axis at ``x = L - tip_offset_m``, ``y = w/2 + lateral_offset_m`` and
+    its top face ``gap_m`` below the strip's bottom face (``z = -gap_m``).
+
+    The gap is what a user measures: from the strip's bottom face at the tip to the magnet's
+    top face [m], >= 0.
+    """
+    _check_axis_z(magnet)
+    g = check_positive("gap_m", gap_m, "m", allow_zero=True)
+    check_finite("tip_offset_m", tip_offset_m, "m")
+    check_finite("lateral_offset_m", lateral_offset_m, "m")
+    pos = (strip.length_m - float(tip_offset_m), 0.5 * strip.width_m + float(lateral_offset_m),
+           -g - _half_height(magnet))
+    return dataclasses.replace(magnet, position_m=pos)
+
+
+class MagnetElastica:
+    """Discrete planar elastica of the strip in the field of a magnet below it.
+
+    Parameters
+    ----------
+    strip : Strip; material : ElasticMaterial (E, nu, density)
+    magnet : PermanentMagnet -- axis along z; its x and y position the magnet (the z is set by
+        the gap ``g`` in every call); the tip must lie over its top face
+    M_of_H : callable -- ``M_eff(H)`` [A/m] (see :mod:`homogenize.macro.magnets`)
+    n_segments : int -- elements along the strip, >= 2
+    n_cross : int -- Gauss points per cross-section direction (width, thickness), >= 1
+    demag_factor : float -- ``N`` in ``H_in + N M = |H_a|``, in [0, 1]
+    gravity_m_s2 : float -- self-weight along -z (a dead load), >= 0
+    follower : bool -- True: the field at the deformed cross-sections; False: at the undeformed
+        ones (the dead load of :func:`~homogenize.macro.magnets.body_force_along_strip`)
+    plate : bool -- plate bending stiffness ``EI / (1 - nu^2)``
+
+    Unknowns: ``theta_1 .. theta_N`` [rad] (free), plus the contact force ``lam`` [N] (contact).
+    """
+
+    def __init__(self, strip, material, magnet, M_of_H, *, n_segments=32, n_cross=3,
+                 demag_factor=0.0, gravity_m_s2=0.0, follower=True, plate=False):
+        if not isinstance(strip, Strip):
+            raise InputError(f"strip must be a Strip, got {type(strip).__name__}")
+        if not isinstance(material, ElasticMaterial):
+            raise InputError(f"material must be an ElasticMaterial, got "
+                             f"{type(material).__name__}")
+        _check_axis_z(magnet)
+        if not callable(M_of_H):
+            raise InputError("M_of_H must be a callable M(H) [A/m]")
+        if not float(n_segments).is_integer() or int(n_segments) < 2:
+            raise InputError(f"n_segments must be an integer >= 2, got {n_segments!r}")
+        if not float(n_cross).is_integer() or int(n_cross) < 1:
+            raise InputError(f"n_cross must be an integer >= 1, got {n_cross!r}")
+        self.demag = check_range("demag_factor", demag_factor, 0.0, 1.0, "")
+        gr = check_positive("gravity_m_s2", gravity_m_s2, "m/s^2", allow_zero=True)
+        self.strip, self.material, self.magnet, self.M_of_H = strip, material, magnet, M_of_H
+        self.follower = bool(follower)
+        L, w, t = strip.length_m, strip.width_m, strip.thickness_m
+        self.L, self.w, self.t = L, w, t
+        if not _over_face(magnet, L, 0.0, w):
+            raise InputError(f"the strip's tip (x = {L:g} m) must lie over the magnet's top face "
+                             f"(axis at x = {magnet.position_m[0]:g}, y = "
+                             f"{magnet.position_m[1]:g} m): contact away from the tip is not "
+                             f"modelled")
+        N = int(n_segments)
+        self.N = N
+        self.h = L / N
+        self.s = np.linspace(0.0, L, N + 1)
+        self.wq = np.full(N + 1, self.h)
+        self.wq[[0, -1]] = 0.5 * self.h
+        C = np.zeros((N + 1, N + 1))
+        for k in range(1, N + 1):
+            C[k, 0] = 0.5 * self.h
+            C[k, 1:k] = self.h
+            C[k, k] = 0.5 * self.h
+        self.C = C
+        self.EI = bending_stiffness_N_m2(w, t, material.E_Pa, material.nu, plate)
+        K = np.zeros((N + 1, N + 1))
+        for i in range(N):
+            K[i:i + 2, i:i + 2] += self.EI / self.h * np.array([[1.0, -1.0], [-1.0, 1.0]])
+        self.K = K[1:, 1:]
+        self.area = w * t
+        gx, gw = np.polynomial.legendre.leggauss(int(n_cross))
+        Y, E = np.meshgrid(0.5 * w * (1 + gx), 0.5 * t * gx, indexing="ij")
+        self.yc, self.eta = Y.ravel(), E.ravel()
+        self.omega = (np.outer(gw, gw) / 4.0).ravel()
+        self.n_cross = int(n_cross)
+        self.weight_N_m3 = material.density_kg_m3 * gr
+        self.fd_step = FD_HESSIAN_REL * min(t, min(magnet.dimensions_m))
+        self._dead_cache = {}
+
+    # ---------------------------------------------------------------- geometry
+    def magnet_at(self, gap_m):
+        x, y, _ = self.magnet.position_m
+        return dataclasses.replace(self.magnet,
+                                   position_m=(x, y, -gap_m - _half_height(self.magnet)))
+
+    def kinematics(self, theta_full):
+        """Tangents, normals (N+1, 2) and centreline nodes r (N+1, 2) in the (x, z) plane."""
+        c, s = np.cos(theta_full), np.sin(theta_full)
+        tng = np.column_stack([c, s])
+        nrm = np.column_stack([-s, c])
+        r = np.array([0.0, 0.5 * self.t]) + self.C @ tng
+        return tng, nrm, r
+
+    def _full(self, u):
+        return np.concatenate([[0.0], np.asarray(u, float)[:self.N]])
+
+    def tip_corner(self, theta):
+        """The bottom edge of the tip, ``r(L) - (t/2) n(L)``, in (x, z) [m]."""
+        tng, nrm, r = self.kinematics(self._full(theta))
+        return r[-1] - 0.5 * self.t * nrm[-1]
+
+    def tip_gap_m(self, theta, gap_m):
+        """Gap between the lowest point of the strip (the tip's bottom edge) and the face [m]."""
+        return float(self.tip_corner(theta)[1] + gap_m)
+
+    def tip_deflection_m(self, theta):
+        """Downward displacement of the tip's centre [m]."""
+        return float(0.5 * self.t - self.kinematics(self._full(theta))[2][-1, 1])
+
+    def bottom_face(self, theta):
+        """Points of the bottom face at the nodes, (N+1, 2) [m]."""
+        tng, nrm, r = self.kinematics(self._full(theta))
+        return r - 0.5 * self.t * nrm
+
+    # ---------------------------------------------------------------- the force
+    def force_and_gradient(self, points_m, gap_m, hessian=True):
+        """Body force (x, z) at 3D points [N/m^3] and its derivative d f_a / d r_b (x, z)."""
+        src = self.magnet_at(gap_m)
+        p = np.asarray(points_m, float)
+        if hessian:
+            hs = self.fd_step
+            offs = np.array([[0, 0, 0], [hs, 0, 0], [-hs, 0, 0], [0, 0, hs], [0, 0, -hs]])
+        else:
+            offs = np.zeros((1, 3))
+        allp = (offs[:, None, :] + p[None, :, :]).reshape(-1, 3)
+        B, grad = sample_field(src, allp)
+        Ha = np.linalg.norm(B, axis=1) / MU0
+        Hin = _internal_field(self.M_of_H, Ha, self.demag)
+        M = _call_M(self.M_of_H, Hin)
+        f = (M[:, None] * grad).reshape(len(offs), -1, 3)[:, :, [0, 2]]
+        if not hessian:
+            return f[0], None
+        H = np.empty(f.shape[1:] + (2,))
+        H[:, :, 0] = (f[1] - f[2]) / (2 * hs)
+        H[:, :, 1] = (f[3] - f[4]) / (2 * hs)
+        H = 0.5 * (H + np.swapaxes(H, 1, 2))
+        return f[0], H
+
+    def _points(self, r, nrm):
+        c = self.eta.size
+        pts = np.empty((self.N + 1, c, 3))
+        pts[..., 0] = r[:, None, 0] + self.eta[None, :] * nrm[:, None, 0]
+        pts[..., 1] = self.yc[None, :]
+        pts[..., 2] = r[:, None, 1] + self.eta[None, :] * nrm[:, None, 1]
+        return pts
+
+    def _loads(self, theta_full, gap_m, hessian=True):
+        tng, nrm, r = self.kinematics(theta_full)
+        c = self.eta.size
+        if self.follower:
+            pts = self._points(r, nrm)
+            f, H = self.force_and_gradient(pts.reshape(-1, 3), gap_m, hessian)
+        else:
+            key = (float(gap_m), hessian)
+            if key not in self._dead_cache:
+                t0, n0, r0 = self.kinematics(np.zeros(self.N + 1))
+                self._dead_cache[key] = self.force_and_gradient(
+                    self._points(r0, n0).reshape(-1, 3), gap_m, hessian)
+            f, H = self._dead_cache[key]
+        f = f.reshape(self.N + 1, c, 2)
+        aw = self.area * self.wq
+        P = aw[:, None] * np.einsum("c,kca->ka", self.omega, f)
+        P[:, 1] -= aw * self.weight_N_m3
+        m = aw[:, None] * np.einsum("c,kca->ka", self.omega * self.eta, f)
+        out = dict(tng=tng, nrm=nrm, r=r, P=P, m=m)
+        if H is not None:
+            H = H.reshape(self.N + 1, c, 2, 2)
+            out["S"] = aw[:, None, None] * np.einsum("c,kcab->kab", self.omega, H)
+            out["S1"] = aw[:, None, None] * np.einsum("c,kcab->kab", self.omega * self.eta, H)
+            out["S2"] = aw[:, None, None] * np.einsum("c,kcab->kab",
+                                                       self.omega * self.eta**2, H)
+        return out
+
+    def magnetic_force_N(self, theta, gap_m):
+        """Net magnetic force on the strip (x, z) [N] (trapezoid over the nodes)."""
+        ld = self._loads(self._full(theta), gap_m, hessian=False)
+        return ld["P"].sum(axis=0) + np.array([0.0, self.area * self.L * self.weight_N_m3])
+
+    def magnetic_moment_about_clamp_Nm(self, theta, gap_m):
+        """Moment of the magnetic forces about the clamp's centre, counter-clockwise in (x, z)
+        [N m], taken at the cross-section points (so it includes the distributed moment)."""
+        th = self._full(theta)
+        tng, nrm, r = self.kinematics(th)
+        pts = self._points(r, nrm)
+        f, _ = self.force_and_gradient(pts.reshape(-1, 3), gap_m, hessian=False)
+        f = f.reshape(pts.shape[0], pts.shape[1], 2)
+        arm = pts[..., [0, 2]] - np.array([0.0, 0.5 * self.t])
+        cross = arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0]
+        return float(self.area * np.sum(self.wq[:, None] * self.omega[None, :] * cross))
+
+    # ---------------------------------------------------------------- systems
+    def _gradient_and_hessian(self, theta_full, gap_m):
+        ld = self._loads(theta_full, gap_m, hessian=True)
+        tng, nrm, P, m = ld["tng"], ld["nrm"], ld["P"], ld["m"]
+        S, S1, S2 = ld["S"], ld["S1"], ld["S2"]
+        C = self.C
+        T = C.T @ P
+        G = -(np.sum(nrm * T, axis=1) - np.sum(tng * m, axis=1))
+        diag = -np.sum(tng * T, axis=1) - np.sum(nrm * m, axis=1)
+        if self.follower:
+            V = C[:, :, None] * nrm[None, :, :]
+            term1 = np.einsum("kja,kab,klb->jl", V, S, V, optimize=True)
+            a = np.einsum("ja,lab,lb->jl", nrm, S1, tng)
+            term2 = -C.T * a
+            tS2t = np.einsum("ja,jab,jb->j", tng, S2, tng)
+            Hm = -(np.diag(diag + tS2t) + term1 + term2 + term2.T)
+        else:
+            Hm = -np.diag(diag)
+        dT = C.T @ S[:, :, 1]
+        Gp = -(np.sum(nrm * dT, axis=1) - np.sum(tng * S1[:, :, 1], axis=1))
+        return G, Hm, Gp
+
+    def system_free(self, u, gap_m):
+        """``(R, J, dR/dg)`` of the free strip; ``u`` = theta_1..N [rad], ``gap_m`` [m]."""
+        th = self._full(u)
+        G, Hm, Gp = self._gradient_and_hessian(th, gap_m)
+        R = self.K @ th[1:] + G[1:]
+        return R, self.K + Hm[1:, 1:], Gp[1:]
+
+    def _gap_derivatives(self, th):
+        c, s = np.cos(th), np.sin(th)
+        d1 = self.C[-1] * c
+        d1[-1] += 0.5 * self.t * s[-1]
+        d2 = -self.C[-1] * s
+        d2[-1] += 0.5 * self.t * c[-1]
+        return d1[1:], d2[1:]
+
+    def system_contact(self, u, gap_m):
+        """``(R, J, dR/dg)`` with the tip on the face; ``u`` = (theta_1..N, contact force [N])."""
+        th = self._full(u)
+        lam = float(u[-1])
+        R0, J0, Rp0 = self.system_free(u[:-1], gap_m)
+        d1, d2 = self._gap_derivatives(th)
+        gamma = self.tip_gap_m(u[:-1], gap_m)
+        n = self.N
+        R = np.concatenate([R0 - lam * d1, [-gamma]])
+        J = np.zeros((n + 1, n + 1))
+        J[:n, :n] = J0 - lam * np.diag(d2)
+        J[:n, n] = -d1
+        J[n, :n] = -d1
+        Rp = np.concatenate([Rp0, [-1.0]])
+        return R, J, Rp
+
+    def stable_contact(self, u, gap_m, J):
+        """Constrained Hessian positive definite on the tangent space of the contact."""
+        n = self.N
+        d1 = -J[n, :n]
+        q, _ = np.linalg.qr(np.column_stack([d1, np.eye(n)[:, :n - 1]]))
+        Z = q[:, 1:]
+        Hc = Z.T @ J[:n, :n] @ Z
+        return bool(np.all(np.linalg.eigvalsh(0.5 * (Hc + Hc.T)) > 0.0))
+
+    def linear_guess(self, gap_m):
+        """One Newton step from the straight strip: theta (N,) [rad]."""
+        R, J, _ = self.system_free(np.zeros(self.N), gap_m)
+        return np.linalg.solve(J, -R)
+
+    def other_clearance_m(self, theta, gap_m):
+        """Smallest height of a bottom-face node other than the tip above the face's plane."""
+        return float(np.min(self.bottom_face(theta)[:-1, 1]) + gap_m)
+
+    def check_no_other_contact(self, theta, gap_m, tol_m):
+        """Raise if a bottom-face node other than the tip lies below the face's plane."""
+        b = self.bottom_face(theta)[:-1]
+        if np.any(b[:, 1] + gap_m < -tol_m):
+            raise PathFollowingError(
+                "the strip reaches the plane of the magnet's face away from its tip: not "
+                f"modelled (gap {gap_m:g} m)", {"gap_m": gap_m, "theta_rad": np.asarray(theta)})
+
+
+# ============================================================================================
+# the sweep
+
+@dataclass(frozen=True, eq=False)
+class PullInResult:
+    """Equilibrium path of the strip against the magnet gap, pull-in and release.
+
+    The path (all traced equilibria, in the order traced: the free branch from a far gap through
+    the fold to the touch point, then the contact branch down to the smallest gap):
+    gap_m (n,) magnet gap [m]; tip_deflection_m (n,) downward deflection of the tip's centre
+    [m]; tip_gap_m (n,) gap between the tip's bottom edge and the face [m] (0 on contact);
+    contact_force_N (n,) [N] (0 on the free branch); branch (n,) "free" | "contact";
+    stable (n,) bool; tip_x_m (n,) x of the tip's bottom edge [m]; tip_over_magnet (n,) bool:
+    that edge lies over the magnet's face (False: beside it, on the plane of the face); theta_rad
+    (n, N+1) cross-section rotations at ``s_m`` (N+1,) [m].
+
+    pull_in_gap_m, pull_in_tip_deflection_m : the fold of the free branch (nan if the range
+    of gaps ends before it); snap : False if the tip reached the face without a fold (then
+    pull-in = release = the touching gap); release_gap_m, release_tip_deflection_m : where the
+    contact force vanishes (the touch point, lift-off; nan if the range ends before it);
+    snap_back_gap_m : opening the gap from contact, where the strip returns to the
+    small-deflection branch it left at pull-in (= release_gap_m unless a stable free branch
+    with the tip hovering near the face exists between them; nan without contact);
+    far_gap_m : the gap the path started from [m]; contact_end_gap_m : where, closing the gap
+    on contact, a second point of the strip's bottom face reaches the face's plane (the strip
+    starts to lie on the magnet: not modelled), or the contact branch turns back (a fold: the
+    tip would slide over the face, not modelled either); the contact branch ends there (nan if
+    it reaches the smallest gap). Sweep gaps beyond it are nan, branch "unmodelled".
+
+    The quasi-static sweep (history: the strip starts straight, the magnet brought from far to
+    the first gap, then moved through the sweep, and back if ``round_trip``):
+    sweep_gap_m, sweep_tip_deflection_m, sweep_tip_gap_m, sweep_contact_force_N, sweep_branch.
+    """
+    gap_m: np.ndarray
+    tip_deflection_m: np.ndarray
+    tip_gap_m: np.ndarray
+    contact_force_N: np.ndarray
+    branch: np.ndarray
+    stable: np.ndarray
+    tip_x_m: np.ndarray
+    tip_over_magnet: np.ndarray
+    theta_rad: np.ndarray
+    s_m: np.ndarray
+    pull_in_gap_m: float
+    pull_in_tip_deflection_m: float
+    snap: bool
+    release_gap_m: float
+    release_tip_deflection_m: float
+    snap_back_gap_m: float
+    far_gap_m: float
+    contact_end_gap_m: float
+    sweep_gap_m: np.ndarray
+    sweep_tip_deflection_m: np.ndarray
+    sweep_tip_gap_m: np.ndarray
+    sweep_contact_force_N: np.ndarray
+    sweep_branch: np.ndarray
+    n_segments: int
+    n_cross: int
+    demag_factor: float
+    follower: bool
+
+    def to_dict(self) -> dict:
+        out = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            out[f.name] = v.tolist() if isinstance(v, np.ndarray) else v
+        return out
+
+
+def _check_sweep(gap_sweep_m):
+    g = np.atleast_1d(np.asarray(check_finite("gap_sweep_m", gap_sweep_m, "m"), float))
+    if g.ndim != 1 or g.size < 1:
+        raise InputError(f"gap_sweep_m must be a 1-D array of gaps [m], got shape {g.shape}")
+    if np.any(g < 0):
+        raise InputError(f"gap_sweep_m: a gap below zero ({g.min():g} m) puts the magnet inside "
+                         f"the strip; gaps must be >= 0 m (strip face to magnet face)")
+    d = np.diff(g)
+    if g.size > 1 and not (np.all(d > 0) or np.all(d < 0)):
+        raise InputError("gap_sweep_m must be strictly monotonic (all increasing or all "
+                         "decreasing) [m]; run two sweeps for a round trip (or round_trip=True)")
+    return g
+
+
+def _solve_at(system, u_guess, gap, tol, r_scale, max_newton=30):
+    u = np.asarray(u_guess, float).copy()
+    for _ in range(max_newton):
+        R, J, _ = system(u, gap)
+        du = np.linalg.solve(J, -R)
+        u = u + du
+        if np.max(np.abs(R / r_scale)) < tol and np.max(np.abs(du[:-1] if u.size > 1
+                                                               else du)) < 1e-10:
+            return u
+    R, J, _ = system(u, gap)
+    if np.max(np.abs(R / r_scale)) < 1e3 * tol:
+        return u
+    raise PathFollowingError(f"Newton did not converge at the sweep gap {gap:g} m",
+                             {"gap_m": gap, "u": u})
+
+
+def _interp_branch(p, u, g):
+    """u at g on a branch segment monotone in p (p decreasing or increasing)."""
+    order = np.argsort(p)
+    return np.array([np.interp(g, p[order], u[order, j]) for j in range(u.shape[1])])
+
+
+def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagnet, M_of_H,
+                 gap_sweep_m=None, *, round_trip: bool = True, n_segments: int = 32,
+                 n_cross: int = 3, demag_factor: float = 0.0, gravity_m_s2: float = 0.0,
+                 follower: bool = True, plate: bool = False, far_gap_m: float | None = None,
+                 ds_max: float = 0.05) -> PullInResult:
+    """Tip deflection of the strip against the magnet gap, with pull-in, contact and release.
+
+    Parameters
+    ----------
+    strip, material : the strip [m] and its elastic constants (E [Pa], nu, density)
+    magnet : PermanentMagnet -- axis along z; its ``position_m`` x and y place its axis (use
+        :func:`place_magnet` for the default, centred under the tip end); with ``gap_sweep_m``
+        its z is ignored, without it the magnet's position is the start (and must not overlap
+        the strip)
+    M_of_H : callable -- ``M_eff(H)`` [A/m]
+    gap_sweep_m : array_like or None -- magnet gaps [m], >= 0, strictly monotonic (the
+        strip's bottom face at the tip to the magnet's top face); None: from the magnet's
+        position down to 0 (contact), 33 gaps
+    round_trip : bool -- the sweep is run forward then back (the hysteresis loop)
+    n_segments, n_cross, demag_factor, gravity_m_s2, follower, plate : see
+        :class:`MagnetElastica`
+    far_gap_m : the gap the path starts from (default: found, from the largest gap of the
+        sweep up, such that the linear tip deflection is < 2 % of the gap)
+    ds_max : largest arc-length step (scaled: gap / L and rms rotation [rad])
+
+    Returns
+    -------
+    PullInResult
+
+    Raises
+    ------
+    InputError -- bad parameters, the magnet overlapping the strip at the start, a gap < 0, a
+        sweep that is not monotonic, the tip not over the magnet's face, the magnet not along z
+    PathFollowingError -- the path could not be followed (``last_converged`` holds the last
+        converged state)
+    """
+    _check_axis_z(magnet)
+    if not isinstance(strip, Strip):
+        raise InputError(f"strip must be a Strip, got {type(strip).__name__}")
+    if gap_sweep_m is None:
+        _check_overlap(magnet, strip)
+        g0 = -(magnet.position_m[2] + _half_height(magnet))
+        if g0 < 0:
+            raise InputError(f"the magnet at position_m={magnet.position_m} overlaps the strip "
+                             f"(its top face is {-g0:g} m above the strip's bottom face)")
+        gaps = np.linspace(g0, 0.0, 33)
+    else:
+        gaps = _check_sweep(gap_sweep_m)
+        _check_overlap(place_magnet_xy(magnet, gaps[0]), strip)
+    model = MagnetElastica(strip, material, magnet, M_of_H, n_segments=n_segments,
+                           n_cross=n_cross, demag_factor=demag_factor,
+                           gravity_m_s2=gravity_m_s2, follower=follower, plate=plate)
+    L = strip.length_m
+    g_max, g_min = float(gaps.max()), float(gaps.min())
+    # the start: a gap where the strip is nearly straight
+    if far_gap_m is None:
+        g_far = max(g_max, 0.25 * L)
+        for _ in range(40):
+            th = model.linear_guess(g_far)
+            if model.tip_deflection_m(th) < 0.02 * g_far:
+                break
+            g_far *= 1.5
+        else:
+            raise PathFollowingError("no far gap with a small deflection found", {})
+    else:
+        g_far = check_positive("far_gap_m", far_gap_m, "m")
+        if g_far < g_max:
+            raise InputError(f"far_gap_m ({g_far:g} m) must be >= the largest gap of the sweep "
+                             f"({g_max:g} m)")
+    rs_free = model.EI / L
+    tol_gap = 1e-9 * L
+    common = dict(ds=0.02, ds_max=ds_max, u_scale=math.sqrt(model.N), p_scale=L,
+                  ftol=1e-9, xtol=1e-10)
+    free = trace_branch(model.system_free, model.linear_guess(g_far), g_far, direction=-1.0,
+                        p_min=g_min, p_max=4.0 * g_far, r_scale=rs_free,
+                        events=[("touch", lambda u, p: model.tip_gap_m(u, p))], **common)
+    if free.event is not None and free.event.name == "p_max":
+        raise PathFollowingError("the free branch left the range of gaps without touching the "
+                                 "magnet", {"gap_m": float(free.p[-1]), "theta_rad": free.u[-1]})
+    for k in range(len(free.p)):
+        model.check_no_other_contact(free.u[k], free.p[k], 1e-6 * strip.thickness_m)
+    touched = free.event is not None and free.event.name == "touch"
+    # contact branch: the tip on the plane of the magnet's face, from the touch gap down
+    if touched:
+        g_touch = float(free.event.p)
+        release_gap, release_defl = g_touch, model.tip_deflection_m(free.event.u)
+    else:
+        g_touch = release_gap = release_defl = math.nan
+    rs_contact = np.concatenate([np.full(model.N, rs_free), [L]])
+    if touched and g_touch > g_min + tol_gap:
+        # the contact force's scale: the magnetic pull at the touch point (it can exceed the
+        # elastic forces ~EI/L^2 by orders of magnitude)
+        ls = max(model.EI / L**2, abs(model.magnetic_force_N(free.event.u, g_touch)[1]))
+        u0 = np.concatenate([free.event.u, [0.0]])
+        us = np.concatenate([np.full(model.N, math.sqrt(model.N)), [ls]])
+        contact = trace_branch(model.system_contact, u0, g_touch, direction=-1.0,
+                               p_min=g_min, r_scale=rs_contact,
+                               events=[("other_contact",
+                                        lambda u, p: model.other_clearance_m(u[:-1], p))],
+                               stability=lambda u, p, J: (u[-1] >= -1e-9 * ls
+                                                          and model.stable_contact(u, p, J)),
+                               stop_at_fold=True, max_steps=400,
+                               **{**common, "u_scale": us})
+        if contact.event is not None and contact.event.name in ("other_contact", "fold"):
+            contact_end_gap = float(contact.event.p)
+        else:
+            contact_end_gap = math.nan
+    else:
+        contact = None
+        contact_end_gap = math.nan
+
+    # the path: the free branch, then the contact branch
+    th_rows, gap_l, lam_l, br_l, st_l = [], [], [], [], []
+    for k in range(len(free.p)):
+        th_rows.append(free.u[k])
+        gap_l.append(free.p[k])
+        lam_l.append(0.0)
+        br_l.append("free")
+        st_l.append(bool(free.stable[k]))
+    if contact is not None:
+        for k in range(len(contact.p)):
+            th_rows.append(contact.u[k, :-1])
+            gap_l.append(contact.p[k])
+            lam_l.append(contact.u[k, -1])
+            br_l.append("contact")
+            st_l.append(bool(contact.stable[k]))
+    th = np.array(th_rows)
+    gap_arr = np.array(gap_l)
+    lam_arr = np.array(lam_l)
+    br_arr = np.array(br_l)
+    st_arr = np.array(st_l, bool)
+    defl = np.array([model.tip_deflection_m(x) for x in th])
+    tgap = np.array([model.tip_gap_m(x, g) for x, g in zip(th, gap_arr)])
+    tip_x = np.array([model.tip_corner(x)[0] for x in th])
+    over = _over_face(model.magnet, tip_x, 0.0, strip.width_m)
+
+    # stable segments: runs of stable points of one branch, each monotone in the gap
+    segs = []
+    k = 0
+    while k < len(gap_arr):
+        if not st_arr[k]:
+            k += 1
+            continue
+        j = k
+        while j + 1 < len(gap_arr) and st_arr[j + 1] and br_arr[j + 1] == br_arr[k]:
+            j += 1
+        segs.append((k, j))
+        k = j + 1
+    if not segs or segs[0][0] != 0:
+        raise PathFollowingError("the far end of the free branch is not stable",
+                                 {"gap_m": g_far, "theta_rad": free.u[0]})
+    lo = [float(gap_arr[a:b + 1].min()) for a, b in segs]
+    hi = [float(gap_arr[a:b + 1].max()) for a, b in segs]
+    eps = 1e-12 * L
+
+    def contains(i, g):
+        return lo[i] - eps <= g <= hi[i] + eps
+
+    def move(i, g, closing):
+        """The stable segment holding the state at gap g, coming from segment i."""
+        if contains(i, g):
+            return i
+        order = range(i + 1, len(segs)) if closing else range(i - 1, -1, -1)
+        for j in order:
+            if contains(j, g):
+                return j
+        raise PathFollowingError(f"no stable state at the gap {g:g} m on the traced path",
+                                 {"gap_m": g})
+
+    # pull-in: where the first (small-deflection) segment ends as the gap closes
+    a0, b0 = segs[0]
+    first_fold = next((lp for lp in free.limit_points if lp.index == b0 + 1
+                       or lp.index == b0), None)
+    if first_fold is not None:
+        pull_in_gap, pull_in_defl, snap = float(first_fold.p), \
+            model.tip_deflection_m(first_fold.u), True
+    elif touched and b0 == free.event.index:
+        # the tip reached the face on the stable branch: contact without a snap
+        pull_in_gap, pull_in_defl, snap = g_touch, release_defl, False
+    else:
+        pull_in_gap = pull_in_defl = math.nan
+        snap = False
+    # snap-back: from contact, opening the gap, the gap at which the state returns to the
+    # first segment
+    snap_back = math.nan
+    cseg = [i for i, (a, b) in enumerate(segs) if br_arr[a] == "contact"]
+    if cseg:
+        i = cseg[0]
+        while i != 0:
+            g_end = hi[i] * (1 + 1e-12)
+            i_new = move(i, g_end, closing=False)
+            if i_new == 0:
+                snap_back = hi[i]
+            i = i_new
+
+    # the quasi-static sweep
+    fwd = [float(g) for g in gaps]
+    legs = fwd + (fwd[-2::-1] if round_trip and len(fwd) > 1 else [])
+    seg = 0
+    g_prev = g_far
+    sw_def, sw_tg, sw_lam, sw_br = [], [], [], []
+    for g in legs:
+        closing = g < g_prev
+        if seg is not None and not contains(seg, g):
+            cands = range(seg + 1, len(segs)) if closing else range(seg - 1, -1, -1)
+            seg = next((j for j in cands if contains(j, g)), None)
+        elif seg is None and not closing:
+            # from beyond the modelled contact (the strip lying on the face), opening the gap
+            seg = next((j for j in range(len(segs) - 1, -1, -1) if contains(j, g)), None)
+        g_prev = g
+        if seg is None:
+            sw_def.append(math.nan)
+            sw_tg.append(math.nan)
+            sw_lam.append(math.nan)
+            sw_br.append("unmodelled")
+            continue
+        a, b = segs[seg]
+        guess = _interp_branch(gap_arr[a:b + 1], np.column_stack([th[a:b + 1],
+                                                                  lam_arr[a:b + 1]]), g)
+        if br_arr[a] == "free":
+            u = _solve_at(model.system_free, guess[:-1], g, 1e-9, rs_free)
+            lam = 0.0
+        else:
+            u = _solve_at(model.system_contact, guess, g, 1e-9, rs_contact)
+            u, lam = u[:-1], float(u[-1])
+        sw_def.append(model.tip_deflection_m(u))
+        sw_tg.append(model.tip_gap_m(u, g))
+        sw_lam.append(lam)
+        sw_br.append(str(br_arr[a]))
+
+    arrays = dict(gap_m=gap_arr, tip_deflection_m=defl, tip_gap_m=tgap,
+                  contact_force_N=lam_arr, branch=br_arr, stable=st_arr,
+                  tip_x_m=tip_x, tip_over_magnet=over,
+                  theta_rad=np.column_stack([np.zeros(len(th)), th]), s_m=model.s.copy(),
+                  sweep_gap_m=np.array(legs, float), sweep_tip_deflection_m=np.array(sw_def),
+                  sweep_tip_gap_m=np.array(sw_tg), sweep_contact_force_N=np.array(sw_lam),
+                  sweep_branch=np.array(sw_br))
+    for arr in arrays.values():
+        arr.flags.writeable = False
+    return PullInResult(**arrays, pull_in_gap_m=pull_in_gap,
+                        pull_in_tip_deflection_m=pull_in_defl, snap=snap,
+                        release_gap_m=release_gap, release_tip_deflection_m=release_defl,
+                        snap_back_gap_m=snap_back, far_gap_m=g_far,
+                        contact_end_gap_m=contact_end_gap,
+                        n_segments=model.N, n_cross=model.n_cross,
+                        demag_factor=model.demag, follower=model.follower)
+
+
+def place_magnet_xy(magnet, gap_m):
+    """The magnet at its own x, y with its top face ``gap_m`` below ``z = 0``."""
+    x, y, _ = magnet.position_m
+    return dataclasses.replace(magnet, position_m=(x, y, -gap_m - _half_height(magnet)))
+
+
+# ============================================================================================
+# one-mode Galerkin reduced-order model (an independent estimate of the pull-in gap)
+
+@dataclass(frozen=True)
+class OneModeResult:
+    """One-mode model: ``k q = F(q, g)``. pull_in_gap_m, pull_in_tip_deflection_m [m];
+    stiffness_N_m = k [N/m]; contact_gap_m: the gap at which the tip reaches the face on the
+    unstable branch (the release gap of this model) [m]."""
+    pull_in_gap_m: float
+    pull_in_tip_deflection_m: float
+    stiffness_N_m: float
+    contact_gap_m: float
+
+
+def one_mode_pullin(strip: Strip, material: ElasticMaterial, magnet: PermanentMagnet, M_of_H,
+                    *, n_cross: int = 3, demag_factor: float = 0.0, n_quad: int = 64,
+                    plate: bool = False) -> OneModeResult:
+    """Pull-in gap of a one-mode Galerkin (Rayleigh-Ritz) model of the strip and magnet.
+
+    Mode: the clamped-free beam under uniform load, ``phi(x) = (6 L^2 x^2 - 4 L x^3 + x^4) /
+    (3 L^4)`` (``phi(L) = 1``); displacement ``-q phi(x)`` along z (small rotations, no
+    shortening), so ``q`` is the tip deflection. Stiffness ``k = EI int phi''^2 = 3.2 EI /
+    L^3`` (the exact tip stiffness under a tip load is 3 EI / L^3: one mode is stiffer).
+    Generalized magnetic force ``F(q, g) = w t int_0^L <-f_z>(x, z - q phi) phi dx``, the field
+    at the displaced cross-section points (Gauss-Legendre, ``n_quad`` points along x,
+    ``n_cross^2`` over the section). Equilibrium ``k q = F``: ``g(q)`` by Brent's method for
+    each q; pull-in = ``min_q g(q)`` (bounded Brent), the unstable branch ending where the tip
+    reaches the face (``q = g``).
+    """
+    _check_axis_z(magnet)
+    L, w, t = strip.length_m, strip.width_m, strip.thickness_m
+    EI = bending_stiffness_N_m2(w, t, material.E_Pa, material.nu, plate)
+    k = 3.2 * EI / L**3
+    xg, wg = np.polynomial.legendre.leggauss(int(n_quad))
+    x = 0.5 * L * (1 + xg)
+    wx = 0.5 * L * wg
+    phi = (6 * L**2 * x**2 - 4 * L * x**3 + x**4) / (3 * L**4)
+    gx, gw = np.polynomial.legendre.leggauss(int(n_cross))
+    Y, Z = np.meshgrid(0.5 * w * (1 + gx), 0.5 * t * (1 + gx), indexing="ij")
+    om = (np.outer(gw, gw) / 4.0).ravel()
+    pts0 = np.empty((x.size, om.size, 3))
+    pts0[..., 0] = x[:, None]
+    pts0[..., 1] = Y.ravel()[None, :]
+    pts0[..., 2] = Z.ravel()[None, :]
+    N = check_range("demag_factor", demag_factor, 0.0, 1.0, "")
+
+    def F(q, g):
+        src = place_magnet_xy(magnet, g)
+        p = pts0.copy()
+        p[..., 2] -= q * phi[:, None]
+        B, grad = sample_field(src, p.reshape(-1, 3))
+        Ha = np.linalg.norm(B, axis=1) / MU0
+        M = _call_M(M_of_H, _internal_field(M_of_H, Ha, N))
+        fz = -(M * grad[:, 2]).reshape(p.shape[:2])
+        return w * t * float(np.sum(wx * phi * (fz @ om)))
+
+    def g_of_q(q):
+        # F decreases with the gap; at the touching gap g = q the force is largest
+        lo, hi = q * (1 + 1e-12) + 1e-12 * L, max(2 * q, L)
+        if k * q > F(q, lo):
+            return math.nan
+        while k * q < F(q, hi):
+            hi *= 2.0
+        return brentq(lambda g: F(q, g) - k * q, lo, hi, xtol=1e-14 * L, rtol=1e-13)
+
+    # the end of the branch: k q = F(q, q)
+    q_hi = 1e-6 * L
+    while k * q_hi < F(q_hi, q_hi * (1 + 1e-12) + 1e-12 * L):
+        q_hi *= 1.5
+        if q_hi > 10 * L:
+            raise PathFollowingError("one-mode model: no end of the free branch found", {})
+    q_end = brentq(lambda q: k * q - F(q, q * (1 + 1e-12) + 1e-12 * L), q_hi / 1.5, q_hi,
+                   xtol=1e-14 * L)
+    res = minimize_scalar(lambda q: g_of_q(q), bounds=(1e-9 * L, q_end * (1 - 1e-9)),
+                          method="bounded", options={"xatol": 1e-10 * L})
+    return OneModeResult(float(res.fun), float(res.x), k, float(q_end))
