@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import collections
 import contextlib
 import datetime as _dt
 import errno
@@ -490,8 +491,7 @@ def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, c
             print(f"mapsim: {note}", file=sys.stderr)
     tasks = study.tasks()
     keys = [t.key(evaluator.id) for t in tasks]
-    todo = [(t, k) for t, k in zip(tasks, keys)
-            if _read_part(_part_path(parts, t, k), k, t.seed_int()) is None]
+    todo = _parts_to_compute(parts, tasks, keys)
     n_done = len(tasks) - len(todo)
     failures = []
     if todo:
@@ -586,6 +586,30 @@ def _failure_of(exc: BaseException) -> _Failure:
     if isinstance(exc, _CANCELLED) or name == "CommClosedError":
         return _Failure(_LOST, "the connection to the Dask scheduler was lost", False)
     return _Failure(name, (str(exc).strip().splitlines() or [""])[0], False)
+
+
+def _parts_to_compute(parts: Path, tasks, keys) -> list:
+    """The (task, key) pairs without a usable stored part, in task order. A part that cannot
+    be read or fails :func:`check_part` is quarantined by :func:`_read_part`; a readable part
+    that holds other quantities than most stored parts (an edited or foreign part: the table
+    could never be aggregated) is quarantined here, and all of them are recomputed."""
+    held = {}
+    todo = []
+    for i, (t, k) in enumerate(zip(tasks, keys)):
+        res = _read_part(_part_path(parts, t, k), k, t.seed_int())
+        if res is None:
+            todo.append(i)
+        else:
+            held[i] = frozenset(q for q in res if q != "__seed__")
+    if held:
+        common = collections.Counter(held.values()).most_common(1)[0][0]
+        for i, qs in held.items():
+            if qs != common:
+                _quarantine(_part_path(parts, tasks[i], keys[i]),
+                            f"ValueError: its quantities differ from the other parts "
+                            f"({', '.join(sorted(qs ^ common))})")
+                todo.append(i)
+    return [(tasks[i], keys[i]) for i in sorted(todo)]
 
 
 def _raise_failures(failures, n_tasks: int, parts: Path):

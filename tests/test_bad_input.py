@@ -230,3 +230,27 @@ def test_untrusted_parts_are_quarantined_and_recomputed(study, client1, tmp_path
     assert np.array_equal(na, nb)
     for k in va:
         assert np.array_equal(va[k], vb[k]), k
+
+
+def test_part_with_other_quantities_is_quarantined(study, client1, tmp_path, capsys):
+    """Issue 38: a readable part that lacks a quantity the other parts hold (edited, or from
+    another version) would make every resume fail in the aggregation; it is quarantined and
+    recomputed instead."""
+    ref = tmp_path / "ref.h5"
+    run_batch(study, ref, client=client1, progress=False)
+    out = tmp_path / "t.h5"
+    parts = parts_dir_for(out)
+    parts.mkdir()
+    for p in parts_dir_for(ref).iterdir():
+        (parts / p.name).write_bytes(p.read_bytes())
+    name = sorted(p.name for p in parts.glob("*.npz"))[3]
+    with np.load(parts / name) as z:
+        arrays = {k: z[k] for k in z.files if k != "q_phi_eff"}
+    with open(parts / name, "wb") as fh:
+        np.savez(fh, **arrays)
+    run_batch(study, out, client=client1, progress=False)
+    assert [p.name for p in (parts / "quarantine").iterdir()] == [name]
+    assert "the other parts" in capsys.readouterr().err
+    (va, na), (vb, nb) = _values(ref), _values(out)
+    for k in va:
+        assert np.array_equal(va[k], vb[k]), k
