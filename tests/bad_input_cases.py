@@ -1037,9 +1037,9 @@ def report(outcomes: list, baseline: tuple | None = None) -> str:
         "in one line; `--out` of another study's table is refused unless `--clean`;",
         "- the numba cache falls back to a private temporary directory only when neither the "
         "source tree nor the user cache can be written;",
-        "- batch resume (issue 38): a part whose values are NaN, a part of another seed and a "
-        "FIFO among the parts are quarantined (the FIFO never opened) and recomputed; the table "
-        "equals the uninterrupted one;",
+        "- batch resume (issue 38): a part whose values are NaN, a part of another seed, a "
+        "part with other quantities than the rest and a FIFO among the parts are quarantined "
+        "(the FIFO never opened) and recomputed; the table equals the uninterrupted one;",
         "- the shared roots (tests/test_input_roots.py): `check_slender` (beam: length >= 4 x "
         "thickness; channel: d >= 4 b, c <= 10 a, wall >= 0.1 (b + c)), `check_header` (a "
         "repeated column, count and weight both given), `open_regular` (never blocks on a FIFO), "
