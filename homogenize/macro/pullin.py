@@ -802,6 +802,24 @@ def _solve_at(system, u_guess, gap, tol, r_scale, max_newton=30):
                              {"gap_m": gap, "u": u})
 
 
+def _solve_damped(system, u, p, r_scale, max_it=80, max_step_rad=0.1):
+    """Newton at fixed p with the rotation update limited to ``max_step_rad``."""
+    u = np.asarray(u, float).copy()
+    for _ in range(max_it):
+        R, J, _ = system(u, p)
+        try:
+            du = np.linalg.solve(J, -R)
+        except np.linalg.LinAlgError:
+            break
+        u = u + min(1.0, max_step_rad / max(np.abs(du[:-1]).max(), 1e-300)) * du
+        if not np.all(np.isfinite(u)):
+            break
+        if np.abs(du[:-1]).max() < 1e-12 and np.max(np.abs(R / r_scale)) < 1e-8:
+            return u
+    raise PathFollowingError(f"no contact equilibrium found at the gap {p:g} m",
+                             {"gap_m": p, "u": u})
+
+
 def _interp_branch(p, u, g):
     """u at g on a branch segment monotone in p (p decreasing or increasing)."""
     order = np.argsort(p)
@@ -890,34 +908,55 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     for k in range(len(free.p)):
         model.check_no_other_contact(free.u[k], free.p[k], 1e-6 * strip.thickness_m)
     touched = free.event is not None and free.event.name == "touch"
-    # contact branch: the tip on the plane of the magnet's face, from the touch gap down
-    if touched:
-        g_touch = float(free.event.p)
-        release_gap, release_defl = g_touch, model.tip_deflection_m(free.event.u)
+    g_touch = float(free.event.p) if touched else math.nan
+    if free.limit_points:
+        g_lost = float(free.limit_points[0].p)
     else:
-        g_touch = release_gap = release_defl = math.nan
+        g_lost = g_touch
+    # contact branch: the tip on the plane of the magnet's face. It is started at the smallest
+    # gap (the strip lands there after the snap) and followed opening the gap until the contact
+    # force vanishes (release), the branch folds (the contact state disappears: release by a
+    # snap-off) or a second point reaches the face
     rs_contact = np.concatenate([np.full(model.N, rs_free), [L]])
-    if touched and g_touch > g_min + tol_gap:
-        # the contact force's scale: the magnetic pull at the touch point (it can exceed the
-        # elastic forces ~EI/L^2 by orders of magnitude)
-        ls = max(model.EI / L**2, abs(model.magnetic_force_N(free.event.u, g_touch)[1]))
-        u0 = np.concatenate([free.event.u, [0.0]])
+    contact = None
+    contact_end_gap = release_gap = release_defl = math.nan
+    if np.isfinite(g_lost) and g_min < g_lost - tol_gap:
+        ls = max(model.EI / L**2, abs(model.magnetic_force_N(np.zeros(model.N), g_min)[1]))
         us = np.concatenate([np.full(model.N, math.sqrt(model.N)), [ls]])
-        contact = trace_branch(model.system_contact, u0, g_touch, direction=-1.0,
-                               p_min=g_min, r_scale=rs_contact,
-                               events=[("other_contact",
-                                        lambda u, p: model.other_clearance_m(u[:-1], p))],
-                               stability=lambda u, p, J: (u[-1] >= -1e-9 * ls
-                                                          and model.stable_contact(u, p, J)),
-                               stop_at_fold=True, max_steps=400,
-                               **{**common, "u_scale": us})
-        if contact.event is not None and contact.event.name in ("other_contact", "fold"):
-            contact_end_gap = float(contact.event.p)
+        s_n = model.s[1:]
+        u_start = None
+        for frac in np.linspace(0.0, 0.9, 10):
+            g_start = g_min + frac * (g_lost - g_min)
+            d = g_start
+            th0 = -(3 * d / (2 * L**3)) * (2 * L * s_n - s_n**2)
+            try:
+                u_try = _solve_damped(model.system_contact, np.concatenate([th0, [0.1 * ls]]),
+                                      g_start, rs_contact)
+            except PathFollowingError:
+                continue
+            if u_try[-1] > 0 and model.other_clearance_m(u_try[:-1], g_start) > 0:
+                u_start = u_try
+                break
+        if u_start is not None:
+            if frac > 0:
+                contact_end_gap = g_start
+            contact = trace_branch(
+                model.system_contact, u_start, g_start, direction=1.0, p_max=g_far,
+                r_scale=rs_contact,
+                events=[("release", lambda u, p: u[-1]),
+                        ("other_contact", lambda u, p: model.other_clearance_m(u[:-1], p))],
+                stability=lambda u, p, J: (u[-1] >= -1e-9 * ls
+                                           and model.stable_contact(u, p, J)),
+                stop_at_fold=True, max_steps=400, **{**common, "u_scale": us})
+            if contact.event is not None and contact.event.name in ("release", "fold"):
+                release_gap = float(contact.event.p)
+                release_defl = model.tip_deflection_m(contact.event.u[:-1])
+            # in the order of the path: closing the gap
+            contact = dataclasses.replace(contact, u=contact.u[::-1], p=contact.p[::-1],
+                                          dp_ds=-contact.dp_ds[::-1],
+                                          stable=contact.stable[::-1])
         else:
-            contact_end_gap = math.nan
-    else:
-        contact = None
-        contact_end_gap = math.nan
+            contact_end_gap = g_lost
 
     # the path: the free branch, then the contact branch
     th_rows, gap_l, lam_l, br_l, st_l = [], [], [], [], []
@@ -986,7 +1025,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
             model.tip_deflection_m(first_fold.u), True
     elif touched and b0 == free.event.index:
         # the tip reached the face on the stable branch: contact without a snap
-        pull_in_gap, pull_in_defl, snap = g_touch, release_defl, False
+        pull_in_gap, pull_in_defl, snap = g_touch, model.tip_deflection_m(free.event.u), False
     else:
         pull_in_gap = pull_in_defl = math.nan
         snap = False
@@ -997,7 +1036,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     if cseg:
         i = cseg[0]
         while i != 0:
-            g_end = hi[i] * (1 + 1e-12)
+            g_end = hi[i] + 1e-9 * L
             i_new = move(i, g_end, closing=False)
             if i_new == 0:
                 snap_back = hi[i]

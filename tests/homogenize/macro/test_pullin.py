@@ -174,3 +174,41 @@ def test_bad_input():
     far = PermanentMagnet("cylinder", (10e-3, 10e-3), 1.3, position_m=(5e-3, 2.5e-3, -0.02))
     with pytest.raises(InputError, match="tip"):
         MagnetElastica(STRIP, SOFT, far, M_OF_H)
+
+
+# ------------------------------------------------------------------ the whole sweep
+
+def test_pullin_sweep_round_trip_hysteresis():
+    mag = place_magnet(MAGNET, STRIP, 12e-3)
+    gaps = np.linspace(12e-3, 3e-3, 10)
+    r = pullin_sweep(STRIP, STIFF, mag, M_OF_H, gaps, n_segments=16, n_cross=2,
+                     demag_factor=NZ)
+    # the same fold as the free-branch trace alone (same discretization, Brent-located)
+    g16, d16 = _fold(16)
+    assert r.snap and r.pull_in_gap_m == pytest.approx(g16, rel=1e-9)
+    assert r.pull_in_tip_deflection_m == pytest.approx(d16, rel=1e-6)
+    # hysteresis: the contact is released at a larger gap than the pull-in
+    assert r.release_gap_m > r.pull_in_gap_m
+    # on contact the tip gap is zero (Lagrange multiplier, Newton tolerance 1e-9 relative to
+    # the residual scale: 1e-9 L), the contact force positive; free states keep a positive gap
+    c = r.sweep_branch == "contact"
+    assert c.any() and (~c).any()
+    np.testing.assert_allclose(r.sweep_tip_gap_m[c], 0.0, atol=1e-9 * L)
+    assert np.all(r.sweep_contact_force_N[c] > 0) and np.all(r.sweep_tip_gap_m[~c] > 0)
+    # approach: free above the pull-in gap, contact below; retreat: contact up to the release
+    n = len(gaps)
+    fwd, back = r.sweep_gap_m[:n], r.sweep_gap_m[n - 1:]
+    assert np.all((r.sweep_branch[:n] == "contact") == (fwd < r.pull_in_gap_m))
+    assert np.all((r.sweep_branch[n - 1:] == "contact") == (back < r.release_gap_m))
+    # the contact force at 5 mm equals the direct contact solve of the contact test (same
+    # model, Newton to round-off)
+    k5 = int(np.argmin(np.abs(r.sweep_gap_m - 5e-3)))
+    m = MagnetElastica(STRIP, STIFF, place_magnet(MAGNET, STRIP, 5e-3), M_OF_H, n_segments=16,
+                       n_cross=2, demag_factor=NZ)
+    s = m.s[1:]
+    u = _newton(m.system_contact, np.concatenate(
+        [-(3 * 5e-3 / (2 * L**3)) * (2 * L * s - s**2), [0.01]]), 5e-3)
+    assert r.sweep_contact_force_N[k5] == pytest.approx(u[-1], rel=1e-7)
+    # the path: stable free states before the fold, unstable after it
+    free = r.branch == "free"
+    assert r.stable[0] and not r.stable[free][-1]
