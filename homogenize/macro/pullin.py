@@ -42,11 +42,15 @@ the equilibria themselves do not depend on the Jacobian's accuracy. Moving the m
 is the z column of ``d f / d r``, no extra field evaluation.
 
 *Contact.* The lowest point of the bent strip is the bottom edge of its tip, ``r(L) - (t/2)
-n(L)``; its gap to the magnet's top face (the plane ``z = -g``), ``gamma = z_corner + g``, must
-stay >= 0. On contact ``gamma = 0`` is enforced with a Lagrange multiplier (exact: the tip gap is
-zero to the Newton tolerance, no penalty parameter), the multiplier being the contact force
-[N], >= 0. Contact away from the tip (a magnet under mid-span) is not modelled: it is refused
-(the tip must lie over the magnet's top face) and checked along the path.
+n(L)``; its gap to the plane of the magnet's top face (``z = -g``), ``gamma = z_corner + g``,
+must stay >= 0. On contact ``gamma = 0`` is enforced with a Lagrange multiplier (exact: the tip
+gap is zero to the Newton tolerance, no penalty parameter), the multiplier being the contact
+force [N], >= 0; the contact is frictionless (the tip may slide on the plane). The contact
+surface is the whole PLANE of the face (a magnet flush in a holder plate): the strip shortens
+as it bends, and with a soft strip the tip reaches the plane near or beyond the magnet's rim
+(``PullInResult.tip_over_magnet`` says where; contact with the rim's edge itself is not
+modelled). Contact of any other point of the bottom face with the plane (the strip starting to
+lie on the magnet) is not modelled: the contact branch ends there (``contact_end_gap_m``).
 
 Path following
 --------------
@@ -62,24 +66,35 @@ monotone control variable. The cantilever is traced as follows:
 
 1. the free branch from a far gap (where the strip is nearly straight, the force tiny) towards
    smaller gaps: stable until the fold, the pull-in gap ``g*``; past it the unstable branch
-   comes back to larger gaps as the tip approaches the magnet, until the tip touches the face
-   (``gamma = 0``) at ``g_r``;
-2. the contact branch from ``g_r`` down to the smallest gap asked for: the contact force rises
-   from 0 at ``g_r``. On the way back (gap increasing) the strip stays in contact until the
-   contact force vanishes, at ``g_r``: the release gap, ``g_r > g*`` (hysteresis).
+   comes back to larger gaps as the tip approaches the magnet, until the tip touches the plane
+   of the face (``gamma = 0``);
+2. the contact branch, started at the smallest gap asked for (Newton from a tip-load shape
+   resting on the face, damped) and followed opening the gap until the contact force
+   vanishes: the release gap ``g_r`` (or until the branch folds: a snap-off there). For the
+   20 MPa strip of the tests it ends exactly where the unstable free branch touched the face
+   (the two branches meet at zero contact force), and ``g_r > g*``: the hysteresis. Opening
+   further, the strip returns to the small-deflection branch (``snap_back_gap_m``). For the
+   soft 2 MPa strip of the realistic case the tip-only contact branch folds below the pull-in
+   gap (``release_by``): that case needs the strip lying on the magnet (not modelled).
 
+The quasi-static sweep moves along stable segments and jumps, at the end of one, to the next
+stable segment containing the gap (towards the magnet when closing, away when opening).
 If the tip reaches the face before any fold (a weak magnet, a stiff strip), there is no snap:
 pull-in gap = release gap = that gap (``snap`` False).
 
 Units: SI (m, N, Pa, T, A/m); names carry them.
 
-Realistic case (``docs`` of issue 35)
--------------------------------------
+Realistic case (issue 35)
+-------------------------
 Strip 20 x 5 x 1 mm, E = 2 MPa (the seed's PDMS), 3 vol% iron, ``M_eff = min(0.1 H_in,
 0.03 Ms_Fe)`` with the strip's demagnetizing factor across its thickness (``N_z`` = 0.77,
 :func:`micro.demag.prism_demag_factors`), NdFeB cylinder 10 mm x 10 mm, ``B_r`` = 1.3 T, axis
-along z, centred under the tip: see :data:`REALISTIC_CASE` for the numbers found (pull-in and
-release gaps); the test module reproduces them at a coarse discretization.
+along z, centred under the tip, no self-weight, ``n_cross`` = 3: the pull-in gap is 11.33 /
+11.32 / 11.317 mm at 16 / 32 / 64 segments (second-order convergence; extrapolated 11.316 mm)
+with 3.08 mm of tip deflection at the fold; the tip deflects 2 mm at a gap of 11.55 mm. The
+one-mode Galerkin model gives 11.44 mm (+1.1 %). With E = 1 MPa: 12.94 mm (3.41 mm), 2 mm at
+13.29 mm (one mode: 13.10 mm). The user's fixed-point estimate (snap at ~12.3 mm, 2 mm at
+~12.6 mm) lies between the two moduli. See :data:`REALISTIC_CASE` for the contact side.
 
 CLI wiring
 ----------
@@ -127,12 +142,23 @@ __all__ = ["BranchTrace", "LimitPoint", "EventPoint", "PathFollowingError", "tra
 #: for Newton, whose converged point does not depend on it.
 FD_HESSIAN_REL = 1e-3
 
-#: the numbers this module finds for the realistic case of issue 35 (see the module docstring),
-#: filled in from ``pullin_sweep`` at n_segments=40, n_cross=3 (see the test module)
+#: the numbers this module finds for the realistic case of issue 35 (see the module docstring):
+#: free-branch folds at 16/32/64 segments, n_cross=3, extrapolated
 REALISTIC_CASE = {
-    "strip_m": (20e-3, 5e-3, 1e-3), "E_Pa": PDMS.E_Pa, "chi": 0.1, "phi_Fe": 0.03,
+    "strip_m": (20e-3, 5e-3, 1e-3), "E_Pa": 2.0e6, "chi": 0.1, "phi_Fe": 0.03,
+    "demag_factor": "N_z of the 20 x 5 x 1 mm prism, 0.772",
     "magnet": "NdFeB cylinder 10 mm x 10 mm, B_r 1.3 T, axis z, centred under the tip",
-    "pull_in_gap_m": None, "pull_in_tip_deflection_m": None, "release_gap_m": None,
+    "pull_in_gap_m": 11.316e-3, "pull_in_tip_deflection_m": 3.08e-3,
+    "gap_for_2mm_tip_deflection_m": 11.55e-3,
+    "one_mode_pull_in_gap_m": 11.44e-3,
+    # at 16 segments, n_cross 3: the tip-only contact branch exists between ~9.8 mm (below it
+    # the strip's bottom face reaches the face's plane at a second point: it starts to lie on
+    # the magnet, not modelled) and 10.60 mm where it folds -- below the pull-in gap, so the
+    # state the strip snaps into at 11.3 mm is not a tip-only contact (the tip near the rim,
+    # or the strip lying on the face): the release gap of this case is NOT determined
+    "release_gap_m": None,
+    "E_1MPa": {"pull_in_gap_m": 12.94e-3, "pull_in_tip_deflection_m": 3.41e-3,
+               "gap_for_2mm_tip_deflection_m": 13.29e-3},
 }
 
 
@@ -254,15 +280,14 @@ def _default_stability(u, p, J):
 def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max=0.2,
                  p_min=-math.inf, p_max=math.inf, events=(), u_scale=1.0, p_scale=1.0,
                  r_scale=1.0, xtol=1e-10, ftol=1e-9, max_newton=12, max_steps=2000,
-                 max_turn_deg=20.0, stability=None, start_fixed_p=True,
-                 stop_at_fold=False) -> BranchTrace:
+                 max_turn_deg=20.0, stability=None, stop_at_fold=False) -> BranchTrace:
     """Follow the branch of ``R(u, p) = 0`` through limit points (pseudo arc length).
 
     Parameters
     ----------
     system : callable ``(u, p) -> (R, J, R_p)`` -- residual (n_u,), its Jacobian dR/du
         (n_u, n_u) and dR/dp (n_u,)
-    u0, p0 : start (u0 a guess, corrected at fixed p0 when ``start_fixed_p``)
+    u0, p0 : start (u0 a guess, corrected by Newton at fixed p0)
     direction : initial sign of the change of p
     ds, ds_min, ds_max : arc-length steps in the scaled variables ``(u / u_scale, p / p_scale)``
     p_min, p_max : the branch ends (terminal events "p_min" / "p_max") where p leaves them
@@ -297,10 +322,7 @@ def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max
     e_p = np.zeros(n + 1)
     e_p[-1] = 1.0
     z0 = sc.join(u0, p0)
-    if start_fixed_p:
-        res = _correct(sc, z0, e_p, z0, 0.0, xtol, ftol, 4 * max_newton)
-    else:
-        res = _correct(sc, z0, e_p, z0, 0.0, xtol, ftol, 4 * max_newton)
+    res = _correct(sc, z0, e_p, z0, 0.0, xtol, ftol, 4 * max_newton)
     if res is None:
         raise PathFollowingError(f"no equilibrium found at the start, p = {p0:g}",
                                  {"u": u0, "p": p0})
@@ -726,6 +748,9 @@ class PullInResult:
     snap_back_gap_m : opening the gap from contact, where the strip returns to the
     small-deflection branch it left at pull-in (= release_gap_m unless a stable free branch
     with the tip hovering near the face exists between them; nan without contact);
+    release_by : "contact force zero" (lift-off), "fold of the contact branch" (the contact
+    state disappears: if that gap is below the pull-in gap, the traced tip contact is not the
+    state the strip snaps into -- see the module docstring) or "" (no contact traced);
     far_gap_m : the gap the path started from [m]; contact_end_gap_m : where, closing the gap
     on contact, a second point of the strip's bottom face reaches the face's plane (the strip
     starts to lie on the magnet: not modelled), or the contact branch turns back (a fold: the
@@ -753,6 +778,7 @@ class PullInResult:
     release_tip_deflection_m: float
     snap_back_gap_m: float
     far_gap_m: float
+    release_by: str
     contact_end_gap_m: float
     sweep_gap_m: np.ndarray
     sweep_tip_deflection_m: np.ndarray
@@ -920,6 +946,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     rs_contact = np.concatenate([np.full(model.N, rs_free), [L]])
     contact = None
     contact_end_gap = release_gap = release_defl = math.nan
+    release_by = ""
     if np.isfinite(g_lost) and g_min < g_lost - tol_gap:
         ls = max(model.EI / L**2, abs(model.magnetic_force_N(np.zeros(model.N), g_min)[1]))
         us = np.concatenate([np.full(model.N, math.sqrt(model.N)), [ls]])
@@ -949,6 +976,8 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                                            and model.stable_contact(u, p, J)),
                 stop_at_fold=True, max_steps=400, **{**common, "u_scale": us})
             if contact.event is not None and contact.event.name in ("release", "fold"):
+                release_by = ("contact force zero" if contact.event.name == "release"
+                              else "fold of the contact branch")
                 release_gap = float(contact.event.p)
                 release_defl = model.tip_deflection_m(contact.event.u[:-1])
             # in the order of the path: closing the gap
@@ -1037,7 +1066,10 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
         i = cseg[0]
         while i != 0:
             g_end = hi[i] + 1e-9 * L
-            i_new = move(i, g_end, closing=False)
+            try:
+                i_new = move(i, g_end, closing=False)
+            except PathFollowingError:
+                break                     # the traced path does not say where it goes
             if i_new == 0:
                 snap_back = hi[i]
             i = i_new
@@ -1089,7 +1121,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     return PullInResult(**arrays, pull_in_gap_m=pull_in_gap,
                         pull_in_tip_deflection_m=pull_in_defl, snap=snap,
                         release_gap_m=release_gap, release_tip_deflection_m=release_defl,
-                        snap_back_gap_m=snap_back, far_gap_m=g_far,
+                        snap_back_gap_m=snap_back, far_gap_m=g_far, release_by=release_by,
                         contact_end_gap_m=contact_end_gap,
                         n_segments=model.N, n_cross=model.n_cross,
                         demag_factor=model.demag, follower=model.follower)
