@@ -422,6 +422,13 @@ def _pack(sc, zs, taus, stables, limits, event, reason):
 # ============================================================================================
 # the magnet and the strip
 
+def _default_material(material):
+    """None: the seed's PDMS (E, nu, density from :data:`micro.materials.PDMS`)."""
+    if material is None:
+        return ElasticMaterial(PDMS.E_Pa, PDMS.nu, PDMS.density_kg_m3)
+    return material
+
+
 def _check_axis_z(magnet):
     if not isinstance(magnet, PermanentMagnet):
         raise InputError(f"magnet must be a PermanentMagnet, got {type(magnet).__name__}")
@@ -467,7 +474,7 @@ class MagnetElastica:
 
     Parameters
     ----------
-    strip : Strip; material : ElasticMaterial (E, nu, density)
+    strip : Strip; material : ElasticMaterial (E, nu, density) or None (the seed's PDMS)
     magnet : PermanentMagnet -- axis along z; its x and y position the magnet (the z is set by
         the gap ``g`` in every call); the tip must lie over its top face
     M_of_H : callable -- ``M_eff(H)`` [A/m] (see :mod:`homogenize.macro.magnets`)
@@ -486,6 +493,7 @@ class MagnetElastica:
                  demag_factor=0.0, gravity_m_s2=0.0, follower=True, plate=False):
         if not isinstance(strip, Strip):
             raise InputError(f"strip must be a Strip, got {type(strip).__name__}")
+        material = _default_material(material)
         if not isinstance(material, ElasticMaterial):
             raise InputError(f"material must be an ElasticMaterial, got "
                              f"{type(material).__name__}")
@@ -861,7 +869,8 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
 
     Parameters
     ----------
-    strip, material : the strip [m] and its elastic constants (E [Pa], nu, density)
+    strip, material : the strip [m] and its elastic constants (E [Pa], nu, density; None: the
+        seed's PDMS, :data:`micro.materials.PDMS`)
     magnet : PermanentMagnet -- axis along z; its ``position_m`` x and y place its axis (use
         :func:`place_magnet` for the default, centred under the tip end); with ``gap_sweep_m``
         its z is ignored, without it the magnet's position is the start (and must not overlap
@@ -1163,6 +1172,7 @@ def one_mode_pullin(strip: Strip, material: ElasticMaterial, magnet: PermanentMa
     reaches the face (``q = g``).
     """
     _check_axis_z(magnet)
+    material = _default_material(material)
     L, w, t = strip.length_m, strip.width_m, strip.thickness_m
     EI = bending_stiffness_N_m2(w, t, material.E_Pa, material.nu, plate)
     k = 3.2 * EI / L**3

@@ -141,7 +141,6 @@ def test_contact_tip_on_the_face_and_force_balance(n_segments):
     # Lagrange multiplier: the tip gap is zero to round-off (no penalty)
     assert abs(m.tip_gap_m(th, g)) < 1e-12 * L
     assert lam > 0 and m.other_clearance_m(th, g) > 0
-    _, _, J = m.system_contact(u, g)
     assert m.stable_contact(u, g, m.system_contact(u, g)[1])
     # the contact force balances the magnetic pull minus the elastic reaction: moments about
     # the clamp, EI theta'(0) = M_magnetic + x_contact * lam, with theta'(0) from the shape by
@@ -228,3 +227,23 @@ def test_realistic_case_pull_in_against_one_mode():
     assert rom.pull_in_gap_m == pytest.approx(tr.event.p, rel=3e-2)
     # the strip snaps with ~3 mm of tip deflection, far below the 11 mm gap
     assert 2.5e-3 < m.tip_deflection_m(tr.event.u) < 3.5e-3
+
+
+def test_jacobian_against_finite_differences_of_the_residual():
+    g = 8e-3
+    m = MagnetElastica(STRIP, STIFF, place_magnet(MAGNET, STRIP, g), M_OF_H, n_segments=8,
+                       n_cross=2, demag_factor=NZ)
+    s = m.s[1:]
+    u = -(3 * 3e-3 / (2 * L**3)) * (2 * L * s - s**2)          # a bent state, tip 3 mm down
+    R, J, Rp = m.system_free(u, g)
+    h = 1e-6
+    Jfd = np.column_stack([(m.system_free(u + h * e, g)[0] - m.system_free(u - h * e, g)[0])
+                           / (2 * h) for e in np.eye(m.N)])
+    Rpfd = (m.system_free(u, g + 1e-7)[0] - m.system_free(u, g - 1e-7)[0]) / 2e-7
+    # the analytic chain rule uses d f / d r by central differences (FD_HESSIAN_REL: ~1e-4 at
+    # worst); these differences of R add ~(h/d)^2 and ~1e-10 / h noise: 1e-3 of the largest
+    # entry
+    assert np.abs(J - Jfd).max() < 1e-3 * np.abs(J).max()
+    assert np.abs(Rp - Rpfd).max() < 1e-3 * np.abs(Rp).max()
+    # a Hessian: symmetric
+    np.testing.assert_allclose(J, J.T, atol=1e-12 * np.abs(J).max())
