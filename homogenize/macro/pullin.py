@@ -151,11 +151,15 @@ REALISTIC_CASE = {
     "pull_in_gap_m": 11.316e-3, "pull_in_tip_deflection_m": 3.08e-3,
     "gap_for_2mm_tip_deflection_m": 11.55e-3,
     "one_mode_pull_in_gap_m": 11.44e-3,
-    # at 16 segments, n_cross 3: the tip-only contact branch exists between ~9.8 mm (below it
-    # the strip's bottom face reaches the face's plane at a second point: it starts to lie on
-    # the magnet, not modelled) and 10.60 mm where it folds -- below the pull-in gap, so the
-    # state the strip snaps into at 11.3 mm is not a tip-only contact (the tip near the rim,
-    # or the strip lying on the face): the release gap of this case is NOT determined
+    # at 16 segments, n_cross 3, the tip-only contact branches found: one from the touch point
+    # of the unstable free branch (12.33 mm, the tip's edge at x = 14.8 mm, on the plane just
+    # beyond the magnet's rim) closing to a fold at 11.68 mm; one from deep contact, between
+    # 9.46 mm (fold) and 10.60 mm (fold; below ~9.5 mm a second point of the strip reaches the
+    # face: the strip starts to lie on the magnet, not modelled). Neither exists at the
+    # pull-in gap 11.33 mm: the state the strip snaps into is not a tip-only contact, and the
+    # release gap of this case is NOT determined (pullin_sweep reports the fold at 10.60 mm
+    # with release_by = "fold of the contact branch"). A stable free branch with the tip
+    # hovering near the rim exists between 12.33 and 13.17 mm (snap back at 13.17 mm).
     "release_gap_m": None,
     "E_1MPa": {"pull_in_gap_m": 12.94e-3, "pull_in_tip_deflection_m": 3.41e-3,
                "gap_for_2mm_tip_deflection_m": 13.29e-3},
@@ -956,6 +960,30 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     contact = None
     contact_end_gap = release_gap = release_defl = math.nan
     release_by = ""
+    contact_top = None
+    if touched and g_touch > g_min + tol_gap:
+        # first from the touch point of the free branch, closing the gap (zero contact force
+        # there): the branch the strip lands on after the snap when it reaches below the
+        # pull-in gap
+        ls_t = max(model.EI / L**2, abs(model.magnetic_force_N(free.event.u, g_touch)[1]))
+        us_t = np.concatenate([np.full(model.N, math.sqrt(model.N)), [ls_t]])
+        try:
+            contact_top = trace_branch(
+                model.system_contact, np.concatenate([free.event.u, [0.0]]), g_touch,
+                direction=-1.0, p_min=g_min, r_scale=rs_contact,
+                events=[("other_contact", lambda u, p: model.other_clearance_m(u[:-1], p))],
+                stability=lambda u, p, J: (u[-1] >= -1e-9 * ls_t
+                                           and model.stable_contact(u, p, J)),
+                stop_at_fold=True, max_steps=300, **{**common, "u_scale": us_t})
+        except PathFollowingError:
+            contact_top = None
+        if contact_top is not None and len(contact_top.p) > 1 and contact_top.stable[1] \
+                and contact_top.p.min() < g_lost:
+            release_by = "contact force zero"
+            release_gap, release_defl = g_touch, model.tip_deflection_m(free.event.u)
+        if contact_top is not None and contact_top.event is not None \
+                and contact_top.event.name == "p_min":
+            g_lost = math.nan                       # the whole range is covered
     if np.isfinite(g_lost) and g_min < g_lost - tol_gap:
         ls = max(model.EI / L**2, abs(model.magnetic_force_N(np.zeros(model.N), g_min)[1]))
         us = np.concatenate([np.full(model.N, math.sqrt(model.N)), [ls]])
@@ -984,7 +1012,8 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                 stability=lambda u, p, J: (u[-1] >= -1e-9 * ls
                                            and model.stable_contact(u, p, J)),
                 stop_at_fold=True, max_steps=400, **{**common, "u_scale": us})
-            if contact.event is not None and contact.event.name in ("release", "fold"):
+            if contact.event is not None and contact.event.name in ("release", "fold") \
+                    and not release_by:
                 release_by = ("contact force zero" if contact.event.name == "release"
                               else "fold of the contact branch")
                 release_gap = float(contact.event.p)
@@ -997,20 +1026,24 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
             contact_end_gap = g_lost
 
     # the path: the free branch, then the contact branch
-    th_rows, gap_l, lam_l, br_l, st_l = [], [], [], [], []
+    th_rows, gap_l, lam_l, br_l, st_l, part_l = [], [], [], [], [], []
     for k in range(len(free.p)):
+        part_l.append(0)
         th_rows.append(free.u[k])
         gap_l.append(free.p[k])
         lam_l.append(0.0)
         br_l.append("free")
         st_l.append(bool(free.stable[k]))
-    if contact is not None:
-        for k in range(len(contact.p)):
-            th_rows.append(contact.u[k, :-1])
-            gap_l.append(contact.p[k])
-            lam_l.append(contact.u[k, -1])
+    for i_part, c_br in enumerate((contact_top, contact)):
+        if c_br is None:
+            continue
+        for k in range(len(c_br.p)):
+            part_l.append(1 + i_part)
+            th_rows.append(c_br.u[k, :-1])
+            gap_l.append(c_br.p[k])
+            lam_l.append(c_br.u[k, -1])
             br_l.append("contact")
-            st_l.append(bool(contact.stable[k]))
+            st_l.append(bool(c_br.stable[k]))
     th = np.array(th_rows)
     gap_arr = np.array(gap_l)
     lam_arr = np.array(lam_l)
@@ -1029,7 +1062,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
             k += 1
             continue
         j = k
-        while j + 1 < len(gap_arr) and st_arr[j + 1] and br_arr[j + 1] == br_arr[k]:
+        while j + 1 < len(gap_arr) and st_arr[j + 1] and part_l[j + 1] == part_l[k]:
             j += 1
         segs.append((k, j))
         k = j + 1
