@@ -1,6 +1,8 @@
 """Shared pieces of the CLI: help formatter, option types with ranges, output-path safety."""
 from __future__ import annotations
 
+import math
+
 import argparse
 import fnmatch
 import os
@@ -14,7 +16,7 @@ from micro._validate import InputError, check_regular_file
 
 from homogenize._budget import check_memory, machine_memory_bytes
 
-__all__ = ["Formatter", "Parser", "NEGATIVE_NUMBER", "one_line_errors", "int_in", "float_in",
+__all__ = ["Formatter", "Parser", "NEGATIVE_NUMBER", "one_line_errors", "int_in", "float_in", "json_ready",
            "scheduler_address", "check_outputs", "check_output_dir", "check_input_file",
            "machine_memory_bytes", "check_memory", "parse_at", "write_snippet", "config_of",
            "add_material_options", "fill_from_preset"]
@@ -30,10 +32,11 @@ class Formatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionH
 
 
 #: a number with a minus sign in any notation Python's float() reads: -1, -1.5, -.5, -1e-6,
-#: -2.5E+3, -1_000, -inf, -nan (argparse's own pattern knows only -1 and -1.5)
-NEGATIVE_NUMBER = re.compile(
-    r"^-(?:(?:\d[\d_]*\.?[\d_]*|\.\d[\d_]*)(?:[eE][-+]?\d[\d_]*)?|inf|infinity|nan)$",
-    re.IGNORECASE)
+#: -2.5E+3, -1_000, -inf, -nan (argparse's own pattern knows only -1 and -1.5); also a list of
+#: numbers that starts with one, separated by ':' or ',' (a range START:STOP:COUNT, e.g.
+#: --gap-sweep-m -0.01:0.005:3, reaches its own check instead of being read as an option)
+_NUMBER = r"(?:(?:\d[\d_]*\.?[\d_]*|\.\d[\d_]*)(?:[eE][-+]?\d[\d_]*)?|inf|infinity|nan)"
+NEGATIVE_NUMBER = re.compile(rf"^-{_NUMBER}(?:[:,][-+]?{_NUMBER})*$", re.IGNORECASE)
 
 
 class Parser(argparse.ArgumentParser):
@@ -376,3 +379,15 @@ def _opt_name(parser, dest: str) -> str:
         if a.dest == dest and a.option_strings:
             return max(a.option_strings, key=len)
     return "--" + dest.replace("_", "-")
+
+
+def json_ready(obj):
+    """NaN and infinities -> None, recursively (JSON has no NaN): a quantity that is undefined
+    (an end-face mean of a sphere, a gap beyond a traced branch) is written as null."""
+    if isinstance(obj, dict):
+        return {k: json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

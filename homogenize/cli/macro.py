@@ -12,6 +12,7 @@ import numpy as np
 from micro.demag import prism_demag_factors
 from micro.materials import PDMS, SEED, matrix_preset, particle_preset
 
+from homogenize.cli._pullin import GAP_HELP, gap_sweep
 from homogenize.cli._common import (add_material_options, check_memory, config_of,
                                     fill_from_preset, float_in, int_in, parse_at,
                                     write_snippet)
@@ -86,6 +87,16 @@ def _export(args) -> int:
     return 0
 
 
+def _face_gap_m(source):
+    """Gap between the strip's bottom face (z = 0) and the top face of a permanent magnet with
+    its axis along z below it [m]; None for other sources."""
+    if not isinstance(source, PermanentMagnet) or tuple(source.axis) != (0.0, 0.0, 1.0):
+        return None
+    half = 0.5 * (source.dimensions_m[2] if source.shape == "cuboid" else source.dimensions_m[1])
+    top = source.position_m[2] + half
+    return -top if top <= 0.0 else None
+
+
 def _magnet_source(args):
     """The permanent magnet or coil of ``--magnet`` (None without it)."""
     if args.magnet is None:
@@ -138,6 +149,14 @@ def _beam(args) -> int:
         return beam_from_table(args)       # uniform force + interval from a batch table
     strip = Strip(args.length_m, args.width_m, args.thickness_m)
     mat = Material(args.E_Pa, args.nu, args.density_kg_m3)
+    if args.gap_m is not None or args.gap_sweep_m is not None:
+        if args.magnet is None:
+            raise InputError("--gap-m / --gap-sweep-m need --magnet cuboid|cylinder (with "
+                             "--magnet-size and --remanence-T)")
+        M_of_H, phi, law = _magnet_law(args)
+        N = args.demag_factor if args.demag_factor is not None else \
+            prism_demag_factors(strip.length_m, strip.width_m, strip.thickness_m)[2]
+        return gap_sweep(args, strip, mat, M_of_H, phi, law, N)
     source = _magnet_source(args)
     force, magnet = args.body_force_N_m3, None
     if source is not None:
@@ -178,6 +197,12 @@ def _beam(args) -> int:
         write_json(args.json, {"strip": vars(strip), "material": vars(mat), "results": rows,
                                "magnet": magnet,
                                "manifest": manifest(config_of(args), None)})
+    face = _face_gap_m(source)
+    if face is not None and any(r["tip_m"] >= face for r in rows):
+        print(f"warning: a tip deflection reaches the magnet's face ({face:.4g} m below the "
+              "strip): with the field of the undeformed strip (a dead load) the strip passes "
+              "through the magnet; the real strip snaps to it -- use --gap-m / --gap-sweep-m "
+              "(the field on the deformed strip, pull-in and contact)", file=sys.stderr)
     print(f"{'model':<12} {'tip [m]':>12} {'horizontal [m]':>15} {'dofs':>8}  mesh")
     for r in rows:
         mesh = "" if r.get("divisions") is None else f"{tuple(r['divisions'])} P{r['order']}"
@@ -506,18 +531,31 @@ def register(sub, formatter) -> None:
                         "19.4 x 5 x 1 mm)")
     g.add_argument("--stations", type=int_in("--stations", 3, 2001), default=101,
                    help="stations along the strip where the field is sampled")
+    g.add_argument("--gap-m", dest="gap_m", type=float_in("--gap-m", 0.0, 1.0, "m"),
+                   default=None, help="one magnet gap: " + GAP_HELP + ". The field is taken on "
+                   "the DEFORMED strip (follower elastica), traced from a far gap down to this "
+                   "one: pull-in, contact and the contact force are reported; --model is not "
+                   "used")
+    g.add_argument("--gap-sweep-m", dest="gap_sweep_m", default=None, metavar="START:STOP:COUNT",
+                   help="a sweep of magnet gaps [m], closing then opening again (the device's "
+                        "hysteresis): pull-in and release gaps, deflection against gap "
+                        "(--png); with --table the pull-in gap's interval from the table's "
+                        "M_eff interval")
+    g.add_argument("--png", default=None, help="with --gap-m/--gap-sweep-m: tip deflection "
+                   "against gap, stable/unstable/contact branches, pull-in and release marked")
     add_material_options(p, what="--matrix-material fills --E-Pa, --nu, --density-kg-m3 (the "
                                  "matrix's: with --table the force and, with --E-from-table, E "
                                  "come from the table); --particle-material sets the saturation "
                                  "of the soft spheres of --magnet without --table.")
-    p.set_defaults(func=_beam, outputs=("json",), inputs=("table",),
+    p.set_defaults(func=_beam, outputs=("json", "png"), inputs=("table",),
                    option_needs={"E_from_table": "table", "table_at": "table",
                                  "B_T": "table", "gradB_T_per_m": "table",
                                  "phi": ("table", "magnet"),
                                  **{d: "magnet" for d in (
                                      "magnet_size", "magnet_position", "magnet_direction",
                                      "magnet_axis", "remanence_T", "current_A", "turns",
-                                     "demag_factor", "stations")}})
+                                     "demag_factor", "stations", "gap_m", "gap_sweep_m",
+                                     "png")}})
 
     p = sub.add_parser(
         "channel", formatter_class=formatter, help="ceiling deflection of a microchannel",

@@ -11,7 +11,8 @@ import numpy as np
 from micro._io import atomic_path, manifest, write_json
 from micro._validate import ConvergenceError, InputError
 
-from homogenize.cli._common import check_input_file, config_of, float_in, int_in, parse_at
+from homogenize.cli._common import check_input_file, config_of, float_in, int_in, json_ready, \
+    parse_at
 from homogenize.experiments.tables import affine_kappa
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
@@ -226,17 +227,6 @@ def _specimen(args):
                     edge_radius_m=args.edge_radius_m)
 
 
-def _json_ready(obj):
-    """NaN/inf -> None (JSON has no NaN): e.g. the end-face mean of a sphere, N at B = 0."""
-    if isinstance(obj, dict):
-        return {k: _json_ready(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_ready(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def _f(v, width: int) -> str:
     """``v`` in ``width`` columns, ``-`` where it is undefined (None, NaN)."""
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
@@ -272,7 +262,7 @@ def _cmd(args) -> int:
                 file=sys.stderr)
         raise
     seconds = time.perf_counter() - t0
-    out = _json_ready(res.to_dict())
+    out = json_ready(res.to_dict())
     out["specimen"]["edge_radius_m"] = float(spec.edge_radius_m)
     out["solid"] = {"shear_modulus_Pa": solid.G_Pa, "bulk_modulus_Pa": solid.K_Pa,
                     "poisson_ratio": args.nu,
