@@ -387,6 +387,9 @@ def scheduler_restarted(study_file: Path, out: Path, ref: Path, n_total: int,
     try:
         procs.append(_dask(sched_args, logs))
         procs.append(_dask(work_args, logs))
+        from distributed import Client
+        with Client(addr, timeout="60s") as c:      # the cluster up before the batch starts
+            c.wait_for_workers(WORKERS, timeout=120)
         t0 = time.monotonic()
         batch = _cli(["batch", study_file, "--out", out, "--scheduler", addr, "--no-progress"])
         n_at_kill = _wait_for_parts(out, int(at * n_total), batch)
