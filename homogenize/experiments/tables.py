@@ -586,6 +586,13 @@ def _restructuring_from(path: Path, phi: float, E_Pa: float, rtol: float):
                          M_relaxed_A_per_m=M_r, E_parallel_Pa=E_r), ""
 
 
+def _shown(path: Path) -> str:
+    """A path inside the project as a project-relative POSIX path (reports carry no machine's
+    directory); others as given."""
+    root = DATA_DIR.parents[2]
+    return path.relative_to(root).as_posix() if path.is_relative_to(root) else str(path)
+
+
 @functools.lru_cache(maxsize=16)
 def restructuring_table(phi: float, E_Pa: float, rtol: float = 0.02) -> Restructuring:
     """The relax table computed at this phi and matrix modulus (within ``rtol``).
@@ -603,7 +610,7 @@ def restructuring_table(phi: float, E_Pa: float, rtol: float = 0.02) -> Restruct
             return r
         why.append(reason)
     raise Unavailable(f"no coupled-RVE (relax) table at phi = {phi:g}, E = {E_Pa:g} Pa in "
-                      f"{DATA_DIR}" + (f" ({'; '.join(why)})" if why else "")
+                      f"{_shown(DATA_DIR)}" + (f" ({'; '.join(why)})" if why else "")
                       + "; make one with `mapsim batch STUDY.toml --out "
                         "homogenize/experiments/data/relax_NAME.h5` (evaluator = \"relax\", "
                         "fem = true; see data/relax_diguet2010.toml)")

@@ -26,13 +26,31 @@ def test_diguet(ex):
     assert r["final"]["params"]["law"] == "langevin"
     # predicted (not fitted) stresses over mu0 M^2: the L/D = 0.8 cylinder's shape (Maxwell)
     # stress 0.174 (cylinder demagnetizing factor) and the random RVE's stress ~0.17 (virial
-    # ~0.2 times the FEM share 0.86) nearly cancel; the data need a fitted extra ~0.22
-    # (values as committed in results/diagnose)
+    # ~0.2 times the FEM share 0.86) nearly cancel; on the independent matrix modulus
+    # E0 = 0.14 MPa the data need a fitted extra ~0.04 (0.22 on the fitted 0.69 MPa: kappa / E
+    # is what the data fix; values as committed in results/diagnose)
     p = r["final"]["params"]
     assert p["kappa_shape_predicted"] == pytest.approx(0.1741, abs=2e-4)
     assert 0.15 < p["kappa_rve_predicted"] < 0.2
     assert abs(p["kappa_predicted"]) < 0.05
-    assert 0.2 < p["kappa_extra"] < 0.3 and p["kappa_extra_sd"] < 0.03
+    assert 0.03 < p["kappa_extra"] < 0.05 and p["kappa_extra_sd"] < 0.005
+
+
+def test_diguet_specimen_predicted_as_measured(ex):
+    """The change of length through the specimen solver, nothing fitted (results/diagnose):
+    the continuum model overshoots about 2x, the affine model cancels the end faces' mean;
+    the measured curve lies between; the relaxed model needs a relax table at E0 (none)."""
+    sp = ex.diguet["specimen"]
+    assert sp["available"]
+    g = sp["groups"][0]
+    assert g["matrix_E_Pa"] == 140e3 and 1.9 < g["filler_stiffness_ratio"] < 2.1
+    c, a = sp["models"]["continuum"], sp["models"]["affine"]
+    assert 1.8 < c["fraction_explained"] < 2.6
+    assert abs(a["fraction_explained"]) < 0.2
+    assert a["predicted_end_mean"] < a["measured"] < c["predicted_end_mean"]
+    # what still has to be fitted, named as such, with opposite signs for the two models
+    assert c["fitted"]["kappa_extra"] < 0 < a["fitted"]["kappa_extra"]
+    assert sp["models"]["relaxed"]["available"] is False
 
 
 def test_rtv615(ex):
