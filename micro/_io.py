@@ -435,3 +435,15 @@ def hdf5_agree(path_a, path_b, rtol: float) -> bool:
     except (OSError, KeyError, ValueError, TypeError):
         return False
     return True
+
+
+def json_ready(obj):
+    """NaN and infinities -> None, recursively (JSON has no NaN): a quantity that is undefined
+    (an end-face mean of a sphere, a gap beyond a traced branch) is written as null."""
+    if isinstance(obj, dict):
+        return {k: json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

@@ -15,6 +15,7 @@ from micro._io import atomic_write_text
 from micro._validate import InputError, check_regular_file
 
 from homogenize._budget import check_memory, machine_memory_bytes
+from micro._io import json_ready  # noqa: F401  (re-exported for the commands)
 
 __all__ = ["Formatter", "Parser", "NEGATIVE_NUMBER", "one_line_errors", "int_in", "float_in", "json_ready",
            "scheduler_address", "check_outputs", "check_output_dir", "check_input_file",
@@ -380,14 +381,3 @@ def _opt_name(parser, dest: str) -> str:
             return max(a.option_strings, key=len)
     return "--" + dest.replace("_", "-")
 
-
-def json_ready(obj):
-    """NaN and infinities -> None, recursively (JSON has no NaN): a quantity that is undefined
-    (an end-face mean of a sphere, a gap beyond a traced branch) is written as null."""
-    if isinstance(obj, dict):
-        return {k: json_ready(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_ready(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj

@@ -145,7 +145,7 @@ FD_HESSIAN_REL = 1e-3
 #: the numbers this module finds for the realistic case of issue 35 (see the module docstring):
 #: free-branch folds at 16/32/64 segments, n_cross=3, extrapolated
 REALISTIC_CASE = {
-    "strip_m": (20e-3, 5e-3, 1e-3), "E_Pa": 2.0e6, "chi": 0.1, "phi_Fe": 0.03,
+    "strip_m": (20e-3, 5e-3, 1e-3), "E_Pa": PDMS.E_Pa, "chi": 0.1, "phi_Fe": 0.03,
     "demag_factor": "N_z of the 20 x 5 x 1 mm prism, 0.772",
     "magnet": "NdFeB cylinder 10 mm x 10 mm, B_r 1.3 T, axis z, centred under the tip",
     "pull_in_gap_m": 11.316e-3, "pull_in_tip_deflection_m": 3.08e-3,

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._io import (atomic_write_text, data_digest, manifest, round_floats, save_png,
+from micro._io import (json_ready, atomic_write_text, data_digest, manifest, round_floats, save_png,
                        write_json)
-from micro._validate import InputError, check_positive
+from micro._validate import ConvergenceError, InputError, check_positive
 
 from micro.demag import prism_demag_factors
 from micro.magnetization import DEFAULT_LAW, get_law
@@ -36,6 +36,7 @@ from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.closed_form import eb_tip_deflection_m, elastica_tip_deflection
 from homogenize.macro.effective import magnetization_from_table
 from homogenize.macro.magnets import PermanentMagnet, body_force_along_strip
+from homogenize.macro.pullin import place_magnet, pullin_sweep
 from homogenize.tables import (body_force_from_table, interpolate, modulus_from_table,
                                read_table, run_batch)
 
@@ -61,6 +62,9 @@ SEED = {
 MAGNET = {"shape": "cylinder", "dimensions_m": (10e-3, 10e-3), "remanence_T": 1.3}
 #: gaps between the strip's lower face and the magnet's top face [m]
 MAGNET_GAPS_M = (2e-3, 3e-3, 4e-3, 5e-3, 6e-3, 8e-3, 10e-3, 12e-3, 15e-3, 20e-3, 25e-3, 30e-3)
+#: segments of the follower elastica (its pull-in gap changes by < 0.1 % from 16 to 64:
+#: tests/homogenize/macro/test_pullin.py)
+PULLIN_SEGMENTS = 16
 
 
 def seed_strip(thickness_m: float = 1e-3, width_m: float = 5e-3) -> dict:
@@ -91,6 +95,44 @@ def _applied_field(table, phi, B_in, N, others):
     M = np.array([interpolate(table, "M_eff_A_per_m", component="z", phi=phi, B_T=float(b),
                               **others).mean for b in B_in])
     return B_in + MU0 * N * M, M
+
+
+def _pullin(table, phi, strip, E, N, others, gaps_m=MAGNET_GAPS_M):
+    """The same magnet with the field on the DEFORMED strip (follower elastica,
+    :func:`homogenize.macro.pullin.pullin_sweep`): the gaps closed from the largest to the
+    smallest and opened again; pull-in and release gaps, with the pull-in gap's interval from
+    the ends of the table's M_eff interval (closing only)."""
+    L, w, t = strip["length_m"], strip["width_m"], strip["thickness_m"]
+    geo = Strip(L, w, t)
+    mat = ElasticMaterial(E, SEED["nu"])
+    gaps = np.array(sorted(gaps_m, reverse=True))
+    magnet = place_magnet(PermanentMagnet("cylinder", MAGNET["dimensions_m"],
+                                          MAGNET["remanence_T"]), geo, float(gaps[0]))
+    out = {}
+    try:
+        for b in ("mean", "low", "high"):
+            law = magnetization_from_table(table, phi, bound=b, **others)
+            out[b] = pullin_sweep(geo, mat, magnet, law, gap_sweep_m=gaps,
+                                  round_trip=(b == "mean"), n_segments=PULLIN_SEGMENTS,
+                                  demag_factor=N)
+    except (InputError, ConvergenceError) as exc:    # beyond the table's B range / no path
+        return {"available": False, "why": str(exc).splitlines()[0]}
+    r = out["mean"]
+    n = gaps.size
+    return {"available": True, "n_segments": PULLIN_SEGMENTS,
+            "pull_in_gap_m": r.pull_in_gap_m,
+            "pull_in_gap_ci_m": sorted([out["low"].pull_in_gap_m, out["high"].pull_in_gap_m]),
+            "pull_in_tip_deflection_m": r.pull_in_tip_deflection_m,
+            "release_gap_m": r.release_gap_m, "release_by": r.release_by,
+            "snap_back_gap_m": r.snap_back_gap_m, "contact_end_gap_m": r.contact_end_gap_m,
+            "closing": [{"gap_m": float(g), "tip_m": float(d), "branch": str(br),
+                         "contact_force_N": float(f)}
+                        for g, d, br, f in zip(r.sweep_gap_m[:n], r.sweep_tip_deflection_m[:n],
+                                               r.sweep_branch[:n], r.sweep_contact_force_N[:n])],
+            "opening": [{"gap_m": float(g), "tip_m": float(d), "branch": str(br),
+                         "contact_force_N": float(f)}
+                        for g, d, br, f in zip(r.sweep_gap_m[n:], r.sweep_tip_deflection_m[n:],
+                                               r.sweep_branch[n:], r.sweep_contact_force_N[n:])]}
 
 
 def _magnet_sweep(table, phi, strip, E, N, others, gaps_m=MAGNET_GAPS_M):
@@ -223,6 +265,7 @@ def run_chain(study=None, out_dir="results/chain", *, workers=None, scheduler=No
                               "deflection_elastica_m": float(el_mean[j]),
                               "deflection_elastica_ci_m": [float(el_lo[j]), float(el_hi[j])]})
         sweep = _magnet_sweep(table, phi, strip, E, N, others)
+        pull = json_ready(_pullin(table, phi, strip, E, N, others))
         curves.append({"phi": phi, "E_Pa": E, "E_from_table": E_est is not None,
                        "B_internal_T": B_fine, "B_applied_T": B_app, "M_eff_A_per_m": M_in,
                        "f_mean_N_m3": f_mean, "f_ci_low_N_m3": f_lo,
@@ -230,7 +273,7 @@ def run_chain(study=None, out_dir="results/chain", *, workers=None, scheduler=No
                        "deflection_elastica_m": el_mean, "deflection_ci_low_m": el_lo,
                        "deflection_ci_high_m": el_hi, "B_for_4mm_T": B4,
                        "B_for_4mm_metallic_boundary_T": B4_metallic, "grid": grid_rows,
-                       "magnet_sweep": sweep})
+                       "magnet_sweep": sweep, "pullin": pull})
     law_name = str(others.get("law", DEFAULT_LAW))
     res = {"seed": SEED, "strip": strip, "gradB_T_per_m": g, "confidence": table.confidence,
            "realizations": study.realizations, "n_particles": study.n_particles,
@@ -325,8 +368,19 @@ def _plot_magnet(path: Path, res: dict, digest: str) -> None:
         d = 1e3 * np.array([r["deflection_elastica_m"] for r in sw])
         lo = 1e3 * np.array([r["deflection_ci_m"][0] for r in sw])
         hi = 1e3 * np.array([r["deflection_ci_m"][1] for r in sw])
-        line, = ax.plot(gap, d, "o-", ms=3, label=f"phi = {c['phi']:g} (elastica)")
+        line, = ax.plot(gap, d, "o--", ms=3, lw=0.8,
+                        label=f"phi = {c['phi']:g}: dead load (field of the straight strip)")
         ax.fill_between(gap, lo, hi, color=line.get_color(), alpha=0.3, lw=0)
+        p = c.get("pullin") or {}
+        if p.get("available"):
+            for br, mk, what in (("free", "s-", "free"), ("contact", "D-", "tip on the magnet")):
+                cl = [r for r in p["closing"] if r["branch"] == br and r["tip_m"] is not None]
+                if cl:
+                    ax.plot([1e3 * r["gap_m"] for r in cl], [1e3 * r["tip_m"] for r in cl], mk,
+                            ms=3, color=line.get_color(),
+                            label=f"phi = {c['phi']:g}: follower field, closing, {what}")
+            ax.axvline(1e3 * p["pull_in_gap_m"], color=line.get_color(), lw=0.8, ls=":",
+                       label=f"phi = {c['phi']:g}: pull-in {1e3 * p['pull_in_gap_m']:.1f} mm")
     ax.axhline(1e3 * SEED["deflection_m"], color="k", lw=1.0, ls="--",
                label="seed paper: measured 4 mm")
     m = res["magnet"]
@@ -339,6 +393,37 @@ def _plot_magnet(path: Path, res: dict, digest: str) -> None:
     ax.legend(fontsize=7)
     ax.grid(True, which="both", alpha=0.3)
     save_png(fig, path, digest, dpi=120)
+
+
+def _pullin_lines(p) -> list:
+    if not p:
+        return []
+    if not p.get("available"):
+        return [f"Follower elastica not evaluated: {p.get('why')}", ""]
+    lo, hi = p["pull_in_gap_ci_m"]
+    lines = [f"**Pull-in gap {1e3 * p['pull_in_gap_m']:.2f} mm** (interval from the table's "
+             f"M_eff: [{1e3 * lo:.2f}, {1e3 * hi:.2f}] mm; tip deflection there "
+             f"{1e3 * p['pull_in_tip_deflection_m']:.2f} mm): closing the gap below it the strip "
+             "snaps to the magnet."]
+    rel = p["release_gap_m"]
+    if rel is not None and math.isfinite(rel) and p["release_by"] == "contact force zero":
+        lines.append(f"Release (lift-off) at {1e3 * rel:.2f} mm on the way back.")
+    else:
+        lines.append("Release on the way back: not determined -- after the snap the strip does "
+                     "not rest on the magnet with its tip alone (it touches beside the magnet's "
+                     "rim or lies on it over a length, which the model does not include).")
+    lines += ["", "| gap [mm] | closing: tip [mm] | branch | opening: tip [mm] | branch |",
+              "|---:|---:|---|---:|---|"]
+    opening = {round(r["gap_m"], 9): r for r in p["opening"]}
+
+    def tip(r):
+        return "-" if r is None or r["tip_m"] is None or not math.isfinite(r["tip_m"]) \
+            else f"{1e3 * r['tip_m']:.3f}"
+    for r in p["closing"]:
+        o = opening.get(round(r["gap_m"], 9))
+        lines.append(f"| {1e3 * r['gap_m']:g} | {tip(r)} | {r['branch']} | {tip(o)} | "
+                     f"{o['branch'] if o else '-'} |")
+    return lines + [""]
 
 
 def _display_path(path) -> str:
@@ -436,10 +521,12 @@ def _summary(res: dict, study) -> str:
                          f"{1e3 * r['deflection_elastica_m']:.3f}{touch} | "
                          f"[{1e3 * r['deflection_ci_m'][0]:.3f}, "
                          f"{1e3 * r['deflection_ci_m'][1]:.3f}] |")
-        lines += ["", "The body force is evaluated on the undeformed strip (a dead load): a tip "
-                  "that bends towards the magnet meets a stronger field, so the deflections at "
-                  "small gaps are lower bounds, and a deflection larger than the gap means the "
-                  "strip reaches the magnet.", ""]
+        lines += ["", "The elastica tip above is the DEAD load (the field of the undeformed "
+                  "strip): a tip that bends towards the magnet meets a stronger field, and a "
+                  "deflection larger than the gap goes through the magnet. The strip as it is "
+                  "-- the field taken where the strip is (follower elastica, "
+                  "`homogenize.macro.pullin`), gaps closed from 30 mm and opened again:", ""]
+        lines += _pullin_lines(c.get("pullin"))
     lines += [
         "d_eff is the packing density the seed's formula would have needed (with saturated "
         "particles) to give the computed force: the seed's d = 0.5 stands for the combined "

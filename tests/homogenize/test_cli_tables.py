@@ -198,6 +198,15 @@ def test_chain_reduced_real_rves(scheduler, tmp_path):
     # Aharoni's factor of the 19.4 x 5 x 1 mm strip through its thickness (0.771)
     assert 0.76 < res["demag_factor"] < 0.78 and res["law"] == "regime"
     assert (out / "deflection_vs_magnet_gap.png").stat().st_size > 1000
+    # the follower field (issue 35): a pull-in gap inside its interval, or why not
+    for c in res["curves"]:
+        p = c["pullin"]
+        if p["available"]:
+            lo, hi = p["pull_in_gap_ci_m"]
+            assert lo <= p["pull_in_gap_m"] <= hi
+            assert {r["branch"] for r in p["closing"]} <= {"free", "contact", "unmodelled"}
+        else:       # this reduced table ends at 0.3 T: the path may leave it; said why
+            assert p["why"]
     # dilute limit: the force per particle volume hardly depends on phi (interactions at
     # 1.75-3.5 vol% change it by a few %), so doubling phi doubles the force within 10 %
     f = {c["phi"]: c["grid"][0]["f_eff_N_m3"] for c in res["curves"]}
