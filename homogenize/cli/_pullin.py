@@ -17,7 +17,7 @@ from micro.materials import ElasticMaterial
 
 from homogenize.cli._common import config_of, json_ready, parse_at
 
-__all__ = ["gap_sweep", "parse_gap_sweep", "GAP_HELP"]
+__all__ = ["gap_sweep", "parse_gap_sweep", "permanent_magnet", "GAP_HELP"]
 
 GAP_HELP = ("the magnet gap as a user measures it: from the strip's bottom face at the tip to "
             "the magnet's top face [m] (the magnet's axis along z, centred under the tip end "
@@ -45,6 +45,20 @@ def parse_gap_sweep(text: str) -> np.ndarray:
     return np.linspace(a, b, n)
 
 
+def permanent_magnet(args, position_m) -> PermanentMagnet:
+    """The --magnet cuboid|cylinder of the options, at ``position_m`` (its size and remanence
+    checked: one message naming the missing option)."""
+    size = tuple(args.magnet_size or ())
+    want = 3 if args.magnet == "cuboid" else 2
+    if len(size) != want:
+        what = "A B C (edges)" if want == 3 else "DIAMETER HEIGHT"
+        raise InputError(f"--magnet {args.magnet} needs --magnet-size {what} [m]")
+    if args.remanence_T is None:
+        raise InputError(f"--magnet {args.magnet} needs --remanence-T [T]")
+    return PermanentMagnet(args.magnet, size, args.remanence_T, position_m,
+                           tuple(args.magnet_direction), tuple(args.magnet_axis))
+
+
 def _magnet_at(args, strip, gap):
     if args.magnet not in ("cuboid", "cylinder"):
         raise InputError("--gap-m / --gap-sweep-m need a permanent magnet (--magnet cuboid or "
@@ -53,15 +67,7 @@ def _magnet_at(args, strip, gap):
             (0.0, 0.0, 1.0), (0.0, 0.0, -1.0)):
         raise InputError("--gap-m / --gap-sweep-m: the magnet's axis and magnetization must be "
                          "along z (a magnet below the strip, facing it)")
-    size = tuple(args.magnet_size or ())
-    want = 3 if args.magnet == "cuboid" else 2
-    if len(size) != want:
-        what = "A B C (edges)" if want == 3 else "DIAMETER HEIGHT"
-        raise InputError(f"--magnet {args.magnet} needs --magnet-size {what} [m]")
-    if args.remanence_T is None:
-        raise InputError(f"--magnet {args.magnet} needs --remanence-T [T]")
-    m = PermanentMagnet(args.magnet, size, args.remanence_T, (0.0, 0.0, -1.0),
-                        tuple(args.magnet_direction), tuple(args.magnet_axis))
+    m = permanent_magnet(args, (0.0, 0.0, -1.0))
     if args.magnet_position is None:
         return place_magnet(m, strip, gap)
     x, y, _ = args.magnet_position

@@ -12,7 +12,7 @@ import numpy as np
 from micro.demag import prism_demag_factors
 from micro.materials import PDMS, SEED, matrix_preset, particle_preset
 
-from homogenize.cli._pullin import GAP_HELP, gap_sweep
+from homogenize.cli._pullin import GAP_HELP, gap_sweep, permanent_magnet
 from homogenize.cli._common import (add_material_options, check_memory, config_of,
                                     fill_from_preset, float_in, int_in, parse_at,
                                     write_snippet)
@@ -112,14 +112,7 @@ def _magnet_source(args):
             raise InputError("--magnet coil needs --current-A and --turns")
         return Coil(size[0], size[1], args.turns, args.current_A, args.magnet_position,
                     tuple(args.magnet_axis))
-    want = 3 if args.magnet == "cuboid" else 2
-    if len(size) != want:
-        what = "A B C (edges)" if want == 3 else "DIAMETER HEIGHT"
-        raise InputError(f"--magnet {args.magnet} needs --magnet-size {what} [m]")
-    if args.remanence_T is None:
-        raise InputError(f"--magnet {args.magnet} needs --remanence-T [T]")
-    return PermanentMagnet(args.magnet, size, args.remanence_T, args.magnet_position,
-                           tuple(args.magnet_direction), tuple(args.magnet_axis))
+    return permanent_magnet(args, args.magnet_position)
 
 
 def _magnet_law(args):
