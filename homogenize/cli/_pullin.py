@@ -127,6 +127,8 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
           f"{'contact force [N]':>18}  branch")
     for g, d, tg, fc, b in zip(r.sweep_gap_m, r.sweep_tip_deflection_m, r.sweep_tip_gap_m,
                                r.sweep_contact_force_N, r.sweep_branch):
+        # on contact the tip gap is zero to round-off (its sign is noise): printed as 0
+        tg = 0.0 if abs(tg) < 1e-9 * strip.length_m else tg
         print(f"{g:10.4g} {d:19.6g} {tg:12.4g} {fc:18.4g}  {b}")
     out = {"strip": vars(strip), "gap_definition": GAP_HELP, "magnet": {
         "kind": args.magnet, "size_m": list(args.magnet_size), "remanence_T": args.remanence_T,

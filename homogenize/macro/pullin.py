@@ -248,7 +248,10 @@ def _correct(sc, z_guess, tau, z_anchor, sigma, xtol, ftol, max_newton):
     for it in range(max_newton + 1):
         try:
             F, Jz = sc.eval(z)
-        except (InputError, FloatingPointError, ValueError):
+        except InputError as exc:         # e.g. a field beyond a magnetization table
+            sc.last_refusal = str(exc)
+            return None
+        except (FloatingPointError, ValueError):
             return None
         if not (np.all(np.isfinite(F)) and np.all(np.isfinite(Jz))):
             return None
@@ -359,8 +362,10 @@ def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max
             step *= 0.5
             if step < ds_min:
                 u, p = sc.split(z)
+                why = getattr(sc, "last_refusal", None)
                 raise PathFollowingError(
-                    f"path following stopped: step below {ds_min:g} at p = {p:.6g}",
+                    f"path following stopped: step below {ds_min:g} at p = {p:.6g}"
+                    + (f"; the trial steps beyond it were refused: {why}" if why else ""),
                     {"u": u, "p": p})
             continue
 
