@@ -1,4 +1,5 @@
 """Shared fixtures of the test suite."""
+import contextlib
 import importlib.util
 from pathlib import Path
 
@@ -19,3 +20,20 @@ def _load_script(path: Path):
 def load_script():
     """``load_script(path)``: a script outside the packages, imported as a module."""
     return _load_script
+
+
+@contextlib.contextmanager
+def _inprocess_client(n_workers: int):
+    """A Dask client on an in-process (threads) cluster of ``n_workers`` single-thread workers,
+    without a dashboard: what the batch tests run on."""
+    from dask.distributed import Client, LocalCluster
+    with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=False,
+                      dashboard_address="127.0.0.1:0") as c, Client(c) as cl:
+        yield cl
+
+
+@pytest.fixture(scope="session")
+def inprocess_client():
+    """``with inprocess_client(n) as client:`` a Dask client on an in-process cluster of ``n``
+    single-thread workers (the batch tests' cluster)."""
+    return _inprocess_client

@@ -33,19 +33,15 @@ def study():
 
 
 @pytest.fixture(scope="module")
-def client1():
+def client1(inprocess_client):
     """In-process (threads) cluster with one worker, shared by the module (start-up is slow)."""
-    from dask.distributed import Client, LocalCluster
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                      dashboard_address="127.0.0.1:0") as c, Client(c) as cl:
+    with inprocess_client(1) as cl:
         yield cl
 
 
 @pytest.fixture(scope="module")
-def client2():
-    from dask.distributed import Client, LocalCluster
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                      dashboard_address="127.0.0.1:0") as c, Client(c) as cl:
+def client2(inprocess_client):
+    with inprocess_client(2) as cl:
         yield cl
 
 

@@ -49,10 +49,8 @@ def study():
 
 
 @pytest.fixture(scope="module")
-def client2():
-    from dask.distributed import Client, LocalCluster
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                      dashboard_address="127.0.0.1:0") as c, Client(c) as cl:
+def client2(inprocess_client):
+    with inprocess_client(2) as cl:
         yield cl
 
 

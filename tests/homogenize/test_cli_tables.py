@@ -368,12 +368,13 @@ def test_specimen_with_the_table_law(table, tmp_path, capsys):
     lo = magnetization_table_law(t, 0.035, bound="low", arrangement="dispersed")
     hi = magnetization_table_law(t, 0.035, bound="high", arrangement="dispersed")
     assert np.all(np.asarray(lo.M_nodes_A_per_m) <= np.asarray(hi.M_nodes_A_per_m))
+    def specimen(B, out):
+        return main(["specimen", "--shape", "sphere", "--radius-m", "1e-3", "--law", "table",
+                     "--table", str(table), "--at", "arrangement=dispersed", "--phi", "0.035",
+                     "--shear-modulus-Pa", "1e3", "--B", B, "--n-mesh", "3", "--n-boundary",
+                     "24", "--json", str(out), "--quiet"])
     out = tmp_path / "s.json"
-    rc = main(["specimen", "--shape", "sphere", "--radius-m", "1e-3", "--law", "table",
-               "--table", str(table), "--at", "arrangement=dispersed", "--phi", "0.035",
-               "--shear-modulus-Pa", "1e3",
-               "--B", "0.1,0.2", "--n-mesh", "3", "--n-boundary", "24", "--json", str(out),
-               "--quiet"])
+    rc = specimen("0.1,0.2", out)
     assert rc == 0, capsys.readouterr().err
     res = json.loads(out.read_text())
     M = [s["M_mean_A_per_m"] for s in res["steps"]]
@@ -381,11 +382,7 @@ def test_specimen_with_the_table_law(table, tmp_path, capsys):
     assert 0 < M[0] < M[1] <= law.M_A_per_m(np.array([0.2 / mu_0]))[0]
     # beyond the table's field range: refused, not extrapolated (exit 2), nothing written
     out2 = tmp_path / "t.json"
-    rc = main(["specimen", "--shape", "sphere", "--radius-m", "1e-3", "--law", "table",
-               "--table", str(table), "--at", "arrangement=dispersed", "--phi", "0.035",
-               "--shear-modulus-Pa", "1e3",
-               "--B", "0.5", "--n-mesh", "3", "--n-boundary", "24", "--json", str(out2),
-               "--quiet"])
+    rc = specimen("0.5", out2)
     assert rc == 2 and not out2.exists()
     assert "table" in capsys.readouterr().err
 
