@@ -42,6 +42,7 @@ from micro.dipoles import solve
 from micro.magnetization import get_law
 from micro.particles import generate_rve
 from homogenize.cell import homogenize_rve
+from homogenize.resolution import resolution_warning
 
 __all__ = ["QUANTITIES", "get_evaluator", "RVEEvaluator", "RelaxEvaluator", "SyntheticEvaluator",
            "synthetic_truth"]
@@ -78,10 +79,25 @@ QUANTITIES = {
     "chain_fraction": ("1", (), "fraction of particles in aligned contact chains of >= 3"),
 }
 
+#: quantities of the rve evaluator's cell FEM -> the [cell] key of their value without filler
+#: (None: zero), for the discretization error (:mod:`homogenize.resolution`)
+FEM_QUANTITIES = {"E_eff_Pa": "matrix_E_Pa", "nu_eff": "matrix_nu", "stress_mag_Pa": None,
+                  "strain_mag": None}
+#: suffix of the same quantities on the coarser grid of the two-grid estimate
+COARSE = "_coarse"
+for _q in FEM_QUANTITIES:
+    _unit, _shape, _desc = QUANTITIES[_q]
+    QUANTITIES[_q + COARSE] = (_unit, _shape, _desc + ", on the coarser grid of the "
+                               "discretization-error estimate ([study] coarse_voxels)")
+del _q, _unit, _shape, _desc
+
 # Seed-paper values used by the synthetic model, so that its numbers look like the real ones.
 _MS_A_PER_M = SEED.Ms_A_m         # Fe saturation magnetization rho * sigma [A/m]
 _B_SAT_T = 0.3                       # field scale of the synthetic magnetization curve [T]
 _REL_SD_100 = 0.05                   # relative sd of f_eff at 100 particles
+#: synthetic FEM quantities with ``[study] coarse_voxels``: the grid of n voxels adds
+#: ``SYNTHETIC_DISC_REL * truth / n`` (first order), which the two-grid estimate recovers
+SYNTHETIC_DISC_REL = 0.3
 
 
 def get_evaluator(name: str, *, fem: bool = False, **options):
@@ -210,6 +226,15 @@ class SyntheticEvaluator:
         for name in sorted(truth):     # fixed draw order: the result depends on the seed only
             mean, sd = truth[name]
             out[name] = mean + sd * rng.standard_normal(np.shape(mean))
+        nc = task.settings.get("coarse_voxels")
+        if task.settings.get("fem") and nc:
+            # an exactly first-order discretization error A / voxels on top of the truth (the
+            # infinite-grid value), the same realization on both grids
+            n = task.settings["voxels"]
+            for q in FEM_QUANTITIES:
+                a = SYNTHETIC_DISC_REL * truth[q][0]
+                out[q] = out[q] + a / n
+                out[q + COARSE] = out[q] + a / nc - a / n
         return _check_finite_result(out, task)
 
 
@@ -373,6 +398,28 @@ class RVEEvaluator:
         elif study.cell:
             raise InputError(f"{study.path}: [cell] is given but [study] fem = false")
 
+    def resolution_warnings(self, study) -> list[str]:
+        """One warning per distinct (phi, particle population) of the grid whose mean radius
+        is resolved by fewer voxels than the accuracy study needs
+        (:func:`homogenize.resolution.resolution_warning`; the box from the expected particle
+        volume: the realizations' boxes scatter around it)."""
+        if not study.fem:
+            return []
+        gen = _particle_keys(generate_rve)
+        axes = [(a, v) for a, v in study.axes if a == "phi" or a in gen]
+        out = []
+        for combo in dict.fromkeys(itertools.product(*(v for _, v in axes))):
+            point = dict(zip((a for a, _ in axes), combo))
+            dist = _rve_kwargs({**study.rve, **{k: v for k, v in point.items()
+                                               if k != "phi"}})["distribution"]
+            box = (study.n_particles * dist.mean_volume_m3() / float(point["phi"])) ** (1 / 3)
+            where = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
+                              for k, v in point.items())
+            w = resolution_warning(dist.raw_moment(1), box, study.voxels, where)
+            if w:
+                out.append(w)
+        return out
+
     def __call__(self, task) -> dict:
         point = dict(task.point)
         s = task.settings
@@ -392,6 +439,12 @@ class RVEEvaluator:
                                   virial_stress_Pa=state.virial_stress_Pa, **s["cell"])
             out.update(E_eff_Pa=cell.E_eff_Pa, nu_eff=cell.nu_eff,
                        stress_mag_Pa=cell.stress_mag_Pa, strain_mag=cell.strain_mag)
+            if s.get("coarse_voxels"):
+                # the same RVE and forces on the coarser grid: the two-grid estimate of the
+                # discretization error (homogenize.resolution)
+                coarse = homogenize_rve(rve, s["coarse_voxels"], forces_N=forces,
+                                        virial_stress_Pa=state.virial_stress_Pa, **s["cell"])
+                out.update({q + COARSE: getattr(coarse, q) for q in FEM_QUANTITIES})
         return _check_finite_result(out, task)
 
 

@@ -13,6 +13,9 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
                                    # that move: coupled RVE through the B steps) or "synthetic"
     fem = false                    # run the FEM homogenization (E_eff, nu_eff, stress_mag)
     voxels = 16                    # FEM voxels per RVE edge (when fem = true)
+    coarse_voxels = 10             # second grid of the discretization-error estimate (rve
+                                   # evaluator, fem = true; default: the even count nearest
+                                   # 2/3 voxels; 0: no estimate); homogenize.resolution
     confidence = 0.95              # level of the confidence intervals in the table
 
     [grid]                         # every key is a grid axis: one value or a list of values
@@ -76,6 +79,7 @@ from micro.dipoles import METHODS, SUMMATIONS
 from micro.magnetization import LAW_ALIASES, LAW_NAMES
 from homogenize import _evaluate
 from homogenize._budget import check_memory
+from homogenize.resolution import coarse_voxels
 
 __all__ = ["Study", "Task", "load_study", "parse_study", "AXIS_ORDER"]
 
@@ -91,7 +95,7 @@ AXIS_UNITS = {"phi": "1", "mean_radius_m": "m", "shell_thickness_m": "m", "B_T":
 _STUDY_KEYS = {
     "name": str, "seed": int, "realizations": int, "n_particles": int, "evaluator": str,
     "fem": bool, "voxels": int, "confidence": float, "description": str,
-    "particle_material": str, "matrix_material": str,
+    "particle_material": str, "matrix_material": str, "coarse_voxels": int,
 }
 _TABLES = ("study", "grid", "rve", "law", "magnetics", "cell", "relax", "rve_size", "synthetic")
 _RVE_SIZE_KEYS = {"n_particles": list, "realizations": int, "quantity": str, "component": str,
@@ -234,6 +238,7 @@ class Study:
     voxels: int
     confidence: float
     axes: tuple
+    coarse_voxels: int = 0       # second grid of the discretization error (0: none)
     rve: dict = field(default_factory=dict)
     law: dict = field(default_factory=dict)
     magnetics: dict = field(default_factory=dict)
@@ -263,6 +268,8 @@ class Study:
         """Everything besides the grid point that determines one realization's result."""
         s = {"n_particles": self.n_particles, "fem": self.fem, "voxels": self.voxels,
              "rve": self.rve, "law": self.law, "magnetics": self.magnetics, "cell": self.cell}
+        if self.coarse_voxels:
+            s["coarse_voxels"] = self.coarse_voxels
         if self.evaluator == "relax":
             # the whole continuation path determines the result at each of its steps
             s["relax"] = self.relax
@@ -302,7 +309,8 @@ class Study:
         return {"path": self.path, "name": self.name, "seed": self.seed,
                 "realizations": self.realizations, "n_particles": self.n_particles,
                 "evaluator": self.evaluator, "fem": self.fem, "voxels": self.voxels,
-                "confidence": self.confidence, "axes": {a: list(v) for a, v in self.axes},
+                "coarse_voxels": self.coarse_voxels, "confidence": self.confidence,
+                "axes": {a: list(v) for a, v in self.axes},
                 "rve": self.rve, "law": self.law, "magnetics": self.magnetics,
                 "cell": self.cell, "relax": self.relax, "synthetic": self.synthetic,
                 "study_file_text": self.text}
@@ -456,6 +464,7 @@ def parse_study(text: str, path: str = "<study>") -> Study:
     if evaluator not in EVALUATORS:
         raise InputError(f"{path}: [study] evaluator must be one of {', '.join(EVALUATORS)}; "
                          f"got {evaluator!r}")
+    coarse = _coarse_voxels(path, s, evaluator, voxels)
 
     grid = doc.get("grid")
     if not grid:
@@ -537,7 +546,8 @@ def parse_study(text: str, path: str = "<study>") -> Study:
     synth = _synthetic_options(doc, path, evaluator)
     study = Study(path=str(path), text=text, name=s.get("name", Path(path).stem), seed=s["seed"],
                   realizations=s["realizations"], n_particles=n_particles, evaluator=evaluator,
-                  fem=s.get("fem", False), voxels=voxels, confidence=confidence,
+                  fem=s.get("fem", False), voxels=voxels, coarse_voxels=coarse,
+                  confidence=confidence,
                   axes=tuple(axes), rve_size=rve_size, synthetic=synth, **tables)
     _evaluate.get_evaluator(evaluator).check(study)
     return study
@@ -603,6 +613,27 @@ def _check_study_size(path, n_points: int, realizations: int, n_particles: int, 
     check_memory(f"{path}: one realization of n_particles = {n_particles}"
                  + (f" with voxels = {voxels}" if fem else ""), 2 * per,
                  "two workers run at once; use fewer particles or voxels")
+
+
+def _coarse_voxels(path, s: dict, evaluator: str, voxels: int) -> int:
+    """``[study] coarse_voxels``: the second grid of the discretization-error estimate
+    (:mod:`homogenize.resolution`). Default with ``fem = true`` and the rve evaluator: the even
+    count nearest 2/3 ``voxels`` (none below 6 voxels); 0 turns the estimate off."""
+    fem = s.get("fem", False)
+    if "coarse_voxels" not in s:
+        return coarse_voxels(voxels) if (fem and evaluator == "rve" and voxels >= 6) else 0
+    c = s["coarse_voxels"]
+    if c == 0:
+        return 0
+    if not fem or evaluator == "relax":
+        why = ("fem = false: there is no cell FEM to estimate" if not fem else
+               "the relax evaluator has no two-grid estimate yet")
+        raise InputError(f"{path}: [study] coarse_voxels = {c} is given but {why} (use 0 or "
+                         f"leave it out)")
+    if not 4 <= c < voxels:
+        raise InputError(f"{path}: [study] coarse_voxels must be 0 (no discretization-error "
+                         f"estimate) or in [4, voxels - 1] = [4, {voxels - 1}], got {c}")
+    return c
 
 
 def _synthetic_options(doc: dict, path: str, evaluator: str) -> dict:

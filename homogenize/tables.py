@@ -74,6 +74,7 @@ import threading
 import sys
 import tomllib
 import zipfile
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -83,7 +84,9 @@ from micro._io import (atomic_path, hdf5_agree, is_regular_file, manifest as _ma
                        open_regular, write_json)
 from micro._validate import InputError
 
-from ._evaluate import QUANTITIES, get_evaluator
+from ._evaluate import COARSE, FEM_QUANTITIES, QUANTITIES, get_evaluator
+from .resolution import FILLER_BIAS_REL, ORDER, combined_interval, discretization_error
+from micro.materials import PDMS
 from ._stats import summarize, t_half_width
 from ._study import Study, Task, _unit_of, load_study
 from micro._progress import progress_bar
@@ -663,7 +666,41 @@ def aggregate(study: Study, parts: Path, evaluator_id: str) -> dict:
             values[q][t.grid_index, t.realization] = res[q]
     summaries = {q: summarize(np.moveaxis(values[q], 1, 0), study.confidence) for q in names}
     return {"values": values, "summaries": summaries, "seeds": seeds,
-            "n": np.full(P, R, dtype=np.int64)}
+            "n": np.full(P, R, dtype=np.int64), "disc": _discretization(study, values)}
+
+
+def _matrix_value(study: Study, key: str | None) -> float:
+    """The value of a cell-FEM quantity without filler: the matrix's E or nu, else 0."""
+    if key is None:
+        return 0.0
+    default = {"matrix_E_Pa": PDMS.E_Pa, "matrix_nu": PDMS.nu}[key]
+    return float(study.cell.get(key, default))
+
+
+def _discretization(study: Study, values: dict) -> dict:
+    """Per cell-FEM quantity with coarse-grid values: the discretization error of its mean
+    (:func:`homogenize.resolution.discretization_error`), arrays (P, ...)."""
+    out = {}
+    for q, key in FEM_QUANTITIES.items():
+        if q in values and q + COARSE in values:
+            out[q] = discretization_error(np.moveaxis(values[q], 1, 0),
+                                          np.moveaxis(values[q + COARSE], 1, 0),
+                                          study.voxels, study.coarse_voxels, study.confidence,
+                                          matrix_value=_matrix_value(study, key))
+    return out
+
+
+def discretization_attrs(study: Study) -> dict:
+    """How the table's discretization errors were estimated (root attribute
+    ``discretization``, JSON)."""
+    return {"voxels": study.voxels, "coarse_voxels": study.coarse_voxels, "order": ORDER,
+            "floor_rel_of_filler_contribution": FILLER_BIAS_REL,
+            "estimate": "max((|mean(Q_n - Q_nc)| + t sd/sqrt(R)) / ((n/nc)^order - 1), "
+                        "floor_rel |Q - Q_matrix|)",
+            "combination": "linear: [ci_low - disc_err, ci_high + disc_err] (a bias shared "
+                           "by the realizations)",
+            "source": "homogenize.resolution; results/cell/README.md (dilute sphere "
+                      "convergence of the composite voxels)"}
 
 
 def _str_array(values):
@@ -761,6 +798,9 @@ def _write_table_file(tmp, study: Study, data: dict, man: dict, evaluator_id: st
         put("seed", grid(data["seeds"]), gdims + ("realization",), "1",
             "integer seed of each realization")
         lvl = f"{100 * study.confidence:g} %"
+        disc = data.get("disc") or {}
+        if disc:
+            h.attrs["discretization"] = json.dumps(discretization_attrs(study))
         for q, vals in data["values"].items():
             unit, shape, desc = QUANTITIES[q]
             comp = ("i", "j")[:len(shape)]
@@ -773,6 +813,18 @@ def _write_table_file(tmp, study: Study, data: dict, man: dict, evaluator_id: st
                 desc + f" (lower end of the {lvl} Student-t interval of the mean)")
             put(f"{q}_ci_high", grid(s["ci_high"]), gdims + comp, unit,
                 desc + f" (upper end of the {lvl} Student-t interval of the mean)")
+            if q in disc:
+                lo, hi = combined_interval(s["ci_low"], s["ci_high"], disc[q]["err"])
+                put(f"{q}_disc_err", grid(disc[q]["err"]), gdims + comp, unit,
+                    desc + f" (discretization error of the mean at {study.voxels} voxels, "
+                    f"two-grid estimate with {study.coarse_voxels} voxels: attribute "
+                    f"discretization)")
+                put(f"{q}_total_low", grid(lo), gdims + comp, unit,
+                    desc + f" (lower end of the {lvl} interval widened by the discretization "
+                    f"error)")
+                put(f"{q}_total_high", grid(hi), gdims + comp, unit,
+                    desc + f" (upper end of the {lvl} interval widened by the discretization "
+                    f"error)")
         h.flush()
         image = h.id.get_file_image()
     with open(tmp, "wb") as fh:
@@ -792,6 +844,9 @@ class Table:
     values: dict          # quantity -> (P, R, ...) per-realization values
     units: dict           # quantity -> unit
     attrs: dict
+    #: quantity -> (P, ...) discretization error of the mean (cell FEM quantities of tables
+    #: with ``[study] coarse_voxels``; :mod:`homogenize.resolution`)
+    disc_err: dict = dataclasses.field(default_factory=dict)
 
     @property
     def quantities(self) -> tuple:
@@ -827,6 +882,23 @@ class Table:
             raise InputError(f"component {component!r} of {q}: allowed {allowed}")
         idx = tuple(_COMPONENTS.index(c) for c in component)
         return v[(slice(None), slice(None)) + idx]
+
+    def component_disc_err(self, quantity: str, component: str | None = None):
+        """(P,) discretization error of one scalar component of ``quantity``'s mean (None when
+        the table has no estimate for it); components as in :meth:`component_values`."""
+        q = self.resolve_quantity(quantity)
+        if q not in self.disc_err:
+            return None
+        e = self.disc_err[q]
+        shape = e.shape[1:]
+        if not shape:
+            return e
+        if component in (None, ""):
+            component = "z" * len(shape)
+        if component == "norm" and len(shape) == 1:
+            return np.linalg.norm(e, axis=-1)
+        idx = tuple(_COMPONENTS.index(c) for c in component)
+        return e[(slice(None),) + idx]
 
     def select(self, spec) -> int:
         """Index of the grid point given as an integer or ``axis=value,axis=value``."""
@@ -919,6 +991,12 @@ def check_table(t: Table) -> Table:
             i = np.argwhere(~np.isfinite(v))[0]
             raise InputError(f"{where}: dataset {q} holds a non-finite value at grid point "
                              f"{int(i[0])} realization {int(i[1])} (the table is damaged)")
+    for q, e in t.disc_err.items():
+        if q not in t.values or e.shape != (P,) + QUANTITIES[q][1] \
+                or not np.all(np.isfinite(e)) or np.any(e < 0):
+            raise InputError(f"{where}: dataset {q}_disc_err must hold a finite value >= 0 of "
+                             f"shape ({P}{''.join(f', {d}' for d in QUANTITIES[q][1])}) for a "
+                             f"quantity of the table (the table is damaged)")
     return t
 
 
@@ -946,23 +1024,27 @@ def _read_table(path: Path) -> Table:
         def flat(arr):
             return arr.reshape((P,) + arr.shape[nd:])
 
-        values, units = {}, {}
+        values, units, disc = {}, {}, {}
         for q in QUANTITIES:
             if q in h:
                 values[q] = flat(h[q][()])
                 units[q] = h[q].attrs["units"]
                 if isinstance(units[q], bytes):
                     units[q] = units[q].decode()
+                if f"{q}_disc_err" in h:
+                    disc[q] = flat(h[f"{q}_disc_err"][()])
         attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
         return Table(path=str(path), axes=axes, points=points,
                      confidence=float(h.attrs["confidence"]), n=flat(h["n"][()]),
-                     values=values, units=units, attrs=attrs)
+                     values=values, units=units, attrs=attrs, disc_err=disc)
 
 
 # --------------------------------------------------------------------------- interpolation
 @dataclass(frozen=True)
 class Estimate:
-    """An interpolated table value with its confidence interval."""
+    """An interpolated table value with its confidence interval and, for the cell FEM's
+    quantities, the discretization error of the grid (:mod:`homogenize.resolution`; 0 when
+    the table has no estimate)."""
 
     mean: float
     ci_low: float
@@ -971,16 +1053,41 @@ class Estimate:
     dof: float            # Welch-Satterthwaite degrees of freedom
     confidence: float
     unit: str
+    disc_err: float = 0.0     # discretization error of the mean (same unit)
+    has_disc: bool = False    # whether the table estimated it
 
     @property
     def rel_half_width(self) -> float:
-        """Half the interval width relative to the mean (0 for a zero mean)."""
+        """Half the statistical interval's width relative to the mean (0 for a zero mean)."""
         return (self.ci_high - self.ci_low) / (2 * abs(self.mean)) if self.mean else 0.0
+
+    @property
+    def total_low(self) -> float:
+        """Lower end of the interval widened by the discretization error (linear sum)."""
+        return self.ci_low - self.disc_err
+
+    @property
+    def total_high(self) -> float:
+        return self.ci_high + self.disc_err
+
+    @property
+    def total_rel_half_width(self) -> float:
+        """Half the widened interval's width relative to the mean (0 for a zero mean)."""
+        return ((self.total_high - self.total_low) / (2 * abs(self.mean)) if self.mean
+                else 0.0)
 
     def scaled(self, factor: float) -> "Estimate":
         lo, hi = sorted((self.ci_low * factor, self.ci_high * factor))
         return Estimate(self.mean * factor, lo, hi, self.se * abs(factor), self.dof,
-                        self.confidence, self.unit)
+                        self.confidence, self.unit, self.disc_err * abs(factor), self.has_disc)
+
+    def describe(self, fmt: str = ".6g") -> str:
+        """``[lo, hi]`` and, where estimated, ``, discretization +- e, combined [lo, hi]``."""
+        text = f"[{self.ci_low:{fmt}}, {self.ci_high:{fmt}}]"
+        if self.has_disc:
+            text += (f", discretization +- {self.disc_err:.2g}, combined "
+                     f"[{self.total_low:{fmt}}, {self.total_high:{fmt}}]")
+        return text
 
 
 def _axis_weights(table: Table, axis: str, value) -> list[tuple[int, float]]:
@@ -1014,8 +1121,10 @@ def interpolate(table, quantity: str, *, component: str | None = None,
     The grid points are independent samples, so the interpolated mean
     ``sum_k w_k mean_k`` has the variance ``sum_k w_k^2 sd_k^2 / n_k``; the interval uses
     Student's t with Welch-Satterthwaite degrees of freedom (at a grid point it is the table's
-    own interval). Interpolation error between grid points is not included: make the grid
-    dense where the quantity curves. Axes with a single value may be omitted.
+    own interval). The discretization errors of the grid points (a bias, correlated between
+    neighbouring points) are interpolated with the same weights: ``sum_k w_k e_k``.
+    Interpolation error between grid points is not included: make the grid dense where the
+    quantity curves. Axes with a single value may be omitted.
     """
     if not isinstance(table, Table):
         table = read_table(table)
@@ -1034,8 +1143,10 @@ def interpolate(table, quantity: str, *, component: str | None = None,
             per_axis.append(_axis_weights(table, a, coords[a]))
     shape = tuple(len(v) for v in table.axes.values())
     vals = table.component_values(quantity, component)
+    errs = table.component_disc_err(quantity, component)
     q = table.resolve_quantity(quantity)
     mean = 0.0
+    disc = 0.0
     var_terms = []
     for combo in itertools.product(*per_axis):
         w = math.prod(c[1] for c in combo)
@@ -1045,6 +1156,8 @@ def interpolate(table, quantity: str, *, component: str | None = None,
         x = vals[p]
         n = x.size
         mean += w * float(x.mean())
+        if errs is not None:
+            disc += abs(w) * float(errs[p])
         var_terms.append((w * w * float(x.var(ddof=1)) / n, n))
     se2 = sum(v for v, _ in var_terms)
     if se2 > 0:
@@ -1053,7 +1166,7 @@ def interpolate(table, quantity: str, *, component: str | None = None,
         dof = float(min(n for _, n in var_terms) - 1)
     half = t_half_width(math.sqrt(se2), dof, conf)
     return Estimate(mean, mean - half, mean + half, math.sqrt(se2), float(dof), conf,
-                    table.units[q])
+                    table.units[q], disc, errs is not None)
 
 
 def body_force_from_table(table, phi: float, B_T: float, gradB_T_per_m: float, *,
@@ -1105,4 +1218,6 @@ def modulus_from_table(table, phi: float, *, confidence: float | None = None,
     dof = se2 ** 2 / sum((e.se ** 2 / m ** 2) ** 2 / e.dof for e in ests) if se2 > 0 else ests[0].dof
     conf = ests[0].confidence
     half = t_half_width(math.sqrt(se2), dof, conf)
-    return Estimate(mean, mean - half, mean + half, math.sqrt(se2), float(dof), conf, "Pa")
+    disc = sum(e.disc_err for e in ests) / m      # a bias: averaged, not reduced by 1/sqrt(m)
+    return Estimate(mean, mean - half, mean + half, math.sqrt(se2), float(dof), conf, "Pa",
+                    disc, ests[0].has_disc)

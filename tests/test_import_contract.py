@@ -23,7 +23,7 @@ LAYERS = (
     ("homogenize.solvers",),                                      # the solver layer
     ("homogenize.mesh", "homogenize._budget"),                    # grids, memory model
     ("homogenize.cell", "homogenize.cut", "homogenize._conforming", "homogenize._cell_output",
-     "homogenize.relax"),                                         # cell problems
+     "homogenize.relax", "homogenize.resolution"),                # cell problems
     ("homogenize._evaluate", "homogenize._study", "homogenize.tables"),   # batch tables
     ("homogenize",),                                              # the package's public face
     ("homogenize.macro",),                                        # specimen, devices

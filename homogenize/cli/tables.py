@@ -1,6 +1,7 @@
 """Commands ``mapsim batch``, ``mapsim rve-size``, ``mapsim compare`` and ``mapsim chain``."""
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -16,6 +17,7 @@ from homogenize.macro.exporters import ExportSpec, export_text
 from homogenize.tables import read_table
 from homogenize.tables import BatchError, run_batch
 from homogenize._study import load_study
+from homogenize._evaluate import COARSE, get_evaluator
 from homogenize._stats import summarize
 from homogenize.studies.rve_size import rve_size_study
 from homogenize._stats import welch_permutation
@@ -65,6 +67,9 @@ def _check_workers(args):
 
 def _cmd_batch(args) -> int:
     study = load_study(args.study)          # all validation before anything is written
+    evaluator = get_evaluator(study.evaluator, fem=study.fem)
+    for w in getattr(evaluator, "resolution_warnings", lambda s: [])(study):
+        print(f"mapsim batch: {w}", file=sys.stderr)
     try:
         out = run_batch(study, args.out, workers=args.workers, scheduler=args.scheduler,
                         retries=args.retries, progress=not args.no_progress, clean=args.clean)
@@ -78,7 +83,9 @@ def _cmd_batch(args) -> int:
 
 def _print_summary(path, max_rows: int = 40) -> None:
     """Every quantity of the table per grid point, its mean and interval (vectors: the z
-    component, tensors: zz; all components through xarray or ``mapsim compare``)."""
+    component, tensors: zz; all components through xarray or ``mapsim compare``); for the cell
+    FEM's quantities also the discretization error and the interval widened by it
+    (:mod:`homogenize.resolution`). The coarse-grid values of the estimate are not printed."""
     t = read_table(path)
     if len(t.points) > max_rows:
         print(f"{len(t.points)} grid points: more than {max_rows}, no summary here (open the "
@@ -87,16 +94,31 @@ def _print_summary(path, max_rows: int = 40) -> None:
     varying = [a for a, v in t.axes.items() if len(v) > 1]
     lvl = f"{100 * t.confidence:g} %"
     for q in t.values:
+        if q.endswith(COARSE):
+            continue
         comp = {1: "_z", 2: "_zz"}.get(t.values[q].ndim - 2, "")
         vals = t.component_values(q)
+        errs = t.component_disc_err(q)
         head = f"{q}{comp} [{t.units.get(q, '1')}]"
         w = max(15, len(head))
+        extra = "" if errs is None else "  discretization  combined interval"
         print(f"{'point':>5}  {'  '.join(f'{a:>14}' for a in varying)}  {head:>{w}}  "
-              f"{lvl} interval")
+              f"{lvl} interval{extra}")
         for i, point in enumerate(t.points):
             s = summarize(vals[i], t.confidence)
             cols = "  ".join(f"{point[a]!s:>14}" for a in varying)
-            print(f"{i:>5}  {cols}  {s['mean']:{w}.6g}  [{s['ci_low']:.6g}, {s['ci_high']:.6g}]")
+            line = f"{i:>5}  {cols}  {s['mean']:{w}.6g}  [{s['ci_low']:.6g}, {s['ci_high']:.6g}]"
+            if errs is not None:
+                e = float(errs[i])
+                line += f"  +- {e:.2g}  [{s['ci_low'] - e:.6g}, {s['ci_high'] + e:.6g}]"
+            print(line)
+    if t.disc_err:
+        d = json.loads(t.attrs.get("discretization", "{}"))
+        print(f"discretization: the error of the mean at {d.get('voxels')} voxels per edge, "
+              f"from the same RVEs at {d.get('coarse_voxels')} (first order, never below "
+              f"{100 * d.get('floor_rel_of_filler_contribution', 0):g} % of the filler's "
+              f"contribution); combined = the {lvl} interval widened by it on both sides "
+              f"(homogenize/resolution.py)")
 
 
 def _cmd_rve_size(args) -> int:
@@ -308,8 +330,7 @@ def beam_from_table(args) -> int:
           f"dB/dz = {args.gradB_T_per_m:g} T/m: {force.mean:.6g} N/m^3, {lvl} interval "
           f"[{force.ci_low:.6g}, {force.ci_high:.6g}]")
     print(f"E = {mat.E_Pa:.6g} Pa" + ("" if E_est is None else
-                                      f" (table, {lvl} interval [{E_est.ci_low:.6g}, "
-                                      f"{E_est.ci_high:.6g}])"))
+                                      f" (table, {lvl} interval {E_est.describe()})"))
     print(f"{'model':<12} {'tip [m]':>12} {lvl + ' interval [m]':>30}")
     for r in rows:
         print(f"{r['model']:<12} {r['tip_m']:12.6g}   [{r['ci_low_m']:.6g}, {r['ci_high_m']:.6g}]")

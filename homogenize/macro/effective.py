@@ -81,7 +81,7 @@ def tip_deflection_from_table(table, phi: float, B_T: float, gradB_T_per_m: floa
         d = eb
     mid, lo, hi = float(d[0]), float(d[1]), float(d[2])
     if E_est is not None and mid > 0:
-        lo, hi = widen_in_quadrature(mid, lo, hi, E_est.rel_half_width)
+        lo, hi = widen_in_quadrature(mid, lo, hi, E_est.total_rel_half_width)
     return TipDeflection(mid, lo, hi, float(eb[0]), model, f, E, E_est, f.confidence)
 
 
@@ -164,7 +164,8 @@ def beam_with_interval(strip: Strip, material: EffectiveMaterial, models, *, ord
             tips[k] = r.tip_m
         lo, hi = tips["ci_low"], tips["ci_high"]
         if material.E_estimate is not None and tips["mean"] > 0:
-            lo, hi = widen_in_quadrature(tips["mean"], lo, hi, material.E_estimate.rel_half_width)
+            lo, hi = widen_in_quadrature(tips["mean"], lo, hi,
+                                         material.E_estimate.total_rel_half_width)
         rows.append({"model": model, "tip_m": tips["mean"], "ci_low_m": lo, "ci_high_m": hi})
     return rows
 

@@ -242,10 +242,11 @@ def run_chain(study=None, out_dir="results/chain", *, workers=None, scheduler=No
         eb_lo, el_lo = _deflections(f_lo, strip, E)
         eb_hi, el_hi = _deflections(f_hi, strip, E)
         if E_est is not None:
-            # deflection ~ f / E: the modulus interval widens the band (relative errors in
-            # quadrature, an approximation good while both are small)
+            # deflection ~ f / E: the modulus interval (with its discretization error, where
+            # the table has one) widens the band (relative errors in quadrature, an
+            # approximation good while both are small)
             for lo, hi, mid in ((eb_lo, eb_hi, eb_mean), (el_lo, el_hi, el_mean)):
-                lo[:], hi[:] = widen_in_quadrature(mid, lo, hi, E_est.rel_half_width)
+                lo[:], hi[:] = widen_in_quadrature(mid, lo, hi, E_est.total_rel_half_width)
         # the applied field at which the strip bends by the measured 4 mm (elastica)
         B4 = {k: _crossing(B_app, y, SEED["deflection_m"])
               for k, y in (("mean", el_mean), ("low_force", el_lo), ("high_force", el_hi))}
