@@ -84,6 +84,10 @@ STUDIES = {
                                        "voxels = 1000"),
     "s_voxels_mem.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 10\nfem = true\n"
                                            "voxels = 250"),
+    "s_coarse.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 10\nfem = true\n"
+                                       "voxels = 16\ncoarse_voxels = 16"),
+    "s_coarse_nofem.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 10\n"
+                                             "coarse_voxels = 8"),
     "s_conf.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 10\nconfidence = 1.5"),
     "s_evaluator.toml": RVE_STUDY.replace('evaluator = "rve"', 'evaluator = "magic"'),
     "s_unknown_key.toml": RVE_STUDY.replace("n_particles = 10", "n_particles = 10\ncolour = 1"),
@@ -341,6 +345,8 @@ CASES = [
         ("s_npart_huge.toml", ("n_particles", "GiB")),
         ("s_voxels.toml", ("voxels", "256")),
         ("s_voxels_mem.toml", ("voxels", "GiB")),
+        ("s_coarse.toml", ("coarse_voxels", "[4, voxels - 1] = [4, 15]", "16")),
+        ("s_coarse_nofem.toml", ("coarse_voxels", "fem = false")),
         ("s_conf.toml", ("confidence", "(0, 1)")),
         ("s_evaluator.toml", ("evaluator",)),
         ("s_unknown_key.toml", ("colour",)),
