@@ -14,6 +14,7 @@ from micro.materials import FE, PDMS, matrix_preset, particle_preset
 from micro.materials import ElasticMaterial as Material
 from micro.rve import RVE
 
+from homogenize.resolution import resolution_warning, voxels_per_radius
 from homogenize._cell_output import plot_slice, write_pvd
 from homogenize.cell import CellConfig, _choose_solver, homogenize
 from homogenize.cut import check_cut_memory
@@ -101,6 +102,10 @@ def _cmd(args) -> int:
     elif args.gradB is not None:
         raise InputError("--gradB needs --B (the applied flux density [T])")
     rve = RVE.load(args.rve)
+    vpr = voxels_per_radius(float(np.mean(rve.radii_m)), rve.box_m, args.voxels)
+    warning = resolution_warning(float(np.mean(rve.radii_m)), rve.box_m, args.voxels)
+    if warning:
+        print(f"mapsim homogenize: {warning}", file=sys.stderr)
     state = mag = None
     if field is not None:
         B, G = field
@@ -113,6 +118,7 @@ def _cmd(args) -> int:
                      progress=not args.quiet)
     out = res.summary()
     out["rve_file"] = str(args.rve)
+    out["voxels_per_radius"] = vpr      # mean particle radius in voxels (homogenize.resolution)
     out["phi_rve"] = float(rve.phi)
     if mag is not None:
         out["magnetics"] = mag

@@ -175,3 +175,23 @@ def test_study_defaults_and_bad_coarse_grids():
         assert words in str(exc.value)
     with pytest.raises(InputError, match="fem = false"):
         parse_study(rve.replace("fem = true", "fem = false\ncoarse_voxels = 8"), "s.toml")
+
+
+def test_homogenize_warns_when_particles_are_under_resolved(tmp_path, capsys):
+    """`mapsim homogenize` names the resolution of the mean radius and warns below 3 voxels
+    per radius (and only there)."""
+    from homogenize.cli import main
+    from micro.particles import Monodisperse, generate_rve
+    rve = generate_rve(0.05, 4, 7, distribution=Monodisperse(25e-9), gap_m=5e-9)
+    rve.save(tmp_path / "rve.h5")
+    vpr8 = res.voxels_per_radius(25e-9, rve.box_m, 8)
+    n_ok = res.voxels_needed(25e-9, rve.box_m)
+    assert vpr8 < res.MIN_VOXELS_PER_RADIUS <= res.voxels_per_radius(25e-9, rve.box_m, n_ok)
+    for n, warned in ((8, True), (n_ok, False)):
+        out = tmp_path / f"c{n}.json"
+        assert main(["homogenize", str(tmp_path / "rve.h5"), "--voxels", str(n), "--json",
+                     str(out), "--quiet"]) == 0
+        err = capsys.readouterr().err
+        assert ("warning:" in err and f"use voxels >= {n_ok}" in err) is warned
+        assert json.loads(out.read_text())["voxels_per_radius"] == pytest.approx(
+            res.voxels_per_radius(25e-9, rve.box_m, n))
