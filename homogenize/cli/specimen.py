@@ -60,12 +60,13 @@ mean strain 1/15 of mu0 M^2/G within 1 %; a cylinder L/D = 0.8, mean strain agai
 virtual work of its demagnetizing energy within 1.5 % at 128 boundary segments, converging at
 first order in the field mesh. --geometry 3d (a cylinder or a box): the 3D cylinder agrees
 with the axisymmetric solve within its discretization error (tests/homogenize/macro/
-test_specimen.py); no VTU output in 3D yet.
+test_specimen.py); its --vtu holds the whole body (the octant mirrored, quadratic
+tetrahedra).
 
 Prints one line per field step and writes (each optional) --json (per step: B_applied_T,
 M_mean_A_per_m, H_mean_A_per_m, demag_factor, changes of length and strains on the axis and
 between the end-face means, diameter change and lateral strain, volume-mean axial strain,
-staggered and Newton iterations; a manifest), --png (strains against B) and --vtu (the
+staggered and Newton iterations, volume change; a manifest), --png (strains against B) and --vtu (the
 deformed mechanics mesh of the last step with displacement and mean stress, for ParaView)."""
 
 _LAWS = ("linear", "froehlich-kennelly", "langevin", "tanh", "table", "rve")
@@ -202,9 +203,6 @@ def _specimen(args):
     if three_d and args.n_boundary is not None:
         raise InputError("--n-boundary belongs to the axisymmetric field mesh; the 3D field "
                          "mesh is built from the mechanics mesh (--n-mesh)")
-    if three_d and args.vtu is not None:
-        raise InputError("--vtu writes the axisymmetric mechanics mesh; a 3D specimen's VTU "
-                         "output does not exist yet")
     if args.shape == "sphere" and args.length_m is not None:
         raise InputError("--length-m is not taken for --shape sphere (its length is 2 R); use "
                          "--shape spheroid for another length")

@@ -9,6 +9,14 @@ revolution. Point data: ``displacement_m`` (u_r, 0, u_z) [m] (reference position
 displacement) and ``mean_stress_Pa`` [Pa], the material's Cauchy mean stress (the u-p
 pressure field, positive in tension, without the magnetic stress; linear in each element, its
 P1 values interpolated to the edge nodes).
+
+A 3D specimen (``geometry="3d"``, :func:`specimen_vtu_arrays_3d`): the whole body, the computed
+octant ``x, y, z >= 0`` mirrored about its three symmetry planes (nodes on a plane shared), as
+quadratic tetrahedra (VTK ``tetra10``: vertices 0-3, then the midside nodes of the edges (0, 1),
+(1, 2), (0, 2), (0, 3), (1, 3), (2, 3), matched here to the P2 nodes by position, every
+tetrahedron with a positive volume) at their DEFORMED positions; point data ``displacement_m``
+(u_x, u_y, u_z) [m] and ``mean_stress_Pa`` as above. A body mechanics mesh without symmetry
+planes (the supported specimen) is written as it is.
 """
 from __future__ import annotations
 
@@ -17,8 +25,8 @@ import numpy as np
 from homogenize._cell_output import _finish_xml, _text
 from micro._io import atomic_path
 
-__all__ = ["write_specimen_vtu", "specimen_vtu_arrays", "plot_specimen_strains",
-           "SPECIMEN_VTU_UNITS"]
+__all__ = ["write_specimen_vtu", "specimen_vtu_arrays", "specimen_vtu_arrays_3d",
+           "plot_specimen_strains", "SPECIMEN_VTU_UNITS"]
 
 #: units of the arrays of the VTU (also stored in the file as field data ``units``)
 SPECIMEN_VTU_UNITS = {"points": "m (deformed)", "displacement_m": "m", "mean_stress_Pa": "Pa",
@@ -67,6 +75,74 @@ def specimen_vtu_arrays(solution) -> dict:
             "mean_stress_Pa": p}
 
 
+#: VTK's tetra10: the midside node k (4..9) sits on the edge _TET10_EDGES[k - 4]
+_TET10_EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
+#: the same tetrahedron with vertices 1 and 2 swapped (opposite orientation), in VTK's order
+_TET10_FLIP = [0, 2, 1, 3, 6, 5, 4, 7, 9, 8]
+
+
+def _tet10_connectivity(P, dofs) -> np.ndarray:
+    """(ne, 10) node indices in VTK's tetra10 order from the P2 element dofs ``dofs`` (10, ne)
+    at positions ``P`` (3, N): the midside node of each VTK edge found by position (whatever
+    the element's local edge numbering)."""
+    dofs = np.asarray(dofs)
+    v = dofs[:4].T                                          # (ne, 4)
+    e = dofs[4:].T                                          # (ne, 6)
+    Pe = P[:, e]                                            # (3, ne, 6)
+    out = np.empty((dofs.shape[1], 10), dtype=np.int64)
+    out[:, :4] = v
+    for k, (a, b) in enumerate(_TET10_EDGES):
+        mid = 0.5 * (P[:, v[:, a]] + P[:, v[:, b]])         # (3, ne)
+        d = np.sum((Pe - mid[:, :, None]) ** 2, axis=0)     # (ne, 6)
+        out[:, 4 + k] = e[np.arange(e.shape[0]), np.argmin(d, axis=1)]
+    return out
+
+
+def _tet_volumes(P, tet):
+    """Signed volumes [m^3] of the straight tetrahedra of the vertices ``tet[:, :4]``."""
+    x = P[:, tet[:, :4]]                                     # (3, ne, 4)
+    return np.einsum("ie,ie->e", x[:, :, 1] - x[:, :, 0],
+                     np.cross(x[:, :, 2] - x[:, :, 0], x[:, :, 3] - x[:, :, 0], axis=0)) / 6.0
+
+
+def specimen_vtu_arrays_3d(solution) -> dict:
+    """The whole body of a :class:`~homogenize.macro.finite_strain.Solution3D`: its mesh
+    mirrored about the symmetry planes of ``solution.body.symmetry`` (``x_i = 0``; the
+    displacement's ``i`` component changes sign in the image). ``points`` (N, 3) deformed [m],
+    ``tetra10`` (ne, 10) node indices (VTK order, positive volume), ``displacement_m`` (N, 3)
+    [m], ``mean_stress_Pa`` (N,) [Pa]."""
+    basis = solution.basis
+    P = np.asarray(solution.doflocs_m, float)               # (3, N) reference
+    U = np.asarray(solution.u_m, float)                     # (3, N)
+    dofs = np.asarray(basis.element_dofs)                   # (10, ne)
+    nv = solution.body.mesh.p.shape[1]
+    tet = _tet10_connectivity(P, dofs)
+    p = np.empty(P.shape[1])
+    p[:nv] = solution.p_Pa
+    for k, (a, b) in enumerate(_TET10_EDGES):
+        p[tet[:, 4 + k]] = 0.5 * (p[tet[:, a]] + p[tet[:, b]])
+    size = float(np.abs(P).max())
+    for axis, sym in enumerate(solution.body.symmetry):
+        if not sym:
+            continue
+        on = np.abs(P[axis]) <= 1e-12 * size
+        n = P.shape[1]
+        new = np.flatnonzero(~on)
+        index = np.arange(n)
+        index[new] = n + np.arange(new.size)
+        flip = np.ones((3, 1))
+        flip[axis] = -1.0
+        P = np.hstack([P, P[:, new] * flip])
+        U = np.hstack([U, U[:, new] * flip])
+        p = np.concatenate([p, p[new]])
+        tet = np.vstack([tet, index[tet]])
+    # a mirror image turns a tetrahedron inside out (and the solver's mesh may mix both)
+    neg = _tet_volumes(P, tet) < 0
+    tet[neg] = tet[neg][:, _TET10_FLIP]
+    return {"points": (P + U).T.copy(), "tetra10": tet, "displacement_m": U.T.copy(),
+            "mean_stress_Pa": p}
+
+
 def write_specimen_vtu(path, result) -> None:
     """Write the last field step of a :class:`~homogenize.macro.specimen.SpecimenResult` as a
     VTU (module docstring for the arrays). Field data: ``B_applied_T``, ``M_mean_A_per_m``,
@@ -76,18 +152,29 @@ def write_specimen_vtu(path, result) -> None:
 
     if result.solution is None:
         raise ValueError("the result holds no mechanics solution (no field step was solved)")
-    a = specimen_vtu_arrays(result.solution)
+    three_d = getattr(result.specimen, "geometry", "axisymmetric") == "3d"
+    if three_d:
+        a = specimen_vtu_arrays_3d(result.solution)
+        cells = [("tetra10", a["tetra10"])]
+        sym = result.solution.body.symmetry
+        config = ("deformed; the whole body (the computed part x, y, z >= 0 mirrored about the "
+                  "symmetry planes)" if all(sym) else "deformed; the whole body") \
+            + ", field along z"
+    else:
+        a = specimen_vtu_arrays(result.solution)
+        cells = [("triangle6", a["triangle6"])]
+        config = ("deformed; half meridian section r >= 0 in the plane y = 0, field along z; "
+                  "rotate about z for the body")
     last = result.steps[-1]
     field_data = {
         "B_applied_T": np.array([last.B_applied_T], dtype=np.float64),
         "M_mean_A_per_m": np.array([last.M_mean_A_per_m], dtype=np.float64),
         "model": _text(result.model), "law": _text(result.law),
         "shape": _text(result.specimen.shape),
-        "configuration": _text("deformed; half meridian section r >= 0 in the plane y = 0, "
-                               "field along z; rotate about z for the body"),
+        "configuration": _text(config),
         "units": _text("; ".join(f"{k}: {v}" for k, v in SPECIMEN_VTU_UNITS.items())),
     }
-    m = meshio.Mesh(a["points"], [("triangle6", a["triangle6"])],
+    m = meshio.Mesh(a["points"], cells,
                     point_data={"displacement_m": a["displacement_m"],
                                 "mean_stress_Pa": a["mean_stress_Pa"]})
     with atomic_path(path) as tmp:

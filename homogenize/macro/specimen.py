@@ -63,7 +63,8 @@ starts Newton from the previous one (``solve_3d(initial=...)``). Accuracy agains
 axisymmetric solve of the same cylinder (tests, bench): strains within 0.2-0.8 % at n_mesh 6
 and 2-7 % at 4 in the linear regime, within 0.2-1.2 % at n_mesh 6 at 1.2 T (2 % strain);
 cost of the 13-step benchmark in :mod:`homogenize.bench.specimen` (n_mesh 6: 83 s CPU,
-0.47 GB). Not covered in 3D: spheres and spheroids (axisymmetric only), VTU output.
+0.47 GB). Not covered in 3D: spheres and spheroids (axisymmetric only). VTU output: the octant
+mirrored to the whole body (:func:`homogenize.macro._specimen_output.write_specimen_vtu`).
 
 Units: SI (m, Pa, A/m, T).
 """
@@ -81,8 +82,10 @@ from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
 from micro._validate import ConvergenceError, InputError, check_choice, check_positive
 
-__all__ = ["MODELS", "SHAPES", "SHAPES_3D", "GEOMETRIES", "Specimen", "SpecimenStep",
-           "SpecimenResult", "solve_specimen", "magnetic_pressure_Pa"]
+__all__ = ["MODELS", "SHAPES", "SHAPES_3D", "GEOMETRIES", "SUPPORTS", "Specimen",
+           "SpecimenStep", "SpecimenResult", "SupportedStep", "solve_specimen",
+           "solve_specimen_in_field", "solve_specimen_on_magnet", "check_gaps",
+           "magnetic_pressure_Pa", "volume_change_m3"]
 
 MODELS = ("continuum", "affine", "relaxed")
 #: shapes of an axisymmetric specimen (``geometry="axisymmetric"``)
@@ -268,6 +271,7 @@ class SpecimenStep:
     strain_axis, strain_end_mean : the same over the initial length [-]
     diameter_change_m, lateral_strain : at mid-height / the equator [m], [-]
     mean_strain_zz : volume mean of the axial strain (what an RVE gives) [-]
+    volume_change_m3 : change of the body's volume, ``int (J - 1) dV`` [m^3]
     stagger_iterations : field-mechanics iterations; newton_iterations : all Newton steps
     stagger_history : relative change of the length per iteration [-]
     """
@@ -285,6 +289,22 @@ class SpecimenStep:
     stagger_iterations: int
     newton_iterations: int
     stagger_history: tuple
+    volume_change_m3: float = float("nan")
+
+
+def volume_change_m3(sol) -> float:
+    """``int (J - 1) dV`` [m^3] over the whole reference body (mirror images included) of a
+    mechanics solution: the change of the volume of the deformed (curved, P2) body; the
+    element rule integrates the cubic ``det F`` of P2 displacements exactly."""
+    J = np.linalg.det(fs.deformation_gradient(sol))
+    b = sol.basis
+    dx = np.asarray(b.dx)
+    if isinstance(sol, fs.Solution3D):
+        factor = 2.0 ** sum(sol.body.symmetry)
+    else:
+        dx = dx * 2.0 * math.pi * np.asarray(b.global_coordinates())[0]
+        factor = 2.0 if sol.body.mid_plane else 1.0
+    return float(factor * np.sum((J - 1.0) * dx))
 
 
 @dataclass(frozen=True)
@@ -298,19 +318,28 @@ class SpecimenResult:
     steps: tuple
     solution: object = field(repr=False, compare=False, default=None)
     field_result: object = field(repr=False, compare=False, default=None)
+    #: a specimen on a plate in a non-uniform field (:func:`solve_specimen_in_field`): its
+    #: support, frame and magnet (None: the free body in a uniform field)
+    setup: dict | None = field(compare=False, default=None)
 
     def to_dict(self) -> dict:
         """JSON-ready (SI units)."""
         s = self.specimen
+        # the supported body's volume_m3 counts the image of its plate (a plane of symmetry)
+        vol = (None if self.solution is None else
+               float(self.solution.body.volume_m3)
+               / (2.0 if (self.setup or {}).get("support") == "plate" else 1.0))
         return {"specimen": {"shape": s.shape, "radius_m": s.radius_m, "length_m": s.length_m,
                              "aspect_ratio_L_over_D": s.aspect_ratio, "n_mesh": s.n_mesh,
                              "n_boundary": s.n_boundary,
+                             "mesh_volume_m3": vol,
                              **({"geometry": "3d", "edge_radius_m": s.edge_radius_m}
                                 if s.geometry == "3d" else {})},
                 "model": self.model, "shear_modulus_Pa": self.shear_modulus_Pa,
                 "bulk_modulus_Pa": self.bulk_modulus_Pa, "law": self.law,
                 "steps": [dict(st.__dict__, stagger_history=list(st.stagger_history))
-                          for st in self.steps]}
+                          for st in self.steps],
+                **({"setup": self.setup} if self.setup else {})}
 
 
 def _check_steps(B_applied_T) -> np.ndarray:
@@ -339,16 +368,17 @@ def _field_shape(specimen: Specimen):
     return ms.Profile(np.vstack([upper, upper[::-1] * np.array([1.0, -1.0])]))
 
 
-def _vertex_displacement(sol, x) -> np.ndarray:
+def _vertex_displacement(sol, x, mirror: bool = True) -> np.ndarray:
     """The mechanics displacement [m] at points ``x`` (2, n) of the whole section: the quarter's
     vertex displacements interpolated linearly in the triangle holding each point (mirrored
-    about z = 0), or extrapolated from the nearest triangle for a point just outside the
+    about z = 0; ``mirror=False``: a mesh of the whole section, as it is), or extrapolated
+    from the nearest triangle for a point just outside the
     quarter's polygon (the exact profile bulges past the inscribed mesh). Plain numpy: scipy's
     Delaunay-based interpolators make one small LAPACK call per triangle, which multithreaded
     BLAS slows by orders of magnitude."""
     mesh = sol.body.mesh
     nv = mesh.p.shape[1]
-    xq = np.vstack([x[0], np.abs(x[1])])
+    xq = np.vstack([x[0], np.abs(x[1]) if mirror else x[1]])
     P = mesh.p[:, mesh.t]                                       # (2, 3, ne)
     cent = P.mean(axis=1).T
     k = min(8, mesh.t.shape[1])
@@ -366,11 +396,12 @@ def _vertex_displacement(sol, x) -> np.ndarray:
     w = lam[:, rows, best]                                      # (3, n)
     u = sol.u_m[:, :nv][:, mesh.t[:, el]]                       # (2, 3, n)
     out = np.einsum("ivn,vn->in", u, w)
-    out[1] *= np.sign(x[1]) + (x[1] == 0)
+    if mirror:
+        out[1] *= np.sign(x[1]) + (x[1] == 0)
     return out
 
 
-def _moved_geometry(g0: ms.BodyMesh, sol) -> ms.BodyMesh:
+def _moved_geometry(g0: ms.BodyMesh, sol, mirror: bool = True) -> ms.BodyMesh:
     """The field mesh ``g0`` of the undeformed body moved with the body: its body vertices by
     the mechanics displacement (:func:`_vertex_displacement`), the air vertices by the displacement of the
     body surface on their ray, blended linearly to zero at the domain sphere (whose Kelvin
@@ -383,7 +414,7 @@ def _moved_geometry(g0: ms.BodyMesh, sol) -> ms.BodyMesh:
     p = mesh.p
     body_v = np.unique(mesh.t[:, g0.body_elements])
     d = np.zeros_like(p)
-    d[:, body_v] = _vertex_displacement(sol, p[:, body_v])
+    d[:, body_v] = _vertex_displacement(sol, p[:, body_v], mirror)
     # air: the body surface's displacement along each ray, to zero at the domain sphere
     c = g0.center_m.reshape(2, 1)
     y = p - c
@@ -496,6 +527,87 @@ def _solve_mechanics_3d(body, solid, loads, load_steps, previous):
 _FIELD_RTOL_3D = 1e-8
 
 
+def _staggered_step(body, law, solid, kappa, field_solve, mech_solve, length_change, L0,
+                    tol, max_stagger, relaxation, sol, label, trivial, steps):
+    """One field step's staggered field-mechanics iteration (Aitken-relaxed loads, module
+    docstring): ``field_solve(sol)`` the field on the body deformed by ``sol`` (None: the
+    undeformed body), ``mech_solve(loads, sol)`` the mechanics under the Kelvin loads,
+    ``length_change(sol)`` [m] the observable whose relative change stops the iteration;
+    ``label`` names the step in errors, ``trivial`` (no field) stops after one iteration.
+    Returns ``(sol, res, iterations, newton_iterations, history)``."""
+    hist, newton, dl_prev, w = [], 0, None, relaxation
+    x_prev = r_prev = None
+    for it in range(1, max_stagger + 1):
+        res = field_solve(sol)
+        ms.check_table_range(res, "the composite's magnetization table")
+        if sol is None:
+            xf, nf = fs.facet_points(body)
+        else:
+            xf, nf = fs.current_facet_points(sol)
+        xe, _ = _element_state(body, sol)
+        Hf, Mf = ms.body_fields_at(res, xf)
+        nf = nf / np.linalg.norm(nf, axis=0)
+        psi_f = magnetic_pressure_Pa(law, np.linalg.norm(Hf, axis=0))
+        t = (0.5 * MU0 * np.sum(Mf * nf, axis=0) ** 2 + psi_f) * nf
+        He, Me = ms.body_fields_at(res, xe)
+        S = magnetic_pressure_Pa(law, np.linalg.norm(He, axis=0))[..., None, None] \
+            * np.eye(3)
+        if kappa is not None:
+            S = S + _prescribed_stress(Me, kappa)
+        g = np.concatenate([t.ravel(), S.ravel()])
+        if x_prev is None:                # the step's first iteration: the loads as they are
+            x = g
+        else:
+            # Aitken's dynamic relaxation (Irons & Tuck) of the load vector: the staggered
+            # iteration is a fixed point x = g(x) that contracts slowly where the body's
+            # elongation and its magnetization feed each other
+            r = g - x_prev
+            if r_prev is not None:
+                dr = r - r_prev
+                den = float(dr @ dr)
+                if den > 0.0:
+                    w = float(np.clip(-w * float(r_prev @ dr) / den, 0.05, 1.0))
+            x = x_prev + w * r
+            r_prev = r
+        x_prev = x
+        t = x[:t.size].reshape(t.shape)
+        S = x[t.size:].reshape(S.shape)
+        loads = fs.Loads((fs.Traction(t, "surface", follower=True),),
+                         prescribed_stress_Pa=S)
+        try:
+            sol = mech_solve(loads, sol)
+        except ConvergenceError as exc:
+            err = ConvergenceError(
+                f"the mechanics did not converge at {label} (staggered iteration "
+                f"{it}): {exc}", getattr(exc, "residual_history", ()))
+            err.steps_converged = tuple(steps)
+            raise err from None
+        newton += sol.newton_iterations
+        dl = length_change(sol)
+        if dl_prev is not None:
+            # relative to the change of length, or to the magnetic strain scale
+            # mu0 <M>^2 / G where the two load parts cancel (affine sphere)
+            scale = max(abs(dl), L0 * MU0 * float(res.M_mean_A_per_m[-1]) ** 2
+                        / solid.G_Pa, 1e-300)
+            change = abs(dl - dl_prev) / scale
+            hist.append(float(change))
+            if change <= tol:
+                break
+        elif trivial:
+            hist.append(0.0)
+            break
+        dl_prev = dl
+    else:
+        err = ConvergenceError(
+            f"the field-mechanics iteration did not converge at {label} in "
+            f"{max_stagger} iterations (relative changes of the length "
+            f"{', '.join(f'{h:.2g}' for h in hist[-5:])}); try relaxation < 1 or smaller "
+            "field steps", hist)
+        err.steps_converged = tuple(steps)
+        raise err
+    return sol, res, it, newton, hist
+
+
 def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied_T, *,
                    model: str = "continuum", kappa=None, tol: float = 1e-4,
                    max_stagger: int = 30, relaxation: float = 1.0,
@@ -568,83 +680,22 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
     sol, res, steps = None, None, []
     for i, b in enumerate(B):
         H0 = b / MU0
-        hist, newton, dl_prev, w = [], 0, None, relaxation
-        x_prev = r_prev = None
-        for it in range(1, max_stagger + 1):
-            if is3:
-                res = ms.solve_3d(_moved_geometry_3d(g0, sol, rays), law, H0,
-                                  rtol=field_rtol)
-            else:
-                res = ms.solve_axisymmetric(None, law, H0, geometry=_moved_geometry(g0, sol))
-            ms.check_table_range(res, "the composite's magnetization table")
-            if sol is None:
-                xf, nf = fs.facet_points(body)
-            else:
-                xf, nf = fs.current_facet_points(sol)
-            xe, _ = _element_state(body, sol)
-            Hf, Mf = ms.body_fields_at(res, xf)
-            nf = nf / np.linalg.norm(nf, axis=0)
-            psi_f = magnetic_pressure_Pa(law, np.linalg.norm(Hf, axis=0))
-            t = (0.5 * MU0 * np.sum(Mf * nf, axis=0) ** 2 + psi_f) * nf
-            He, Me = ms.body_fields_at(res, xe)
-            S = magnetic_pressure_Pa(law, np.linalg.norm(He, axis=0))[..., None, None] \
-                * np.eye(3)
-            if kappa is not None:
-                S = S + _prescribed_stress(Me, kappa)
-            g = np.concatenate([t.ravel(), S.ravel()])
-            if x_prev is None:                # the step's first iteration: the loads as they are
-                x = g
-            else:
-                # Aitken's dynamic relaxation (Irons & Tuck) of the load vector: the staggered
-                # iteration is a fixed point x = g(x) that contracts slowly where the body's
-                # elongation and its magnetization feed each other
-                r = g - x_prev
-                if r_prev is not None:
-                    dr = r - r_prev
-                    den = float(dr @ dr)
-                    if den > 0.0:
-                        w = float(np.clip(-w * float(r_prev @ dr) / den, 0.05, 1.0))
-                x = x_prev + w * r
-                r_prev = r
-            x_prev = x
-            t = x[:t.size].reshape(t.shape)
-            S = x[t.size:].reshape(S.shape)
-            loads = fs.Loads((fs.Traction(t, "surface", follower=True),),
-                             prescribed_stress_Pa=S)
-            try:
-                if is3:
-                    sol = _solve_mechanics_3d(body, solid, loads, load_steps, sol)
-                else:
-                    sol = fs.solve_axisymmetric(body, solid, loads, load_steps=load_steps)
-            except ConvergenceError as exc:
-                err = ConvergenceError(
-                    f"the mechanics did not converge at B = {b:g} T (staggered iteration "
-                    f"{it}): {exc}", getattr(exc, "residual_history", ()))
-                err.steps_converged = tuple(steps)
-                raise err from None
-            newton += sol.newton_iterations
-            dl = fs.length_change_m(sol)[0]
-            if dl_prev is not None:
-                # relative to the change of length, or to the magnetic strain scale
-                # mu0 <M>^2 / G where the two load parts cancel (affine sphere)
-                scale = max(abs(dl), L0 * MU0 * float(res.M_mean_A_per_m[-1]) ** 2
-                            / solid.G_Pa, 1e-300)
-                change = abs(dl - dl_prev) / scale
-                hist.append(float(change))
-                if change <= tol:
-                    break
-            elif b == 0.0:
-                hist.append(0.0)
-                break
-            dl_prev = dl
+        if is3:
+            def field_solve(sol, H0=H0):
+                return ms.solve_3d(_moved_geometry_3d(g0, sol, rays), law, H0, rtol=field_rtol)
+
+            def mech_solve(loads, sol):
+                return _solve_mechanics_3d(body, solid, loads, load_steps, sol)
         else:
-            err = ConvergenceError(
-                f"the field-mechanics iteration did not converge at B = {b:g} T in "
-                f"{max_stagger} iterations (relative changes of the length "
-                f"{', '.join(f'{h:.2g}' for h in hist[-5:])}); try relaxation < 1 or smaller "
-                "field steps", hist)
-            err.steps_converged = tuple(steps)
-            raise err
+            def field_solve(sol, H0=H0):
+                return ms.solve_axisymmetric(None, law, H0, geometry=_moved_geometry(g0, sol))
+
+            def mech_solve(loads, sol):
+                return fs.solve_axisymmetric(body, solid, loads, load_steps=load_steps)
+        sol, res, it, newton, hist = _staggered_step(
+            body, law, solid, kappa, field_solve, mech_solve,
+            lambda sol: fs.length_change_m(sol)[0], L0, tol, max_stagger, relaxation, sol,
+            f"B = {b:g} T", b == 0.0, steps)
         dl_axis, dl_mean = fs.length_change_m(sol)
         dd = fs.diameter_change_m(sol)
         steps.append(SpecimenStep(
@@ -655,8 +706,297 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
             strain_axis=dl_axis / L0, strain_end_mean=float(dl_mean) / L0,
             diameter_change_m=dd, lateral_strain=dd / (2.0 * specimen.radius_m),
             mean_strain_zz=float(fs.mean_strain(sol)[2, 2]), stagger_iterations=it,
-            newton_iterations=newton, stagger_history=tuple(hist)))
+            newton_iterations=newton, stagger_history=tuple(hist),
+            volume_change_m3=volume_change_m3(sol)))
         if progress is not None:
             progress(i + 1, len(B), float(b))
     return SpecimenResult(specimen, model, solid.G_Pa, solid.K_Pa, _law_name(law),
                           tuple(steps), sol, res)
+
+
+# --------------------------------------------------------------------------------------------
+# a specimen in a non-uniform applied field (a permanent magnet), resting on a plate
+
+#: supports of a specimen in a non-uniform field (the body feels a net force): "plate" -- its
+#: bottom face on a rigid frictionless plate; "free" -- none, the net force balanced by
+#: d'Alembert's uniform body force (the body accelerating quasi-statically; with no net force,
+#: the free body of :func:`solve_specimen`)
+SUPPORTS = ("plate", "free")
+
+
+@dataclass(frozen=True)
+class SupportedStep(SpecimenStep):
+    """A field step of a specimen resting on a plate in a non-uniform field
+    (:func:`solve_specimen_in_field`, :func:`solve_specimen_on_magnet`): the observables of
+    :class:`SpecimenStep` (``B_applied_T``: ``mu0 H_a,z`` of the applied field at the
+    undeformed body's centre; ``diameter_change_m`` at mid-height), and
+
+    gap_m : the magnet gap (its top face to the specimen's bottom face) [m] (NaN: no magnet)
+    gradB_applied_T_per_m : ``mu0 dH_a,z/dz`` at the undeformed centre [T/m]
+    reaction_N : axial force of the plate on the body [N] (> 0: pushes it up, away from a
+        magnet below; the plate's consistent nodal reactions)
+    kelvin_force_N : net axial magnetic force [N] from the Kelvin loads on the field mesh
+        (:func:`homogenize.macro.magnetostatics.magnetic_loads`)
+    maxwell_force_N : the same from the Maxwell stress on a shell in the air between the body
+        and the sources (:func:`homogenize.macro.magnetostatics.maxwell_force_N`); NaN when no
+        shell fits between them (a magnet closer to the body's centre than ~1.15 times the
+        body's largest distance from it)
+    """
+    gap_m: float = float("nan")
+    gradB_applied_T_per_m: float = float("nan")
+    reaction_N: float = float("nan")
+    kelvin_force_N: float = float("nan")
+    maxwell_force_N: float = float("nan")
+
+
+def _supported_cylinder_body(spec: Specimen, support: str = "plate") -> fs.AxisymmetricBody:
+    """The whole meridian section of a cylinder resting with its bottom face on the plate
+    ``z = 0`` (it occupies ``0 <= z <= L``), both rims rounded as in
+    :meth:`Specimen.mechanics_body`. The plate is frictionless and rigid: ``u_z = 0`` on the
+    flat part of the bottom face, ``u_r`` free. It is imposed through the solver's plane of
+    symmetry (the boundary ``"mid"`` with ``mid_plane=True``: ``u_z = 0`` there, nothing else;
+    a frictionless plate and a symmetry plane impose the same condition). Beware: this body's
+    ``volume_m3`` counts a mirror image (twice the body); :func:`fs.mean_strain` divides it
+    out, :func:`fs.length_change_m` and :func:`fs.diameter_change_m` assume a mirror image and
+    are not used for it. Boundaries: ``"axis"``, ``"mid"`` = ``"end_bottom"`` (the flat part
+    of the bottom face), ``"end"`` (the flat part of the top face), ``"side"``,
+    ``"surface"`` (all of the body's surface but the axis: the Kelvin traction acts on the
+    bottom face too, the plate's reaction adds to it). ``support="free"``: the same mesh
+    without the plate (``mid_plane=False``: ``int u_z dV = 0``, a free body)."""
+    R, L, n = spec.radius_m, spec.length_m, int(spec.n_mesh)
+    c = 0.5 * L
+    mesh = fs.cylinder_body(R, L, n, mid_plane=False).mesh
+    p = mesh.p.copy()
+    rho = float(spec.edge_radius_m)
+    if rho > 0.0:
+        a, b = p[0] - (R - rho), np.abs(p[1]) - (c - rho)
+        sel = (a > 0) & (b > 0)
+        an, bn = a[sel] / rho, b[sel] / rho
+        sgn = np.sign(p[1, sel])
+        p[0, sel] = R - rho + rho * an * np.sqrt(1.0 - 0.5 * bn * bn)
+        p[1, sel] = sgn * (c - rho + rho * bn * np.sqrt(1.0 - 0.5 * an * an))
+    p[1] += c
+    bnd = dict(mesh.boundaries)
+    for name, z in (("end", L), ("end_bottom", 0.0)):
+        flat = np.all(np.abs(p[1, mesh.facets[:, bnd[name]]] - z) <= 1e-12 * c, axis=0)
+        bnd[name] = bnd[name][flat]
+    plate = support == "plate"
+    if plate:
+        bnd["mid"] = bnd["end_bottom"]
+    return fs.AxisymmetricBody(MeshTri(p, mesh.t, _boundaries=bnd), "cylinder", R, c, plate)
+
+
+def _plate_reaction_N(sol) -> float:
+    """The plate's axial force on the body [N]: the residual of the mechanics (internal minus
+    applied nodal forces) at the converged state, summed over the plate's ``u_z`` dofs."""
+    asm_ = fs._axi_assembler(sol.body, sol.solid, sol.loads)
+    nu = asm_.nu_dof
+    x = np.zeros(asm_.n)
+    x[0:nu:2], x[1:nu:2] = sol.u_m
+    x[nu:nu + asm_.np_dof] = sol.p_Pa
+    r, _ = asm_.residual(x, 1.0, tangent=False)
+    return float(r[2 * asm_.ub.get_dofs("mid").all() + 1].sum())
+
+
+def _face_mean_uz(sol, name) -> float:
+    """Area mean of ``u_z`` over the reference facets ``name`` (weight ``r``)."""
+    from skfem import ElementTriP2, FacetBasis
+    mesh = sol.body.mesh
+    fb = FacetBasis(mesh, ElementTriP2(), facets=mesh.boundaries[name], intorder=fs.INTORDER)
+    w = np.asarray(fb.dx) * np.asarray(fb.global_coordinates())[0]
+    return float(np.sum(np.asarray(fb.interpolate(sol.u_m[1])) * w) / np.sum(w))
+
+
+def _maxwell_or_nan(res, source_distance_m) -> float:
+    """Axial Maxwell force [N] on a shell between the body and the sources (at
+    ``source_distance_m`` or farther from the field mesh's centre), NaN if none fits."""
+    g = res.geometry
+    c = g.center_m.reshape(2, 1)
+    pts = g.mesh.p[:, g.mesh.t[:, g.body_elements]].reshape(2, -1)
+    rb = float(np.max(np.linalg.norm(pts - c, axis=0)))
+    upper = min(float(source_distance_m), g.radius_m)
+    if not upper > 1.15 * rb:
+        return float("nan")
+    return float(ms.maxwell_force_N(res, rb + 0.2 * (upper - rb), rb + 0.8 * (upper - rb))[1])
+
+
+def solve_specimen_in_field(specimen: Specimen, law, solid: fs.NeoHookeanSolid, H_applied, *,
+                            source_distance_m=None, gaps_m=None, support: str = "plate",
+                            model: str = "continuum",
+                            kappa=None, tol: float = 1e-4, max_stagger: int = 30,
+                            relaxation: float = 1.0, load_steps: int = 2,
+                            progress=None) -> SpecimenResult:
+    """Field steps of a cylinder resting on a rigid, frictionless plate in a non-uniform
+    applied field (e.g. of a magnet below the plate).
+
+    Frame: the specimen's axis is z, its bottom face on the plate ``z = 0``, the body in
+    ``0 <= z <= L`` (:func:`_supported_cylinder_body`). In a non-uniform field the body feels
+    a net force; the plate holds it (``u_z = 0`` on the flat bottom face, ``u_r`` free) and
+    its reaction is reported. The loads are those of :func:`solve_specimen` (Kelvin's, as the
+    traction ``[(mu0/2)(M.n)^2 + psi] n`` and the stress ``psi I``): ``f = mu0 (M . grad) H =
+    grad psi`` holds for ANY curl-free total field ``H = H_a - grad phi`` with ``M`` parallel
+    to ``H`` (isotropic law), uniform or not, so they carry over unchanged; their net force
+    ``int [(mu0/2)(M.n)^2 + psi] n dA`` is the Kelvin force (tests: against the Maxwell stress
+    and the dipole limit). The staggered iteration, models and tolerances are those of
+    :func:`solve_specimen`; the field mesh moves with the body including its rigid motion.
+
+    Parameters
+    ----------
+    specimen : Specimen -- an axisymmetric cylinder (the plate needs a flat face)
+    H_applied : sequence of callables -- one per field step, ``H_a(x)`` for ``x`` (2, ...) =
+        (r, z) [m] in the frame above, returning ``(H_r, H_z)`` [A/m]; curl- and
+        divergence-free in the body, axisymmetric (e.g.
+        :func:`homogenize.macro.magnetostatics.applied_field` of a magpylib source)
+    source_distance_m : sequence of float, optional -- per step, the distance from the body's
+        centre ``(0, L/2)`` to the nearest point of the field's sources [m]: the Maxwell
+        force is computed on a shell inside it (None: no Maxwell force)
+    gaps_m : sequence of float, optional -- the magnet gap of each step, recorded [m]
+    support : "plate" (default) | "free" (:data:`SUPPORTS`; ``reaction_N`` is then the free-body
+        constraint's axial force, minus the net magnetic force)
+
+    Returns
+    -------
+    SpecimenResult with :class:`SupportedStep` s
+    """
+    if not isinstance(specimen, Specimen):
+        raise InputError(f"specimen must be a Specimen, got {type(specimen).__name__}")
+    if specimen.geometry != "axisymmetric" or specimen.shape != "cylinder":
+        raise InputError("a specimen on a plate in a non-uniform field is an axisymmetric "
+                         f"cylinder (a flat face to rest on), got a {specimen.geometry} "
+                         f"{specimen.shape}")
+    if not isinstance(solid, fs.NeoHookeanSolid):
+        raise InputError(f"solid must be a NeoHookeanSolid, got {type(solid).__name__}")
+    check_choice("model", model, MODELS)
+    check_choice("support", support, SUPPORTS)
+    fields = list(H_applied) if not callable(H_applied) else [H_applied]
+    if not fields or not all(callable(f) for f in fields):
+        raise InputError("H_applied must be a non-empty sequence of callables H_a(x) [A/m]")
+    n = len(fields)
+    dist = [math.inf] * n if source_distance_m is None else \
+        [float(d) for d in np.atleast_1d(source_distance_m)]
+    gaps = [float("nan")] * n if gaps_m is None else [float(g) for g in np.atleast_1d(gaps_m)]
+    if len(dist) != n or len(gaps) != n:
+        raise InputError("source_distance_m and gaps_m need one value per field step")
+    ms.check_law(law)
+    if model == "continuum":
+        kappa = None
+    elif kappa is None:
+        raise InputError(f"model {model!r} needs kappa (the microstructural stress "
+                         "coefficient)")
+    elif not callable(kappa):
+        k0 = float(kappa)
+        kappa = lambda M_abs, k0=k0: np.full(np.shape(M_abs), k0)  # noqa: E731
+    tol = check_positive("tol", tol)
+    relaxation = float(relaxation)
+    if not 0.0 < relaxation <= 1.0:
+        raise InputError(f"relaxation must lie in (0, 1], got {relaxation}")
+    body = _supported_cylinder_body(specimen, support)
+    plate = support == "plate"
+    L0 = specimen.length_m
+    c = 0.5 * L0
+    g0 = ms.axisymmetric_mesh(_field_shape(specimen),
+                              ms.MeshOptions(n_boundary=int(specimen.n_boundary)),
+                              center_z_m=c)
+    centre = np.array([[0.0], [c]])
+    h_fd = 1e-4 * L0
+
+    def dl_axis(sol):
+        u = sol.displacement_m([[0.0, 0.0], [L0, 0.0]])[1]
+        return float(u[0] - u[1])
+
+    def mech_solve(loads, sol):
+        return fs.solve_axisymmetric(body, solid, loads, load_steps=load_steps)
+
+    sol, res, steps = None, None, []
+    for i, Ha in enumerate(fields):
+        Hc = np.asarray(Ha(centre), float).reshape(2)
+        dHz = float((np.asarray(Ha(centre + [[0.0], [h_fd]]), float).reshape(2)[1]
+                     - np.asarray(Ha(centre - [[0.0], [h_fd]]), float).reshape(2)[1])
+                    / (2 * h_fd))
+        label = (f"gap = {gaps[i]:g} m" if math.isfinite(gaps[i])
+                 else f"field step {i + 1} (mu0 H_a,z = {MU0 * Hc[1]:.4g} T at the centre)")
+
+        def field_solve(sol, Ha=Ha):
+            return ms.solve_axisymmetric(None, law, H_applied=Ha,
+                                         geometry=_moved_geometry(g0, sol, mirror=False))
+        sol, res, it, newton, hist = _staggered_step(
+            body, law, solid, kappa, field_solve, mech_solve, dl_axis, L0, tol, max_stagger,
+            relaxation, sol, label, False, steps)
+        dl = dl_axis(sol)
+        dl_mean = _face_mean_uz(sol, "end") - _face_mean_uz(sol, "end_bottom")
+        dd = float(2.0 * sol.displacement_m([[specimen.radius_m], [c]])[0, 0])
+        steps.append(SupportedStep(
+            B_applied_T=float(MU0 * Hc[1]), M_mean_A_per_m=float(res.M_mean_A_per_m[-1]),
+            H_mean_A_per_m=float(res.H_mean_A_per_m[-1]),
+            demag_factor=float(res.demag_factor),
+            length_change_axis_m=dl, length_change_mean_m=dl_mean, strain_axis=dl / L0,
+            strain_end_mean=dl_mean / L0, diameter_change_m=dd,
+            lateral_strain=dd / (2.0 * specimen.radius_m),
+            mean_strain_zz=float(fs.mean_strain(sol)[2, 2]), stagger_iterations=it,
+            newton_iterations=newton, stagger_history=tuple(hist),
+            # the plate's body is solved as a half with a plane of symmetry: no image
+            volume_change_m3=(0.5 if plate else 1.0) * volume_change_m3(sol),
+            gap_m=gaps[i], gradB_applied_T_per_m=MU0 * dHz,
+            reaction_N=_plate_reaction_N(sol) if plate else float(sol.reaction_N),
+            kelvin_force_N=float(ms.magnetic_loads(res).total_force_N[1]),
+            maxwell_force_N=_maxwell_or_nan(res, dist[i])))
+        if progress is not None:
+            progress(i + 1, n, gaps[i] if math.isfinite(gaps[i]) else float(MU0 * Hc[1]))
+    return SpecimenResult(specimen, model, solid.G_Pa, solid.K_Pa, _law_name(law),
+                          tuple(steps), sol, res,
+                          setup={"support": support, "frame": (
+                              "z along the specimen's axis, its bottom face at z = 0" +
+                              (" on the rigid frictionless plate (u_z = 0 there)" if plate
+                               else " (free body: int u_z dV = 0)"))})
+
+
+def check_gaps(gaps_m) -> np.ndarray:
+    """Magnet gaps [m]: finite, > 0 (a gap <= 0 puts the magnet into the specimen) and
+    strictly decreasing (the magnet approached step by step, as in an experiment)."""
+    g = np.atleast_1d(np.asarray(gaps_m, dtype=float))
+    if g.ndim != 1 or g.size == 0 or not np.all(np.isfinite(g)):
+        raise InputError("the magnet gaps must be a non-empty list of finite values [m]")
+    if np.any(g <= 0):
+        raise InputError(f"the magnet gaps must be > 0 m (a gap <= 0 puts the magnet into the "
+                         f"specimen), got {g.tolist()}")
+    if np.any(np.diff(g) >= 0):
+        raise InputError(f"the magnet gaps must decrease strictly (the magnet approached step by "
+                         f"step), got {g.tolist()}")
+    return g
+
+
+def solve_specimen_on_magnet(specimen: Specimen, law, solid: fs.NeoHookeanSolid,
+                             magnet_diameter_m: float, magnet_height_m: float,
+                             remanence_T: float, gaps_m, **kwargs) -> SpecimenResult:
+    """A cylinder on a plate above a coaxial cylindrical permanent magnet (e.g. NdFeB),
+    magnetized along the axis, approached gap by gap.
+
+    The experimenter's sequence: the magnet is brought closer in steps, ``gaps_m`` strictly
+    decreasing, > 0 [m] -- the gap between the magnet's top face and the specimen's bottom
+    face (the thickness of the non-magnetic plate and spacers between them). Frame of
+    :func:`solve_specimen_in_field` (specimen on ``z = 0``); the magnet occupies
+    ``-gap - height <= z <= -gap``, its field from magpylib
+    (:class:`homogenize.macro.magnets.PermanentMagnet`, remanence ``B_r`` [T]). The magnet is
+    rigid (its magnetization is not changed by the specimen: ``mu_r`` ~ 1.05 of NdFeB).
+    ``kwargs``: those of :func:`solve_specimen_in_field`.
+    """
+    from homogenize.macro.magnets import PermanentMagnet, _magpylib_source
+    g = check_gaps(gaps_m)
+    D = check_positive("magnet_diameter_m", magnet_diameter_m, "m")
+    Hm = check_positive("magnet_height_m", magnet_height_m, "m")
+    if not isinstance(specimen, Specimen):
+        raise InputError(f"specimen must be a Specimen, got {type(specimen).__name__}")
+    c = 0.5 * specimen.length_m
+    fields, dist = [], []
+    for gap in g:
+        m = PermanentMagnet("cylinder", (D, Hm), remanence_T, (0.0, 0.0, -gap - 0.5 * Hm))
+        fields.append(ms.applied_field(_magpylib_source(m).getH, axisymmetric=True))
+        dist.append(c + gap)                   # the centre of the magnet's top face
+    res = solve_specimen_in_field(specimen, law, solid, fields, source_distance_m=dist,
+                                  gaps_m=g, **kwargs)
+    setup = dict(res.setup)
+    setup["magnet"] = {"shape": "cylinder", "diameter_m": D, "height_m": Hm,
+                       "remanence_T": float(remanence_T), "magnetization": "+z (along the axis)",
+                       "position": "coaxial below the plate, top face at z = -gap_m"}
+    return SpecimenResult(res.specimen, res.model, res.shear_modulus_Pa, res.bulk_modulus_Pa,
+                          res.law, res.steps, res.solution, res.field_result, setup=setup)

@@ -155,3 +155,80 @@ def test_box_in_3d_from_the_command_line(tmp_path, capsys):
     assert e[0] > 0
     # small strains (1e-4 .. 1e-3): quadratic in B within a few per cent (geometry change)
     assert e[1] / e[0] == pytest.approx(4.0, rel=0.03)
+
+
+def _tet10_jacobians(P, t):
+    """det(dx/dxi) (ne, 5) of quadratic tetrahedra (VTK tetra10 order) at the points of a
+    degree-3 rule on the reference tetrahedron, and the rule's weights (5,): their product summed
+    is the volume of the curved (isoparametric) tetrahedra, exact (det is cubic in xi)."""
+    from skfem.quadrature import get_quadrature
+    from skfem.refdom import RefTet
+    xi, w = get_quadrature(RefTet, 3)
+    lam = np.vstack([1.0 - xi.sum(axis=0), xi])                         # (4, q)
+    dlam = np.array([[-1.0, -1.0, -1.0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])   # (4, 3)
+    # dN/dxi (10, q, 3): vertices l (2 l - 1), edges 4 la lb
+    dN = [(4.0 * lam[a] - 1.0)[:, None] * dlam[a] for a in range(4)]
+    for a, b in ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)):
+        dN.append(4.0 * (lam[a][:, None] * dlam[b] + lam[b][:, None] * dlam[a]))
+    dN = np.stack(dN)
+    Jm = np.einsum("eai,aqj->eqij", P[t], dN)                           # (ne, q, 3, 3)
+    return np.linalg.det(Jm), w
+
+
+def test_3d_vtu_is_the_whole_deformed_body(tmp_path, capsys):
+    """--geometry 3d --vtu: the octant mirrored to the whole cylinder as VTK tetra10. Read back
+    with meshio: the reference points (points - displacement) are the P2 nodes of the octant
+    and their mirror images, the midside nodes sit on the midpoints of the reference edges in
+    VTK's edge order, every curved tetrahedron has a positive Jacobian (node order), and the
+    deformed volume (the isoparametric tetrahedra, exact quadrature) is the mesh's volume plus
+    the JSON's volume change int (J - 1) dV to round-off."""
+    import meshio
+    from scipy.spatial import cKDTree
+    from skfem import Basis, ElementTetP2
+
+    from homogenize.macro.specimen import Specimen
+    j, v = tmp_path / "c.json", tmp_path / "c.vtu"
+    Rc, Lc = 5e-3, 8e-3
+    # nu = 0.3: a volume change of ~1e-3, well above the round-off of the volume sums
+    rc = main(["specimen", "--geometry", "3d", "--shape", "cylinder", "--radius-m", str(Rc),
+               "--length-m", str(Lc), "--law", "linear", "--chi", "0.5", "--shear-modulus-Pa",
+               "2e4", "--nu", "0.3", "--B", "0.1,0.2", "--n-mesh", "3", "--json", str(j),
+               "--vtu", str(v), "--quiet"])
+    assert rc == 0, capsys.readouterr().err
+    out = json.loads(j.read_text())
+    m = meshio.read(v)
+    assert [c.type for c in m.cells] == ["tetra10"]
+    t = m.cells[0].data
+    u = m.point_data["displacement_m"]
+    assert u.shape == (len(m.points), 3) and m.point_data["mean_stress_Pa"].shape == (len(u),)
+    X = m.points - u
+    # the reference octant's P2 nodes and their mirror images, each once
+    body = Specimen("cylinder", Rc, Lc, n_mesh=3, geometry="3d").mechanics_body()
+    oct_ = np.asarray(Basis(body.mesh, ElementTetP2()).doflocs).T
+    d, _ = cKDTree(oct_).query(np.abs(X))
+    assert d.max() < 1e-12 * Rc
+    n_images = 2 ** np.sum(np.abs(oct_) > 1e-12 * Rc, axis=1)
+    assert len(X) == n_images.sum() == len(np.unique(np.round(X / Rc, 9), axis=0))
+    assert np.allclose([X[:, 0].min(), X[:, 0].max(), X[:, 2].min(), X[:, 2].max()],
+                       [-Rc, Rc, -Lc / 2, Lc / 2], rtol=0, atol=1e-12 * Rc)
+    # the displacement is the mirror image's: odd in each coordinate it is along
+    top, bottom = np.argmin(np.sum((X - [0, 0, Lc / 2]) ** 2, axis=1)), \
+        np.argmin(np.sum((X - [0, 0, -Lc / 2]) ** 2, axis=1))
+    assert u[top, 2] - u[bottom, 2] == pytest.approx(out["steps"][-1]["length_change_axis_m"],
+                                                     rel=1e-9)
+    # node order: midside nodes on the reference edges' midpoints in VTK's order
+    for k, (a, b) in enumerate(((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))):
+        assert np.allclose(X[t[:, 4 + k]], 0.5 * (X[t[:, a]] + X[t[:, b]]), rtol=0,
+                           atol=1e-12 * Rc)
+    det0, w = _tet10_jacobians(X, t)
+    det1, _ = _tet10_jacobians(m.points, t)
+    assert det0.min() > 0 and det1.min() > 0
+    V0, V1 = det0 @ w, det1 @ w
+    assert V0.sum() == pytest.approx(out["specimen"]["mesh_volume_m3"], rel=1e-12)
+    dV = out["steps"][-1]["volume_change_m3"]
+    # 0.3: compressible; the volume strain is of the order of the axial one
+    assert abs(dV) > 1e-2 * abs(out["steps"][-1]["mean_strain_zz"]) * V0.sum()
+    assert V1.sum() - V0.sum() == pytest.approx(dV, rel=1e-6)
+    fd = m.field_data
+    assert "mirrored" in bytes(fd["configuration"]).decode()
+    assert fd["B_applied_T"][0] == pytest.approx(0.2)
