@@ -822,6 +822,30 @@ CASES += [
       words=("--vtu", "3D")),
 ]
 
+# export --deck: geometric nonlinearity and a magnet's varying load (issue 35 item 3)
+_EXPORT_MAT = _EXPORT[:3] + _EXPORT[5:]
+_DECK_MAGNET = ("--magnet", "cylinder", "--magnet-size", "10e-3", "5e-3", "--remanence-T", "1.2",
+                "--magnet-position", "0.017", "0.0025", "-0.010")
+CASES += [
+    C(*_EXPORT, "--deck", "cantilever", "--nlgeom", "maybe", "--out", "d.inp",
+      words=("--nlgeom", "maybe")),
+    C(*_EXPORT, "--nlgeom", "on", "--out", "-", words=("--nlgeom", "--deck")),
+    C("export", "--to", "elmer", *_EXPORT[3:], "--deck", "cantilever", "--nlgeom", "on",
+      "--out", "d.sif", words=("--nlgeom on", "Elmer")),
+    C(*_EXPORT_MAT, *_DECK_MAGNET, "--out", "-", words=("--magnet", "--deck")),
+    C(*_EXPORT, "--deck", "cantilever", *_DECK_MAGNET, "--out", "d.inp",
+      words=("--body-force-N-m3", "--magnet", "not both")),
+    C(*_EXPORT_MAT, "--deck", "cantilever", *_DECK_MAGNET[:2], *_DECK_MAGNET[5:], "--out",
+      "d.inp", words=("--magnet cylinder", "--magnet-size")),
+    C(*_EXPORT, "--remanence-T", "1.2", "--out", "-", words=("--remanence-T", "--magnet")),
+    C(*_EXPORT_MAT, "--deck", "channel", *_DECK_MAGNET, "--out", "d.inp",
+      words=("--magnet", "cantilever")),
+    C(*_EXPORT_MAT, "--deck", "cantilever", *_DECK_MAGNET[:-1], "0.0", "--out", "d.inp",
+      words=("overlaps", "strip")),
+    C(*_EXPORT_MAT, "--deck", "cantilever", *_DECK_MAGNET, "--table", "table.h5", "--phi",
+      "0.01", "--B", "0.1", "--out", "d.inp", words=("--B", "--magnet")),
+]
+
 
 # --------------------------------------------------------------------------- running a case
 def _snapshot(d: Path) -> dict:

@@ -19,7 +19,8 @@ from homogenize.cli._common import (add_material_options, check_memory, config_o
 from homogenize.cli.tables import (add_beam_table_options, add_export_table_options,
                                    beam_from_table, wrap_export)
 from homogenize.studies.paper import write_calculix_peer, write_paper
-from homogenize.macro.exporters import ExportSpec, export_text, write_deck
+from homogenize.macro.exporters import (NLGEOM_FRACTION, NLGEOM_MODES, ExportSpec, export_text,
+                                        magnet_body_force, write_deck)
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.fem import Material
 from homogenize.macro.channel import ChannelGeometry, solve_channel
@@ -65,23 +66,71 @@ def _paper_calculix(args) -> int:
     return 0
 
 
+def _export_magnet(args, geometry):
+    """The magnet of ``export --deck cantilever --magnet ...``: (body force f(points), notes)."""
+    if args.deck != "cantilever" or args.to != "abaqus":
+        raise InputError("--magnet is written into the abaqus cantilever deck only (--to abaqus "
+                         "--deck cantilever)")
+    source = _magnet_source(args)
+    M_of_H, phi, law = _magnet_law(args)
+    N = args.demag_factor if args.demag_factor is not None else \
+        prism_demag_factors(geometry.length_m, geometry.width_m, geometry.thickness_m)[2]
+    # checks the magnet against the strip (overlap) and the law's range along the strip
+    bf = body_force_along_strip(source, geometry, M_of_H, n_points=21, demag_factor=N)
+    notes = (f"magnet: {args.magnet} at {tuple(source.position_m)} m (strip frame [0, L] x "
+             f"[0, w] x [0, t], clamp at x = 0); M_eff(H) from {law}, phi = {phi:g}, "
+             f"demagnetizing factor N = {N:.4g}",
+             f"net magnetic force on the undeformed strip {bf.total_force_N[2]:.6g} N along z "
+             f"(cross-section average, Simpson on 21 stations)")
+    return magnet_body_force(source, M_of_H, N), notes
+
+
+def _export_run(args) -> int:
+    """``export``: a magnet deck takes its law from --table itself; the rest as before."""
+    if getattr(args, "magnet", None) is None:
+        return wrap_export(_export)(args)
+    for dest, flag in (("E_Pa", "--E-Pa"), ("nu", "--nu"), ("density_kg_m3", "--density-kg-m3")):
+        if getattr(args, dest, None) is None:
+            raise InputError(f"{flag} is required with --magnet")
+    if args.body_force_N_m3 is not None:
+        raise InputError("give either --body-force-N-m3 or --magnet (its force varies over "
+                         "the strip), not both")
+    for dest, flag in (("B_T", "--B"), ("gradB_T_per_m", "--gradB")):
+        if getattr(args, dest, None) is not None:
+            raise InputError(f"{flag} is not used with --magnet (the magnet gives the field "
+                             f"over the strip; --table is read at --phi along its B_T axis)")
+    if getattr(args, "bound", "mean") != "mean":
+        raise InputError("--bound is not used with --magnet (the deck takes the table's mean "
+                         "M_eff(H))")
+    return _export(args)
+
+
 def _export(args) -> int:
-    spec = ExportSpec(args.body_force_N_m3, args.E_Pa, args.nu, args.density_kg_m3,
-                      direction=args.direction, gravity_m_s2=args.gravity_m_s2, name=args.name,
-                      elset=args.elset, index=args.index)
+    magnet = getattr(args, "magnet", None) is not None
+    spec = ExportSpec(0.0 if magnet else args.body_force_N_m3, args.E_Pa, args.nu,
+                      args.density_kg_m3, direction=args.direction,
+                      gravity_m_s2=args.gravity_m_s2, name=args.name, elset=args.elset,
+                      index=args.index)
     if args.deck is None:
         return write_snippet(export_text(spec, args.to), args.out, f"{args.to} snippet")
     if args.out == "-":
         raise InputError("--deck writes files: give --out FILE (.inp for abaqus, .sif for elmer)")
+    if args.to == "elmer" and args.nlgeom == "on":
+        raise InputError("--nlgeom on: the Elmer deck is linear (StressSolver); use --to abaqus")
     if args.deck == "cantilever":
         geometry = Strip(args.length_m, args.width_m, args.thickness_m)
     else:
         geometry = ChannelGeometry(args.a_m, args.b_m, args.c_m, args.d_m, args.wall_m)
+    body_force, notes = _export_magnet(args, geometry) if magnet else (None, ())
     deck = write_deck(args.deck, args.to, spec, geometry, args.out, element=args.element,
-                      nz=args.deck_nz)
+                      nz=args.deck_nz, nlgeom=args.nlgeom, body_force=body_force,
+                      notes=notes)
     for f in deck.files:
         print(f"wrote {f}")
     if args.to == "abaqus":
+        print(f"{'geometrically nonlinear (NLGEOM)' if deck.nlgeom else 'linear'} step: linear "
+              f"deflection estimate {deck.estimate_m:.4g} m (--nlgeom {args.nlgeom}; auto: "
+              f"NLGEOM above {NLGEOM_FRACTION:g} of the thickness)")
         print(f"run it with CalculiX: ccx -i {Path(deck.path).with_suffix('')} "
               f"(tip node {deck.mesh.tip_node + 1}, set NTIP)")
     return 0
@@ -440,10 +489,18 @@ def register(sub, formatter) -> None:
         "Elmer's documented keywords only: ElmerSolver is not installable here).")
     g.add_argument("--deck", choices=("cantilever", "channel"), default=None,
                    help="write a complete deck of this model (default: none, a snippet)")
-    g.add_argument("--element", choices=("C3D10", "C3D20R"), default="C3D10",
-                   help="abaqus element type of the deck")
-    g.add_argument("--deck-nz", dest="deck_nz", type=int_in("--deck-nz", 1, 16), default=2,
-                   help="element layers through the strip thickness")
+    g.add_argument("--element", choices=("C3D10", "C3D20R"), default=None,
+                   help="abaqus element type of the deck (default: C3D20R for the cantilever, "
+                        "within 1 %% of the converged tip at the default mesh; C3D10 for the "
+                        "channel and for elmer)")
+    g.add_argument("--deck-nz", dest="deck_nz", type=int_in("--deck-nz", 1, 16), default=None,
+                   help="element layers through the strip thickness (default 2, elements as "
+                        "long as a layer is high)")
+    g.add_argument("--nlgeom", choices=NLGEOM_MODES, default="auto",
+                   help="geometric nonlinearity of the abaqus step (*STEP, NLGEOM): auto = on "
+                        f"when the linear estimate of the deflection exceeds "
+                        f"{NLGEOM_FRACTION:g} of the thickness (strip t, channel ceiling c); "
+                        "elmer decks are linear")
     g.add_argument("--length-m", dest="length_m", type=_length("--length-m"),
                    default=SEED_STRIP_LENGTH_M, help="cantilever free length [m]")
     g.add_argument("--width-m", dest="width_m", type=_length("--width-m", 1.0), default=5e-3,
@@ -452,13 +509,53 @@ def register(sub, formatter) -> None:
                    default=1e-3,
                    help="cantilever thickness [m]")
     _channel_geometry_options(g)
+    g = p.add_argument_group(
+        "a real magnet in the cantilever deck (magpylib)",
+        "With --deck cantilever --to abaqus: the body force f = (M . grad) B = M_eff(H_in) "
+        "grad|B_a| of the magnet, evaluated at each element's centroid of the UNDEFORMED strip "
+        "and written per element (*DLOAD BX/BY/BZ): a dead load, no follower field and no "
+        "pull-in (mapsim beam --gap-m takes the field on the deformed strip). M_eff(H) from "
+        "--table at --phi (interpolated, never extrapolated) or demagnetization-limited soft "
+        "spheres (--particle-material); the magnet options as in mapsim beam.")
+    g.add_argument("--magnet", choices=("cuboid", "cylinder", "coil"), default=None,
+                   help="field source (default: none, the uniform --body-force-N-m3)")
+    g.add_argument("--magnet-size", type=_length("--magnet-size"), nargs="+", default=None,
+                   metavar="M",
+                   help="cuboid: A B C edges; cylinder: DIAMETER HEIGHT; coil: RADIUS LENGTH [m]")
+    g.add_argument("--magnet-position", type=float_in("--magnet-position", -10.0, 10.0, "m"),
+                   nargs=3, default=None,
+                   metavar=("X", "Y", "Z"), help="centre of the source in the strip frame [m]")
+    g.add_argument("--magnet-direction", type=float_in("--magnet-direction", -1e6, 1e6), nargs=3,
+                   default=(0.0, 0.0, 1.0),
+                   metavar=("X", "Y", "Z"), help="magnetization direction of a permanent magnet")
+    g.add_argument("--magnet-axis", type=float_in("--magnet-axis", -1e6, 1e6), nargs=3,
+                   default=(0.0, 0.0, 1.0),
+                   metavar=("X", "Y", "Z"), help="axis of a cylinder or coil (cuboid: its C edge)")
+    g.add_argument("--remanence-T", dest="remanence_T", type=float_in("--remanence-T", 0.0, 3.0,
+                                                                       "T", lo_open=True),
+                   default=None, help="remanent polarization B_r of a permanent magnet [T]")
+    g.add_argument("--current-A", dest="current_A", type=float_in("--current-A", -1e5, 1e5, "A"),
+                   default=None, help="coil current [A]")
+    g.add_argument("--turns", type=int_in("--turns", 1, 100000), default=None,
+                   help="coil turns")
+    g.add_argument("--demag-factor", dest="demag_factor",
+                   type=float_in("--demag-factor", 0.0, 1.0), default=None,
+                   help="specimen demagnetizing factor for the field direction (default: "
+                        "Aharoni's prism factor of the strip through its thickness)")
     add_export_table_options(p)
-    p.set_defaults(func=wrap_export(_export), outputs=("out",), inputs=("table",),
-                   option_needs={**{d: "table" for d in ("phi", "B_T", "gradB_T_per_m",
-                                                         "table_at", "bound")},
+    add_material_options(p, matrix=False, what="--particle-material sets the saturation of the "
+                                               "soft spheres of --magnet without --table.")
+    p.set_defaults(func=_export_run, outputs=("out",), inputs=("table",),
+                   option_needs={**{d: "table" for d in ("B_T", "gradB_T_per_m", "bound")},
+                                 "phi": ("table", "magnet"), "table_at": ("table", "magnet"),
                                  **{d: "deck" for d in (
                                      "element", "deck_nz", "length_m", "width_m",
-                                     "thickness_m", "a_m", "b_m", "c_m", "d_m", "wall_m")}})
+                                     "thickness_m", "a_m", "b_m", "c_m", "d_m", "wall_m",
+                                     "nlgeom", "magnet")},
+                                 **{d: "magnet" for d in (
+                                     "magnet_size", "magnet_position", "magnet_direction",
+                                     "magnet_axis", "remanence_T", "current_A", "turns",
+                                     "demag_factor", "particle_material")}})
 
     p = sub.add_parser(
         "beam", formatter_class=formatter, help="tip deflection of a clamped strip",

@@ -37,6 +37,36 @@ grid; for the cantilever also ``C3D20``, ``C3D4``, ``C3D8``, ``C3D8R``, ``C3D8I`
 ``*STATIC``, ``*DLOAD`` (``BX/BY/BZ`` and ``GRAV``), ``*NODE FILE`` U, ``*NODE PRINT`` U of
 ``NTIP``, ``*END STEP``. :func:`parse_ccx_dat` reads the printed displacements back.
 
+Default cantilever deck and its accuracy: ``C3D20R`` (:data:`DECK_ELEMENT`; serendipity hexahedra
+with reduced integration, which do not shear-lock in bending) on
+``beam_divisions(strip, DECK_NZ=2, DECK_ASPECT=1)``, (39, 10, 2) for the seed strip
+(19.369 x 5 x 1 mm, E = 2 MPa, nu = 0.45) at 40 kN/m^3. Converged linear tip: 3.998 mm, from a
+CalculiX refinement study of this deck, C3D20R on (20, 4, 2) x 2^k, k = 0..2: 3.9385, 3.9859,
+3.9954 mm (rate 2.3, Richardson 3.9977 mm), then (160, 16, 8): 3.9970 mm (0.04 % from
+(80, 16, 8)); independently mapsim's P2 FEM (:mod:`homogenize.macro.convergence`, (31, 4, 2) /
+(62, 8, 4) half width, Richardson): 3.9970 mm. The default deck, linear: 3.9720 mm, -0.65 %. The
+former default, C3D10 on (13, 4, 2), gave 3.814 mm (-4.6 %; C3D8I on that grid 3.818 mm): too
+few elements along the strip for the clamped root's edge singularity, which sets the rate of
+convergence. With NLGEOM (written by the rule below at this load): 3.8414 mm against the
+converged 3.866 mm (the linear 3.998 mm times the nonlinear/linear ratio: CalculiX 0.9671 on
+(39, 10, 2), 0.9670 on (40, 8, 4); mapsim's neo-Hookean P2, :func:`~homogenize.macro.fem.
+neo_hookean_solve`, 0.9675 on (40, 4, 2)): -0.64 %.
+
+Geometric nonlinearity (``nlgeom``): "auto" writes ``*STEP, NLGEOM`` when the linear estimate of
+the deflection (:func:`linear_deflection_estimate_m`: Euler-Bernoulli tip of the strip, or the
+channel ceiling as a clamped plate strip) exceeds :data:`NLGEOM_FRACTION` = 0.1 of the thickness
+(``t``, or the ceiling's ``c``): there a clamped plate's membrane stiffening reaches ~0.75 %
+(``0.75 (w/t)^2``, one-term Galerkin with immovable edges); for the cantilever the rule is
+conservative (its nonlinearity grows as (deflection/length)^2). The step then starts at 25 % of
+the load with automatic increments.
+
+A varying load (``body_force``, e.g. a magnet's :func:`magnet_body_force`): evaluated at each
+element's centroid of the undeformed strip and written per element, ``e, BX|BY|BZ, value``
+[N/m^3]; a dead load (no follower field, no pull-in: ``mapsim beam --gap-m`` takes the field on
+the deformed strip), stated in the deck's comments. The sum of load x volume equals the force on
+the strip to the centroid rule's O(h^2) error (2.3e-3 relative on the default mesh for a
+cylinder magnet 10 mm below the tip).
+
 ``solver="elmer"`` writes ``<out>.sif`` and the mesh directory ``<out dir>/<stem>_mesh`` in
 ElmerGrid's format (``mesh.header``, ``mesh.nodes``, ``mesh.elements`` with quadratic
 tetrahedra, type 510, ``mesh.boundary`` with quadratic triangles, type 306, on the boundaries
@@ -60,7 +90,9 @@ from micro._validate import InputError, check_choice, check_positive, check_rang
 __all__ = ["ExportSpec", "DIRECTIONS", "to_elmer", "to_abaqus", "abaqus_model", "abaqus_step",
            "parse_elmer", "parse_abaqus", "export_text", "Deck", "DeckMesh", "deck_mesh",
            "write_deck", "parse_ccx_dat", "parse_sif", "read_elmer_mesh", "ELMER_KEYWORDS",
-           "DECK_KINDS", "DECK_SOLVERS", "ABAQUS_ELEMENTS", "LINEAR_ELEMENTS"]
+           "DECK_KINDS", "DECK_SOLVERS", "ABAQUS_ELEMENTS", "LINEAR_ELEMENTS", "DECK_ELEMENT",
+           "DECK_NZ", "DECK_ASPECT", "NLGEOM_MODES", "NLGEOM_FRACTION", "magnet_body_force",
+           "linear_deflection_estimate_m", "element_centroids_volumes"]
 
 #: allowed force directions (unit vectors along the global axes)
 DIRECTIONS = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0),
@@ -238,6 +270,18 @@ DECK_SOLVERS = ("abaqus", "elmer")
 ABAQUS_ELEMENTS = ("C3D10", "C3D20R", "C3D4", "C3D8", "C3D8R", "C3D8I", "C3D20")
 #: the linear (corner-node only) element types among :data:`ABAQUS_ELEMENTS`
 LINEAR_ELEMENTS = ("C3D4", "C3D8", "C3D8R", "C3D8I")
+#: default element of an Abaqus/CalculiX cantilever deck (the channel's is ``C3D10``, Elmer's
+#: quadratic tetrahedra): serendipity hexahedra with reduced integration, free of shear locking
+DECK_ELEMENT = "C3D20R"
+#: default layers through the strip and element aspect of a deck: :func:`beam_divisions`
+#: ``(strip, DECK_NZ, DECK_ASPECT)``, (39, 10, 2) for the seed strip (module docstring)
+DECK_NZ = 2
+DECK_ASPECT = 1.0
+#: ``nlgeom`` modes of :func:`write_deck`
+NLGEOM_MODES = ("auto", "on", "off")
+#: ``nlgeom="auto"``: the step carries NLGEOM when the linear estimate of the deflection exceeds
+#: this fraction of the thickness (the strip's ``t``, the channel ceiling's ``c``)
+NLGEOM_FRACTION = 0.1
 
 # corner pairs of the edge nodes, in Abaqus (= Elmer 510 / 306) node order
 _TET10_EDGES = ((0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3))
@@ -280,12 +324,19 @@ class DeckMesh:
 
 @dataclass(frozen=True)
 class Deck:
-    """What :func:`write_deck` wrote: ``files`` (the input deck first), the mesh, the spec."""
+    """What :func:`write_deck` wrote: ``files`` (the input deck first), the mesh, the spec;
+    ``nlgeom`` whether the step carries NLGEOM, ``estimate_m`` the linear deflection estimate
+    the ``auto`` rule used [m]; with a varying load ``element_loads_N_m3`` (E, 3) the body
+    force written per element [N/m^3] and ``element_volumes_m3`` (E,) [m^3]."""
     kind: str
     solver: str
     files: tuple
     mesh: DeckMesh
     spec: ExportSpec
+    nlgeom: bool = False
+    estimate_m: float = float("nan")
+    element_loads_N_m3: np.ndarray | None = None
+    element_volumes_m3: np.ndarray | None = None
 
     @property
     def path(self):
@@ -461,18 +512,82 @@ def deck_mesh(kind: str, geometry, *, element: str = "C3D10", divisions=None, nz
     return DeckMesh(nodes, elems, "C3D10", sets, bnd, fixed, tip, (nd, nw + na, nb + nc))
 
 
+def element_centroids_volumes(mesh: DeckMesh) -> tuple[np.ndarray, np.ndarray]:
+    """Centroids (E, 3) [m] and volumes (E,) [m^3] of the deck's elements (straight-edged
+    tetrahedra, or the axis-parallel boxes of the hexahedral grid)."""
+    X = mesh.nodes_m
+    if mesh.elements.shape[1] in (4, 10):
+        c = [X[mesh.elements[:, k]] for k in range(4)]
+        vol = np.abs(np.einsum("ij,ij->i", np.cross(c[1] - c[0], c[2] - c[0]), c[3] - c[0])) / 6
+        return sum(c) / 4.0, vol
+    c = X[mesh.elements[:, :8]]                                  # (E, 8, 3) corners
+    return c.mean(axis=1), np.prod(c.max(axis=1) - c.min(axis=1), axis=1)
+
+
+def linear_deflection_estimate_m(kind: str, spec: ExportSpec, geometry,
+                                 element_loads_N_m3=None, mesh: DeckMesh | None = None) -> float:
+    """The project's linear estimate of the largest deflection [m] (the NLGEOM rule's input).
+
+    cantilever: Euler-Bernoulli tip deflection under the body force plus self-weight
+    (:func:`~homogenize.macro.closed_form.eb_tip_deflection_m`); with per-element loads their
+    z component averaged over each column of elements along the length (a uniform force is
+    taken as transverse whatever its direction: conservative). channel: the
+    ceiling as a plate strip clamped on both walls,
+    :func:`~homogenize.macro.closed_form.plate_clamped_strip_deflection_m` (span a, thickness c).
+    """
+    from homogenize.macro import closed_form as cf
+    weight = spec.density_kg_m3 * spec.gravity_m_s2
+    if kind == "channel":
+        g = geometry
+        return abs(cf.plate_clamped_strip_deflection_m(spec.body_force_N_m3 + weight, g.a_m,
+                                                       g.c_m, spec.E_Pa, spec.nu))
+    L, w, t = geometry.length_m, geometry.width_m, geometry.thickness_m
+    if element_loads_N_m3 is None:
+        return abs(cf.eb_tip_deflection_m(spec.body_force_N_m3 + weight, L, w, t, spec.E_Pa))
+    cen, vol = element_centroids_volumes(mesh)
+    xs = np.round(cen[:, 0] / L, 9)
+    cols = np.unique(xs)
+    # the transverse load per unit length of each column, as a force per strip volume
+    fz = np.array([-(element_loads_N_m3[xs == x, 2] * vol[xs == x]).sum() for x in cols])
+    fz = fz / np.array([vol[xs == x].sum() for x in cols])
+    x = np.concatenate(([0.0], cols * L, [L]))
+    prof = cf.BodyForceProfile(x, np.concatenate(([fz[0]], fz, [fz[-1]])) + weight)
+    return abs(cf.eb_tip_deflection_m(prof, L, w, t, spec.E_Pa))
+
+
+def magnet_body_force(source, M_of_H, demag_factor: float = 0.0):
+    """``f(points_m (n, 3)) -> (n, 3)`` [N/m^3]: the magnetic body force of ``source`` at
+    points of the undeformed strip, ``f = (M . grad) B = M_eff(H_in) grad |B_a|`` (``M`` along
+    the applied field, curl-free outside the source), ``H_in = |B_a| / mu0 - N M`` with the
+    demagnetizing factor ``N`` -- the law of :func:`homogenize.macro.magnets.body_force_along_strip`
+    at single points instead of cross-section averages."""
+    from scipy.constants import mu_0
+    from homogenize.macro.magnets import _call_M, _internal_field, sample_field
+    N = check_range("demag_factor", demag_factor, 0.0, 1.0, "")
+
+    def f(points_m):
+        B, grad = sample_field(source, np.asarray(points_m, float).reshape(-1, 3))
+        Ha = np.linalg.norm(B, axis=1) / mu_0
+        M = _call_M(M_of_H, _internal_field(M_of_H, Ha, N))
+        return M[:, None] * grad
+    return f
+
+
 def _id_lines(ids_1based, per_line: int = 16) -> list[str]:
     ids = [str(int(i)) for i in ids_1based]
     return [", ".join(ids[k:k + per_line]) + ("," if k + per_line < len(ids) else "")
             for k in range(0, len(ids), per_line)]
 
 
-def _abaqus_deck(kind: str, spec: ExportSpec, mesh: DeckMesh) -> str:
-    out = [f"** mapsim {kind} deck for Abaqus / CalculiX (SI units: m, Pa, kg/m^3, N/m^3)",
-           "*HEADING",
-           f"mapsim {kind}: {mesh.element}, {len(mesh.nodes_m)} nodes, {len(mesh.elements)} "
-           f"elements, tip node {mesh.tip_node + 1}",
-           "*NODE, NSET=NALL"]
+def _abaqus_deck(kind: str, spec: ExportSpec, mesh: DeckMesh, *, nlgeom: bool = False,
+                 estimate_m: float = float("nan"), element_loads=None,
+                 notes: tuple = ()) -> str:
+    out = [f"** mapsim {kind} deck for Abaqus / CalculiX (SI units: m, Pa, kg/m^3, N/m^3)"]
+    out += [f"** {n}" for n in notes]
+    out += ["*HEADING",
+            f"mapsim {kind}: {mesh.element}, {len(mesh.nodes_m)} nodes, {len(mesh.elements)} "
+            f"elements, tip node {mesh.tip_node + 1}",
+            "*NODE, NSET=NALL"]
     # 14 significant digits: CalculiX reads at most 20 characters per number
     out += [f"{k + 1}, {x:.13e}, {y:.13e}, {z:.13e}" for k, (x, y, z) in enumerate(mesh.nodes_m)]
     out.append(f"*ELEMENT, TYPE={mesh.element}, ELSET={spec.elset}")
@@ -488,8 +603,29 @@ def _abaqus_deck(kind: str, spec: ExportSpec, mesh: DeckMesh) -> str:
     out.append("*BOUNDARY")
     for name, comps in mesh.fixed:
         out += [f"{name}, {c}, {c}" for c in comps]
-    out += ["*STEP", "*STATIC"]
-    out += abaqus_step(spec).rstrip("\n").split("\n")
+    thick = "c" if kind == "channel" else "t"
+    rule = (f"linear estimate of the deflection {estimate_m:.4g} m, NLGEOM above "
+            f"{NLGEOM_FRACTION:g} {thick}")
+    if nlgeom:
+        # geometric nonlinearity; first increment 25 % of the load, then automatic increments
+        # (cut back when Newton fails; converges for the seed strip up to 4e5 N/m^3, a 15 mm tip
+        # deflection on the 19.4 mm strip)
+        out += [f"** geometrically nonlinear step ({rule})", "*STEP, NLGEOM", "*STATIC",
+                "0.25, 1.0, 1e-05, 1.0"]
+    else:
+        out += [f"** geometrically linear step ({rule})", "*STEP", "*STATIC"]
+    if element_loads is None:
+        out += abaqus_step(spec).rstrip("\n").split("\n")
+    else:
+        out += ["** magnetic body force per element [N/m^3], f = (M . grad) B at each element's "
+                "centroid of the UNDEFORMED strip:",
+                "** a dead load (no follower field, no pull-in); for the field on the deformed "
+                "strip use mapsim beam --gap-m", "*DLOAD"]
+        for e, fe in enumerate(element_loads):
+            out += [f"{e + 1}, B{a}, {_g(fe[k] + 0.0)}" for k, a in enumerate("XYZ")]
+        if spec.gravity_m_s2 > 0:
+            out.append(f"{spec.elset}, GRAV, {_g(spec.gravity_m_s2)}, "
+                       + ", ".join(_g(c + 0.0) for c in spec.unit))
     out += ["*NODE FILE", "U", "*NODE PRINT, NSET=NTIP", "U", "*END STEP"]
     return "\n".join(out) + "\n"
 
@@ -583,8 +719,9 @@ def _write_elmer_mesh(directory, mesh: DeckMesh) -> list:
 
 
 def write_deck(kind: str, solver: str, spec: ExportSpec, geometry, out_path, *,
-               element: str = "C3D10", divisions=None, nz: int = 2, aspect: float = 3.0,
-               nc: int = 2, channel_aspect: float = 4.0) -> Deck:
+               element: str | None = None, divisions=None, nz: int | None = None,
+               aspect: float | None = None, nc: int = 2, channel_aspect: float = 4.0,
+               nlgeom: str = "off", body_force=None, notes=()) -> Deck:
     """Write a complete, runnable input deck for the cantilever or the channel.
 
     Parameters
@@ -595,17 +732,48 @@ def write_deck(kind: str, solver: str, spec: ExportSpec, geometry, out_path, *,
     spec : ExportSpec -- material, body force [N/m^3] and direction, gravity [m/s^2]
     geometry : Strip (cantilever) or ChannelGeometry (channel) [m]
     out_path : path of the ``.inp`` or ``.sif``
-    element, divisions, nz, aspect, nc, channel_aspect : the mesh (:func:`deck_mesh`); Elmer
-        decks are always quadratic tetrahedra (``element="C3D10"``)
+    element, divisions, nz, aspect, nc, channel_aspect : the mesh (:func:`deck_mesh`); None:
+        the cantilever's Abaqus default :data:`DECK_ELEMENT` (``C3D20R``) on
+        ``beam_divisions(strip, DECK_NZ, DECK_ASPECT)``; the channel and Elmer decks are
+        quadratic tetrahedra (``element="C3D10"``)
+    nlgeom : "auto" | "on" | "off" -- ``*STEP, NLGEOM`` (Abaqus/CalculiX); "auto": when
+        :func:`linear_deflection_estimate_m` exceeds :data:`NLGEOM_FRACTION` of the thickness
+        (``mapsim export --nlgeom``'s default; this function's default "off" keeps the linear
+        twins of :mod:`homogenize.macro.elements` linear). Elmer decks are linear
+        (StressSolver): "on" is refused there
+    body_force : None, or ``f(points_m (n, 3)) -> (n, 3)`` [N/m^3] (e.g.
+        :func:`magnet_body_force`): a body force varying over the strip, evaluated at each
+        element's centroid of the undeformed strip and written per element (``*DLOAD`` ``BX``,
+        ``BY``, ``BZ``); ``spec.body_force_N_m3`` must then be 0 (its direction still orients
+        gravity). Abaqus cantilever decks only
+    notes : comment lines written at the top of an Abaqus deck (e.g. the magnet)
 
     Returns
     -------
-    Deck with the files written (deck first) and the mesh (its ``tip_node``, 0-based, is the
-    node of set ``NTIP``).
+    Deck with the files written (deck first), the mesh (its ``tip_node``, 0-based, is the
+    node of set ``NTIP``), ``nlgeom`` and the estimate, and the per-element loads.
     """
     from pathlib import Path
     from micro._io import atomic_path
     check_choice("solver", solver, DECK_SOLVERS)
+    check_choice("kind", kind, DECK_KINDS)
+    check_choice("nlgeom", nlgeom, NLGEOM_MODES)
+    if element is None:
+        element = DECK_ELEMENT if (kind == "cantilever" and solver == "abaqus") else "C3D10"
+    nz = DECK_NZ if nz is None else nz
+    aspect = DECK_ASPECT if aspect is None else aspect
+    if solver == "elmer" and nlgeom == "on":
+        raise InputError("nlgeom 'on': the Elmer deck is linear elasticity (StressSolver); "
+                         "use the abaqus deck (CalculiX) for a geometrically nonlinear step")
+    if body_force is not None:
+        if kind != "cantilever" or solver != "abaqus":
+            raise InputError("a varying body force (a magnet) is written into the abaqus "
+                             "cantilever deck only")
+        if not callable(body_force):
+            raise InputError("body_force must be a callable f(points_m) -> (n, 3) [N/m^3]")
+        if spec.body_force_N_m3 != 0:
+            raise InputError("give either a uniform body force or a magnet's varying force, "
+                             "not both")
     if solver == "elmer" and element != "C3D10":
         raise InputError(f"element {element!r}: Elmer decks use quadratic tetrahedra "
                          f"(element='C3D10', Elmer type 510)")
@@ -616,10 +784,22 @@ def write_deck(kind: str, solver: str, spec: ExportSpec, geometry, out_path, *,
                          f"writes its mesh there: move it away or give another --out")
     mesh = deck_mesh(kind, geometry, element=element, divisions=divisions, nz=nz,
                      aspect=aspect, nc=nc, channel_aspect=channel_aspect)
+    loads = vols = None
+    if body_force is not None:
+        cen, vols = element_centroids_volumes(mesh)
+        loads = np.asarray(body_force(cen), float)
+        if loads.shape != cen.shape or not np.all(np.isfinite(loads)):
+            raise InputError(f"body_force must return finite (n, 3) values [N/m^3], got shape "
+                             f"{loads.shape}")
+    estimate = linear_deflection_estimate_m(kind, spec, geometry, loads, mesh)
+    thickness = geometry.c_m if kind == "channel" else geometry.thickness_m
+    on = nlgeom == "on" or (nlgeom == "auto" and solver == "abaqus"
+                            and estimate > NLGEOM_FRACTION * thickness)
     if solver == "abaqus":
         with atomic_path(out) as tmp:
-            tmp.write_text(_abaqus_deck(kind, spec, mesh))
-        return Deck(kind, solver, (out,), mesh, spec)
+            tmp.write_text(_abaqus_deck(kind, spec, mesh, nlgeom=on, estimate_m=estimate,
+                                        element_loads=loads, notes=tuple(notes)))
+        return Deck(kind, solver, (out,), mesh, spec, on, estimate, loads, vols)
     mesh_dir = out.stem + "_mesh"
     mesh_files = _write_elmer_mesh(out.parent / mesh_dir, mesh)
     with atomic_path(out) as tmp:

@@ -49,3 +49,35 @@ def test_bad_input(kw, msg):
         ExportSpec(**args)
     with pytest.raises(InputError, match="Youngs Modulus"):
         parse_elmer("Material 1\nEnd\n")
+
+
+def test_deck_physics_helpers_against_closed_forms():
+    """The NLGEOM rule's linear estimates and the magnet's body force against closed forms."""
+    from scipy.constants import mu_0
+    from homogenize.macro.cantilever import Strip
+    from homogenize.macro.channel import ChannelGeometry
+    from homogenize.macro.exporters import linear_deflection_estimate_m, magnet_body_force
+    from homogenize.macro.magnets import PermanentMagnet, linear_magnetization
+    L, w, t, E, nu = 19.369e-3, 5e-3, 1e-3, 2e6, 0.45
+    spec = ExportSpec(4e4, E, nu, 1210.0, gravity_m_s2=9.81)
+    q = 4e4 + 1210.0 * 9.81
+    # cantilever, uniform load: q w t L^4 / (8 E w t^3 / 12)
+    assert linear_deflection_estimate_m("cantilever", spec, Strip(L, w, t)) == \
+        pytest.approx(1.5 * q * L**4 / (E * t**2), rel=1e-12)
+    # channel ceiling: clamped plate strip, q c a^4 / (384 D), D = E c^3 / (12 (1 - nu^2))
+    g = ChannelGeometry(a_m=5e-3, b_m=50e-6, c_m=0.5e-3, d_m=10e-3)
+    D = E * g.c_m**3 / (12 * (1 - nu**2))
+    assert linear_deflection_estimate_m("channel", spec, g) == \
+        pytest.approx(q * g.c_m * g.a_m**4 / (384 * D), rel=1e-12)
+    # on the axis of a cylinder magnet (radius R, faces at zc -+ H/2, along +z), linear law
+    # M = chi H, no demagnetization: f_z = chi / mu0 B_z dB_z/dz with the closed-form axial field
+    R, H, Br, zc, chi = 5e-3, 5e-3, 1.2, -0.010, 0.05
+    f = magnet_body_force(PermanentMagnet("cylinder", (2 * R, H), Br, (0.0, 0.0, zc)),
+                          linear_magnetization(chi), 0.0)
+    z = np.array([0.0, 1e-3, 4e-3])
+    d1, d2 = z - (zc + H / 2), z - (zc - H / 2)
+    Bz = Br / 2 * (d2 / np.hypot(d2, R) - d1 / np.hypot(d1, R))
+    dBz = Br / 2 * R**2 * (np.hypot(d2, R)**-3 - np.hypot(d1, R)**-3)
+    got = f(np.column_stack([np.zeros(3), np.zeros(3), z]))
+    np.testing.assert_allclose(got[:, 2], chi / mu_0 * Bz * dBz, rtol=1e-6)
+    np.testing.assert_allclose(got[:, :2], 0.0, atol=1e-9 * np.abs(got[:, 2]).max())
