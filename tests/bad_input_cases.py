@@ -442,8 +442,8 @@ CASES = [
     C(*_EXPORT[:7], "--nu", "0.7", "--density-kg-m3", "1210", "--out", "-", words=("--nu",)),
     C("export", "--to", "abaqus", "--body-force-N-m3=-5", "--E-Pa", "2e6", "--nu", "0.45",
       "--density-kg-m3", "1210", "--out", "-", words=("--body-force-N-m3",)),
-    C("export", "--to", "abaqus", "--body-force-N-m3", "4e4", "--out", "x.inp",
-      words=("--E-Pa", "required")),
+    C("export", "--to", "abaqus", "--body-force-N-m3", "4e4", "--matrix-material", "jelly",
+      "--out", "x.inp", words=("--matrix-material", "jelly", "sylgard184-10to1")),
     C(*_EXPORT, "--out", "fifo", words=("--out", "not a regular file")),
     C(*_EXPORT, "--out", "adir", words=("--out", "directory")),
     C(*_EXPORT, "--deck", "cantilever", "--out", "-", words=("--deck",)),
@@ -818,8 +818,6 @@ CASES += [
       "linear", "--chi", "1", "--shear-modulus-Pa", "1e5", words=("--geometry 3d", "sphere")),
     C(*_SPEC_LIN, "--geometry", "3d", "--shape", "box", "--n-boundary", "24",
       words=("--n-boundary", "3D")),
-    C(*_SPEC_LIN, "--geometry", "3d", "--shape", "cylinder", "--vtu", "s.vtu",
-      words=("--vtu", "3D")),
 ]
 
 # export --deck: geometric nonlinearity and a magnet's varying load (issue 35 item 3)
@@ -844,6 +842,24 @@ CASES += [
       words=("overlaps", "strip")),
     C(*_EXPORT_MAT, "--deck", "cantilever", *_DECK_MAGNET, "--table", "table.h5", "--phi",
       "0.01", "--B", "0.1", "--out", "d.inp", words=("--B", "--magnet")),
+]
+
+# the specimen on a plate above a magnet (issue 34): gaps, overlap, exclusive options
+_SPEC_MAG = (*_SPEC_LIN, "--shape", "cylinder", "--magnet", "cylinder", "--magnet-size",
+             "10e-3", "5e-3", "--remanence-T", "1.2")
+CASES += [
+    C(*_SPEC_MAG, "--gap-m", "0", words=("--gap-m", "> 0 m")),
+    C(*_SPEC_MAG, "--gap-m=-1e-3", words=("--gap-m", "magnet into the specimen")),
+    C(*_SPEC_MAG, "--gap-m", "2e-3:-1e-3:4", words=("--gap-m", "> 0 m")),
+    C(*_SPEC_MAG, "--gap-m", "2e-3,3e-3", words=("--gap-m", "decrease strictly")),
+    C(*_SPEC_MAG, "--gap-m", "2e-3,2e-3", words=("--gap-m", "decrease strictly")),
+    C(*_SPEC_MAG, "--gap-m", "x", words=("--gap-m", "START:STOP:COUNT")),
+    C(*_SPEC_MAG, "--gap-m", "3e-3", "--B", "0.2", words=("--B", "--magnet")),
+    C(*_SPEC_MAG, words=("--magnet cylinder", "--gap-m")),
+    C(*_SPEC_MAG[:-2], "--gap-m", "3e-3", words=("--magnet cylinder", "--remanence-T")),
+    C(*_SPEC_MAG, "--gap-m", "3e-3", "--geometry", "3d", words=("--magnet", "axisymmetric")),
+    C(*_SPEC_LIN, "--shape", "cylinder", "--gap-m", "3e-3", words=("--gap-m", "--magnet")),
+    C(*_SPEC_LIN, "--shape", "cylinder", "--support", "plate", words=("--support", "--magnet")),
 ]
 
 

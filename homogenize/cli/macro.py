@@ -87,11 +87,9 @@ def _export_magnet(args, geometry):
 
 def _export_run(args) -> int:
     """``export``: a magnet deck takes its law from --table itself; the rest as before."""
+    _fill_matrix(args)
     if getattr(args, "magnet", None) is None:
         return wrap_export(_export)(args)
-    for dest, flag in (("E_Pa", "--E-Pa"), ("nu", "--nu"), ("density_kg_m3", "--density-kg-m3")):
-        if getattr(args, dest, None) is None:
-            raise InputError(f"{flag} is required with --magnet")
     if args.body_force_N_m3 is not None:
         raise InputError("give either --body-force-N-m3 or --magnet (its force varies over "
                          "the strip), not both")
@@ -464,11 +462,13 @@ def register(sub, formatter) -> None:
     p.add_argument("--to", required=True, choices=("elmer", "abaqus"), help="target solver")
     p.add_argument("--body-force-N-m3", dest="body_force_N_m3", type=_F_EXPORT, required=True,
                    help="magnitude of the magnetic body force [N/m^3]")
-    p.add_argument("--E-Pa", dest="E_Pa", type=_E, required=True,
-                   help="Young's modulus [Pa]")
-    p.add_argument("--nu", type=_NU, required=True, help="Poisson ratio [-], in (-1, 0.5)")
-    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=_RHO, required=True,
-                   help="mass density [kg/m^3]")
+    p.add_argument("--E-Pa", dest="E_Pa", type=_E, default=None,
+                   help="Young's modulus of the composite [Pa] (default: the "
+                        "--matrix-material's, the matrix alone)")
+    p.add_argument("--nu", type=_NU, default=None,
+                   help="Poisson ratio [-], in (-1, 0.5) (default: the --matrix-material's)")
+    p.add_argument("--density-kg-m3", dest="density_kg_m3", type=_RHO, default=None,
+                   help="mass density [kg/m^3] (default: the --matrix-material's)")
     p.add_argument("--direction", default="-z", choices=tuple(DIRECTIONS),
                    help="direction of the body force (and of gravity)")
     p.add_argument("--gravity-m-s2", dest="gravity_m_s2", type=_G, default=0.0,
@@ -543,8 +543,11 @@ def register(sub, formatter) -> None:
                    help="specimen demagnetizing factor for the field direction (default: "
                         "Aharoni's prism factor of the strip through its thickness)")
     add_export_table_options(p)
-    add_material_options(p, matrix=False, what="--particle-material sets the saturation of the "
-                                               "soft spheres of --magnet without --table.")
+    add_material_options(p, what="--matrix-material fills --E-Pa, --nu, --density-kg-m3 not "
+                                 "given (the matrix alone: give the composite's numbers for "
+                                 "the particles' stiffening and weight); --particle-material "
+                                 "sets the saturation of the soft spheres of --magnet without "
+                                 "--table.")
     p.set_defaults(func=_export_run, outputs=("out",), inputs=("table",),
                    option_needs={**{d: "table" for d in ("B_T", "gradB_T_per_m", "bound")},
                                  "phi": ("table", "magnet"), "table_at": ("table", "magnet"),

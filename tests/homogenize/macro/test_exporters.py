@@ -81,3 +81,22 @@ def test_deck_physics_helpers_against_closed_forms():
     got = f(np.column_stack([np.zeros(3), np.zeros(3), z]))
     np.testing.assert_allclose(got[:, 2], chi / mu_0 * Bz * dBz, rtol=1e-6)
     np.testing.assert_allclose(got[:, :2], 0.0, atol=1e-9 * np.abs(got[:, 2]).max())
+
+
+def test_export_matrix_material_fills_the_material(tmp_path):
+    """`export --matrix-material` fills --E-Pa, --nu, --density-kg-m3 that were not given
+    (explicit options win), as in `beam` (issue 36)."""
+    from homogenize.cli import main
+    from micro.materials import matrix_preset
+    m = matrix_preset("ecoflex-00-30")
+    out = tmp_path / "a.inp"
+    assert main(["export", "--to", "abaqus", "--body-force-N-m3", "4e4", "--matrix-material",
+                 "ecoflex-00-30", "--out", str(out)]) == 0
+    p = parse_abaqus(out.read_text())
+    assert np.isclose(p["E_Pa"], m.E_Pa) and np.isclose(p["nu"], m.nu)
+    assert np.isclose(p["density_kg_m3"], m.density_kg_m3)
+    out2 = tmp_path / "b.inp"
+    assert main(["export", "--to", "abaqus", "--body-force-N-m3", "4e4", "--matrix-material",
+                 "ecoflex-00-30", "--E-Pa", "3e5", "--out", str(out2)]) == 0
+    p2 = parse_abaqus(out2.read_text())
+    assert np.isclose(p2["E_Pa"], 3e5) and np.isclose(p2["nu"], m.nu)
