@@ -33,7 +33,6 @@ from pathlib import Path
 import numpy as np
 
 from micro import materials
-from micro._io import manifest
 from micro.particles import LogNormal, generate_rve
 from homogenize.cell import homogenize_rve
 from homogenize.resolution import (coarse_voxels, discretization_error, voxels_per_radius)
@@ -137,8 +136,10 @@ def main(argv=None) -> int:
     out = a.out or (Path(tempfile.mkdtemp()) / "resolution_error.json" if a.quick
                     else HERE / "resolution_error.json")
     doc = run(a.quick)
-    doc["manifest"] = manifest({"quick": a.quick, "script": "results/cell/resolution_error.py"},
-                               None)
+    from importlib import metadata
+    doc["manifest"] = {"quick": a.quick, "script": "results/cell/resolution_error.py",
+                       "versions": {k: metadata.version(k) for k in
+                                    ("numpy", "scipy", "numba", "scikit-fem", "pyamg")}}
     out.write_text(json.dumps(doc, indent=1) + "\n")
     plot(doc, out.with_suffix(".png"))
     for name, p in doc["populations"].items():
