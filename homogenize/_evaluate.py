@@ -83,9 +83,15 @@ QUANTITIES = {
 #: (None: zero), for the discretization error (:mod:`homogenize.resolution`)
 FEM_QUANTITIES = {"E_eff_Pa": "matrix_E_Pa", "nu_eff": "matrix_nu", "stress_mag_Pa": None,
                   "strain_mag": None}
+#: the same for the relax evaluator's cell FEM on the relaxed (and as-placed) RVE
+RELAX_FEM_QUANTITIES = {"strain_mag": None, "strain_parallel": None,
+                        "strain_perpendicular": None, "stress_mag_Pa": None,
+                        "E_eff_parallel_Pa": "matrix_E_Pa",
+                        "E_eff_perpendicular_Pa": "matrix_E_Pa",
+                        "strain_affine_parallel": None}
 #: suffix of the same quantities on the coarser grid of the two-grid estimate
 COARSE = "_coarse"
-for _q in FEM_QUANTITIES:
+for _q in {**FEM_QUANTITIES, **RELAX_FEM_QUANTITIES}:
     _unit, _shape, _desc = QUANTITIES[_q]
     QUANTITIES[_q + COARSE] = (_unit, _shape, _desc + ", on the coarser grid of the "
                                "discretization-error estimate ([study] coarse_voxels)")
@@ -457,6 +463,20 @@ _RELAX_CACHE: dict = {}
 _RELAX_CACHE_SIZE = 4
 
 
+def _relax_fem_outputs(res, curve, k: int, B: float) -> dict:
+    """The cell-FEM quantities (:data:`RELAX_FEM_QUANTITIES`) of field step ``k``."""
+    st = res.steps[k]
+    if st.get("cell_error"):
+        raise RuntimeError(f"B = {B:g} T: {st['cell_error']}")
+    eps = np.asarray(st["strain_mag"], dtype=float)
+    return {"strain_mag": eps, "strain_parallel": eps[2, 2],
+            "strain_perpendicular": 0.5 * (eps[0, 0] + eps[1, 1]),
+            "stress_mag_Pa": st["stress_mag_Pa"],
+            "E_eff_parallel_Pa": st["E_eff_parallel_Pa"],
+            "E_eff_perpendicular_Pa": st["E_eff_perpendicular_Pa"],
+            "strain_affine_parallel": curve["strain_affine"][k]}
+
+
 def _relax_sweep(rve, B_steps, law, law_params, matrix, fem: bool, voxels: int, opts: dict):
     """Relaxed (and, with the cell FEM, as-placed) quantities at every field step."""
     from homogenize.relax import magnetostriction_curve, relax
@@ -550,11 +570,17 @@ class RelaxEvaluator:
             rve = generate_rve(phi, s["n_particles"], seed, **kwargs)
             res, curve = _relax_sweep(rve, B_steps, law, s["law"], matrix, s["fem"],
                                       s["voxels"], opts)
-            hit = (rve, res, curve)
+            coarse = None
+            if s["fem"] and s.get("coarse_voxels"):
+                # the same RVE and path with the cell FEM on the coarser grid: the two-grid
+                # estimate of the discretization error (homogenize.resolution)
+                coarse = _relax_sweep(rve, B_steps, law, s["law"], matrix, True,
+                                      s["coarse_voxels"], opts)
+            hit = (rve, res, curve, coarse)
             while len(_RELAX_CACHE) >= _RELAX_CACHE_SIZE:
                 _RELAX_CACHE.pop(next(iter(_RELAX_CACHE)))
             _RELAX_CACHE[ck] = hit
-        rve, res, curve = hit
+        rve, res, curve, coarse = hit
         k = min(range(len(B_steps)), key=lambda i: abs(B_steps[i] - B))
         st = res.steps[k]
         ms = st["microstructure"]
@@ -564,14 +590,9 @@ class RelaxEvaluator:
                "n_contacts": float(st["n_contacts"]), "chain_fraction": ms["chain_fraction"],
                "volume_m3": rve.volume_m3, "phi_rve": rve.phi}
         if s["fem"]:
-            if st.get("cell_error"):
-                raise RuntimeError(f"B = {B:g} T: {st['cell_error']}")
-            eps = np.asarray(st["strain_mag"], dtype=float)
-            out.update(strain_mag=eps, strain_parallel=eps[2, 2],
-                       strain_perpendicular=0.5 * (eps[0, 0] + eps[1, 1]),
-                       stress_mag_Pa=st["stress_mag_Pa"],
-                       E_eff_parallel_Pa=st["E_eff_parallel_Pa"],
-                       E_eff_perpendicular_Pa=st["E_eff_perpendicular_Pa"],
-                       strain_affine_parallel=curve["strain_affine"][k],
+            out.update(_relax_fem_outputs(res, curve, k, B),
                        M_eff_affine_A_per_m=curve["M_eff_affine_A_per_m"][k])
+            if coarse is not None:
+                fem_c = _relax_fem_outputs(*coarse, k, B)
+                out.update({q + COARSE: v for q, v in fem_c.items()})
         return _check_finite_result(out, task)

@@ -13,9 +13,9 @@ A study declares a grid of conditions and how many random RVEs to evaluate at ea
                                    # that move: coupled RVE through the B steps) or "synthetic"
     fem = false                    # run the FEM homogenization (E_eff, nu_eff, stress_mag)
     voxels = 16                    # FEM voxels per RVE edge (when fem = true)
-    coarse_voxels = 10             # second grid of the discretization-error estimate (rve
-                                   # evaluator, fem = true; default: the even count nearest
-                                   # 2/3 voxels; 0: no estimate); homogenize.resolution
+    coarse_voxels = 10             # second grid of the discretization-error estimate (fem =
+                                   # true; default: the even count nearest 2/3 voxels; 0: no
+                                   # estimate); homogenize.resolution
     confidence = 0.95              # level of the confidence intervals in the table
 
     [grid]                         # every key is a grid axis: one value or a list of values
@@ -617,19 +617,19 @@ def _check_study_size(path, n_points: int, realizations: int, n_particles: int, 
 
 def _coarse_voxels(path, s: dict, evaluator: str, voxels: int) -> int:
     """``[study] coarse_voxels``: the second grid of the discretization-error estimate
-    (:mod:`homogenize.resolution`). Default with ``fem = true`` and the rve evaluator: the even
-    count nearest 2/3 ``voxels`` (none below 6 voxels); 0 turns the estimate off."""
+    (:mod:`homogenize.resolution`). Default with ``fem = true`` (rve and relax evaluators): the
+    even count nearest 2/3 ``voxels`` (none below 6 voxels); 0 turns the estimate off; the
+    synthetic evaluator only with an explicit value."""
     fem = s.get("fem", False)
     if "coarse_voxels" not in s:
-        return coarse_voxels(voxels) if (fem and evaluator == "rve" and voxels >= 6) else 0
+        return coarse_voxels(voxels) if (fem and evaluator != "synthetic" and voxels >= 6) \
+            else 0
     c = s["coarse_voxels"]
     if c == 0:
         return 0
-    if not fem or evaluator == "relax":
-        why = ("fem = false: there is no cell FEM to estimate" if not fem else
-               "the relax evaluator has no two-grid estimate yet")
-        raise InputError(f"{path}: [study] coarse_voxels = {c} is given but {why} (use 0 or "
-                         f"leave it out)")
+    if not fem:
+        raise InputError(f"{path}: [study] coarse_voxels = {c} is given but fem = false: "
+                         f"there is no cell FEM to estimate (use 0 or leave it out)")
     if not 4 <= c < voxels:
         raise InputError(f"{path}: [study] coarse_voxels must be 0 (no discretization-error "
                          f"estimate) or in [4, voxels - 1] = [4, {voxels - 1}], got {c}")

@@ -1,7 +1,8 @@
 """The discretization error of the cell FEM's composite voxels, next to the statistical one.
 
 A table quantity from the cell FEM (``E_eff_Pa``, ``nu_eff``, ``stress_mag_Pa``,
-``strain_mag``) is the mean over random RVEs, each solved on ``n`` voxels per edge. Its
+``strain_mag``; with the relax evaluator the strains, stresses and moduli of the relaxed RVE) is
+the mean over random RVEs, each solved on ``n`` voxels per edge. Its
 statistical interval says how far the mean of the RVEs is from the mean of infinitely many RVEs
 ON THAT GRID; the grid's own error is a bias shared by all realizations, which no number of
 realizations removes. This module estimates it from two resolutions of the SAME RVEs and adds

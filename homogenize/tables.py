@@ -84,7 +84,7 @@ from micro._io import (atomic_path, hdf5_agree, is_regular_file, manifest as _ma
                        open_regular, write_json)
 from micro._validate import InputError
 
-from ._evaluate import COARSE, FEM_QUANTITIES, QUANTITIES, get_evaluator
+from ._evaluate import COARSE, FEM_QUANTITIES, QUANTITIES, RELAX_FEM_QUANTITIES, get_evaluator
 from .resolution import FILLER_BIAS_REL, ORDER, combined_interval, discretization_error
 from micro.materials import PDMS
 from ._stats import summarize, t_half_width
@@ -669,24 +669,30 @@ def aggregate(study: Study, parts: Path, evaluator_id: str) -> dict:
             "n": np.full(P, R, dtype=np.int64), "disc": _discretization(study, values)}
 
 
-def _matrix_value(study: Study, key: str | None) -> float:
-    """The value of a cell-FEM quantity without filler: the matrix's E or nu, else 0."""
+def _matrix_value(study: Study, key: str | None, ndim: int):
+    """The value of a cell-FEM quantity without filler, per grid point (P, 1, ...) for a
+    quantity of ``ndim`` component dimensions: the matrix's E or nu, else 0. The rve
+    evaluator's matrix is ``[cell]``'s; the relax evaluator's a ``matrix_E_Pa`` grid axis or
+    ``[relax]``'s."""
     if key is None:
         return 0.0
     default = {"matrix_E_Pa": PDMS.E_Pa, "matrix_nu": PDMS.nu}[key]
-    return float(study.cell.get(key, default))
+    table = study.relax if study.evaluator == "relax" else study.cell
+    vals = [float(p.get(key, table.get(key, default))) for p in study.points()]
+    return np.asarray(vals).reshape((-1,) + (1,) * ndim)
 
 
 def _discretization(study: Study, values: dict) -> dict:
     """Per cell-FEM quantity with coarse-grid values: the discretization error of its mean
     (:func:`homogenize.resolution.discretization_error`), arrays (P, ...)."""
     out = {}
-    for q, key in FEM_QUANTITIES.items():
+    for q, key in {**FEM_QUANTITIES, **RELAX_FEM_QUANTITIES}.items():
         if q in values and q + COARSE in values:
             out[q] = discretization_error(np.moveaxis(values[q], 1, 0),
                                           np.moveaxis(values[q + COARSE], 1, 0),
                                           study.voxels, study.coarse_voxels, study.confidence,
-                                          matrix_value=_matrix_value(study, key))
+                                          matrix_value=_matrix_value(study, key,
+                                                                     values[q].ndim - 2))
     return out
 
 

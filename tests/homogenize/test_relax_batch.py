@@ -88,6 +88,14 @@ def test_intervals_and_quantities_against_B(tables):
     assert np.all(M[2] > M[1])
     # stiffness: rigid spheres stiffen the matrix (E_eff > E_matrix) at every field
     assert np.all(t.component_values("E_eff_parallel_Pa") > 0.5e6)
+    # the discretization error of every cell-FEM quantity (two grids: VOX and its coarse grid),
+    # never below 2.2 % of the filler's part: E_matrix from the grid axis matrix_E_Pa
+    from homogenize.resolution import FILLER_BIAS_REL
+    assert set(t.disc_err) == set(_evaluate.RELAX_FEM_QUANTITIES)
+    E = t.component_values("E_eff_parallel_Pa").mean(axis=1)
+    assert np.all(t.disc_err["E_eff_parallel_Pa"] >= FILLER_BIAS_REL * np.abs(E - 0.5e6)
+                  * (1 - 1e-12))
+    assert np.all(t.disc_err["strain_parallel"][0] == 0)       # no field, no strain
 
 
 def test_one_rve_per_realization_through_its_field_steps(study, tables):
