@@ -37,10 +37,12 @@ SPECIMEN_VTU_UNITS = {"points": "m (deformed)", "displacement_m": "m", "mean_str
 _EDGES = ((0, 1), (1, 2), (0, 2))
 
 
-def specimen_vtu_arrays(solution) -> dict:
+def specimen_vtu_arrays(solution, mirror: bool | None = None) -> dict:
     """The half section of an :class:`~homogenize.macro.finite_strain.AxisymmetricSolution`
-    with mid-plane symmetry: ``points`` (N, 3) deformed [m], ``triangle6`` (ne, 6) node
-    indices, ``displacement_m`` (N, 3) [m], ``mean_stress_Pa`` (N,) [Pa]."""
+    (its quarter mirrored about ``z = 0`` if ``mirror``, default: with mid-plane symmetry; a
+    specimen on a plate is a whole section solved with its plate as the plane ``z = 0``:
+    ``mirror=False``): ``points`` (N, 3) deformed [m], ``triangle6`` (ne, 6) node indices,
+    ``displacement_m`` (N, 3) [m], ``mean_stress_Pa`` (N,) [Pa]."""
     basis = solution.basis
     P = np.asarray(solution.doflocs_m)                  # (2, N) reference (r, z)
     U = np.asarray(solution.u_m)                        # (2, N)
@@ -52,7 +54,7 @@ def specimen_vtu_arrays(solution) -> dict:
     for k, (a, b) in enumerate(_EDGES):
         p[dofs[3 + k]] = 0.5 * (p[dofs[a]] + p[dofs[b]])
     tri = dofs.T.copy()
-    if solution.body.mid_plane:
+    if solution.body.mid_plane if mirror is None else mirror:
         # mirror about z = 0: nodes on the mid-plane are shared
         on = P[1] == 0.0
         n = P.shape[1]
@@ -160,6 +162,12 @@ def write_specimen_vtu(path, result) -> None:
         config = ("deformed; the whole body (the computed part x, y, z >= 0 mirrored about the "
                   "symmetry planes)" if all(sym) else "deformed; the whole body") \
             + ", field along z"
+    elif result.setup:
+        a = specimen_vtu_arrays(result.solution, mirror=False)
+        cells = [("triangle6", a["triangle6"])]
+        config = ("deformed; half meridian section r >= 0 in the plane y = 0, the bottom face "
+                  f"at z = 0 (support: {result.setup.get('support')}), the magnet below; "
+                  "rotate about z for the body")
     else:
         a = specimen_vtu_arrays(result.solution)
         cells = [("triangle6", a["triangle6"])]
@@ -174,6 +182,9 @@ def write_specimen_vtu(path, result) -> None:
         "configuration": _text(config),
         "units": _text("; ".join(f"{k}: {v}" for k, v in SPECIMEN_VTU_UNITS.items())),
     }
+    for key in ("gap_m", "reaction_N"):
+        if hasattr(last, key):
+            field_data[key] = np.array([getattr(last, key)], dtype=np.float64)
     m = meshio.Mesh(a["points"], cells,
                     point_data={"displacement_m": a["displacement_m"],
                                 "mean_stress_Pa": a["mean_stress_Pa"]})

@@ -66,6 +66,22 @@ cost of the 13-step benchmark in :mod:`homogenize.bench.specimen` (n_mesh 6: 83 
 0.47 GB). Not covered in 3D: spheres and spheroids (axisymmetric only). VTU output: the octant
 mirrored to the whole body (:func:`homogenize.macro._specimen_output.write_specimen_vtu`).
 
+In the field of a magnet (:func:`solve_specimen_on_magnet`, :func:`solve_specimen_in_field`,
+issue 34). A cylinder resting with its bottom face on a rigid, frictionless plate (``u_z = 0``
+there, ``u_r`` free; or ``support="free"``), a coaxial cylindrical permanent magnet (magpylib,
+:class:`homogenize.macro.magnets.PermanentMagnet`) below the plate, its field ``H_a(x)``
+entering the field solve as the applied field (the reduced potential is the specimen's own;
+the magnet is rigid). The experimenter's steps: the magnet approached, the gap between its top
+face and the specimen's bottom face strictly decreasing. The loads are the ones above: ``f =
+mu0 (M . grad) H = grad psi`` needs only ``curl H = 0`` and ``M`` parallel to ``H``, true in
+any applied field, so the same traction and stress ``psi I`` apply; in a non-uniform field
+they have a net force, which the plate carries. Verified (tests/homogenize/macro/
+test_specimen_magnet.py): the plate's reaction against the Maxwell stress on a shell in the
+air (-0.6 %), a small weakly magnetizable cylinder against the dipole force
+``chi V mu0 (H . grad) H`` at its centre (+1.2 %, the field's curvature) and against the
+applied field's own volume integral (-1.7e-4), a uniform ``H_a`` callable against the
+uniform-field path (``<M>`` 2e-7, mean strain 2e-4, changes of length 0.2 %).
+
 Units: SI (m, Pa, A/m, T).
 """
 from __future__ import annotations

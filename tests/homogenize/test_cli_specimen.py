@@ -232,3 +232,61 @@ def test_3d_vtu_is_the_whole_deformed_body(tmp_path, capsys):
     fd = m.field_data
     assert "mirrored" in bytes(fd["configuration"]).decode()
     assert fd["B_applied_T"][0] == pytest.approx(0.2)
+
+
+MAG = ["specimen", "--shape", "cylinder", "--radius-m", "2e-3", "--length-m", "2e-3", "--law",
+       "linear", "--chi", "0.5", "--shear-modulus-Pa", "1e6", "--n-mesh", "4", "--n-boundary",
+       "24", "--magnet", "cylinder", "--magnet-size", "10e-3", "5e-3", "--remanence-T", "1.2"]
+
+
+def test_specimen_on_a_magnet_from_the_command_line(tmp_path, capsys):
+    """--magnet cylinder --gap-m: per gap the applied field at the centre, the plate's
+    reaction and the net magnetic force in the JSON (the physics in
+    tests/homogenize/macro/test_specimen_magnet.py); the VTU is the whole section resting on
+    the plate z = 0 (not mirrored)."""
+    import meshio
+    j, v = tmp_path / "m.json", tmp_path / "m.vtu"
+    rc = main(MAG + ["--gap-m", "4e-3,3e-3", "--json", str(j), "--vtu", str(v), "--quiet"])
+    assert rc == 0, capsys.readouterr().err
+    out = json.loads(j.read_text())
+    assert out["setup"]["support"] == "plate"
+    assert out["setup"]["magnet"] == pytest.approx(
+        {"shape": "cylinder", "diameter_m": 10e-3, "height_m": 5e-3, "remanence_T": 1.2,
+         "magnetization": "+z (along the axis)",
+         "position": "coaxial below the plate, top face at z = -gap_m"})
+    steps = out["steps"]
+    assert [s["gap_m"] for s in steps] == pytest.approx([4e-3, 3e-3])
+    for s in steps:
+        assert s["reaction_N"] > 0 and s["maxwell_force_N"] < 0
+        assert s["reaction_N"] == pytest.approx(-s["maxwell_force_N"], rel=0.02)
+    assert steps[1]["reaction_N"] > steps[0]["reaction_N"]
+    printed = capsys.readouterr().out
+    assert "reaction [N]" in printed and "on a plate above a magnet" in printed
+    m = meshio.read(v)
+    X = m.points - m.point_data["displacement_m"]
+    assert X[:, 2].min() == pytest.approx(0.0, abs=1e-15) and X[:, 2].max() == pytest.approx(2e-3)
+    assert np.abs(m.point_data["displacement_m"][np.abs(X[:, 2]) < 1e-15, 2]).max() < 1e-15
+    assert m.field_data["gap_m"][0] == pytest.approx(3e-3)
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--gap-m", "0"], ("--gap-m", "> 0 m")),
+    (["--gap-m=-1e-3"], ("--gap-m", "into the specimen")),
+    (["--gap-m", "2e-3,3e-3"], ("--gap-m", "decrease strictly")),
+    (["--gap-m", "3e-3", "--B", "0.2"], ("--B", "--magnet")),
+    (["--gap-m", "3e-3", "--geometry", "3d"], ("--magnet", "axisymmetric")),
+    ([], ("--magnet cylinder", "--gap-m")),
+])
+def test_magnet_bad_input_exit_2_nothing_written(extra, words, tmp_path, capsys):
+    j = tmp_path / "m.json"
+    assert main(MAG + extra + ["--json", str(j)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_magnet_options_without_magnet_are_refused(tmp_path, capsys):
+    assert main(CYL + ["--gap-m", "3e-3", "--json", str(tmp_path / "s.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--gap-m" in err[0] and "--magnet" in err[0]
+    assert list(tmp_path.iterdir()) == []
