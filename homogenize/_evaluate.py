@@ -343,6 +343,29 @@ def _check_laws_and_particles(study, gen_keys, get_law) -> None:
             raise InputError(f"{study.path}: [grid]/[rve] particle parameters: {exc}") from None
 
 
+def resolution_warnings(study) -> list[str]:
+    """One warning per distinct (phi, particle population) of the grid whose mean radius
+    is resolved by fewer voxels than the accuracy study needs
+    (:func:`homogenize.resolution.resolution_warning`; the box from the expected particle
+    volume: the realizations' boxes scatter around it)."""
+    if not study.fem:
+        return []
+    gen = _particle_keys(generate_rve)
+    axes = [(a, v) for a, v in study.axes if a == "phi" or a in gen]
+    out = []
+    for combo in dict.fromkeys(itertools.product(*(v for _, v in axes))):
+        point = dict(zip((a for a, _ in axes), combo))
+        dist = _rve_kwargs({**study.rve, **{k: v for k, v in point.items()
+                                           if k != "phi"}})["distribution"]
+        box = (study.n_particles * dist.mean_volume_m3() / float(point["phi"])) ** (1 / 3)
+        where = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
+                          for k, v in point.items())
+        w = resolution_warning(dist.raw_moment(1), box, study.voxels, where)
+        if w:
+            out.append(w)
+    return out
+
+
 @dataclass(frozen=True)
 class RVEEvaluator:
     """particles -> dipoles -> (FEM): one random RVE at one grid point.
@@ -405,26 +428,8 @@ class RVEEvaluator:
             raise InputError(f"{study.path}: [cell] is given but [study] fem = false")
 
     def resolution_warnings(self, study) -> list[str]:
-        """One warning per distinct (phi, particle population) of the grid whose mean radius
-        is resolved by fewer voxels than the accuracy study needs
-        (:func:`homogenize.resolution.resolution_warning`; the box from the expected particle
-        volume: the realizations' boxes scatter around it)."""
-        if not study.fem:
-            return []
-        gen = _particle_keys(generate_rve)
-        axes = [(a, v) for a, v in study.axes if a == "phi" or a in gen]
-        out = []
-        for combo in dict.fromkeys(itertools.product(*(v for _, v in axes))):
-            point = dict(zip((a for a, _ in axes), combo))
-            dist = _rve_kwargs({**study.rve, **{k: v for k, v in point.items()
-                                               if k != "phi"}})["distribution"]
-            box = (study.n_particles * dist.mean_volume_m3() / float(point["phi"])) ** (1 / 3)
-            where = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
-                              for k, v in point.items())
-            w = resolution_warning(dist.raw_moment(1), box, study.voxels, where)
-            if w:
-                out.append(w)
-        return out
+        """See :func:`resolution_warnings`."""
+        return resolution_warnings(study)
 
     def __call__(self, task) -> dict:
         point = dict(task.point)
@@ -511,6 +516,10 @@ class RelaxEvaluator:
     fem: bool = False
     #: run_batch submits all field steps of one realization as one task (one sweep each)
     sweeps = True
+
+    def resolution_warnings(self, study) -> list[str]:
+        """See :func:`resolution_warnings`."""
+        return resolution_warnings(study)
 
     @property
     def id(self) -> str:

@@ -195,3 +195,21 @@ def test_homogenize_warns_when_particles_are_under_resolved(tmp_path, capsys):
         assert ("warning:" in err and f"use voxels >= {n_ok}" in err) is warned
         assert json.loads(out.read_text())["voxels_per_radius"] == pytest.approx(
             res.voxels_per_radius(25e-9, rve.box_m, n))
+
+
+def test_batch_warns_per_grid_population_below_three_voxels_per_radius():
+    """The box of N particles of mean volume <V> at phi is (N <V> / phi)^(1/3): at 12 voxels
+    the tutorial's 8 particles at phi 0.05 get 1.2 voxels per radius (a warning per phi that
+    falls short), at 24 only phi 0.05 (2.5; phi 0.4: 4.9 voxels per radius)."""
+    from homogenize._evaluate import resolution_warnings
+    text = ('[study]\nseed = 1\nrealizations = 2\nn_particles = 8\nfem = true\nvoxels = 12\n'
+            'particle_material = "carbonyl-iron"\n'
+            '[grid]\nphi = [0.05, 0.4]\nB_T = 0.1\ngradB_T_per_m = 1.0\n')
+    ws = resolution_warnings(parse_study(text, "s.toml"))
+    assert len(ws) == 2 and "phi = 0.05: the mean particle radius is 1.2 voxels" in ws[0]
+    ws = resolution_warnings(parse_study(text.replace("voxels = 12", "voxels = 24"), "s.toml"))
+    assert len(ws) == 1 and ws[0].startswith("warning: phi = 0.05: the mean particle radius "
+                                             "is 2.5 voxels")
+    relax = text.replace("n_particles = 8", 'n_particles = 8\nevaluator = "relax"').replace(
+        "gradB_T_per_m = 1.0\n", "")
+    assert len(resolution_warnings(parse_study(relax, "r.toml"))) == 2
