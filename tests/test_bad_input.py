@@ -14,6 +14,11 @@ import h5py
 import numpy as np
 import pytest
 
+# the packages first: with tests/ on sys.path and the editable install's finder behind it,
+# tests/homogenize (a directory without __init__.py) would become a namespace package
+import homogenize.cli  # noqa: E402,F401
+import micro  # noqa: E402,F401
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bad_input_cases as B  # noqa: E402
 

@@ -15,6 +15,11 @@ from micro._io import (NotRegularFile, atomic_write_text, is_regular_file, open_
                        protected_inputs)
 from micro._validate import InputError, check_header, check_slender
 
+# the packages first: with tests/ on sys.path and the editable install's finder behind it,
+# tests/homogenize (a directory without __init__.py) would become a namespace package
+import homogenize.cli  # noqa: E402,F401
+import micro  # noqa: E402,F401
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
