@@ -426,6 +426,12 @@ CASES = [
     C("beam", "--model", "eb", "--json", "b.json", code=0, creates=("b.json",)),
     # ------------------------------------------------------------------ channel
     C("channel", "--nc", "0", words=("--nc",)),
+    C("channel", "--close", "--flow-rate-m3-s", "1e-10", "--json", "c.json",
+      words=("--close", "flow rate never shuts")),
+    C("channel", "--close", "--png", "c.png", "--pressure-drop-Pa", "10",
+      words=("--close", "--png")),
+    C("channel", "--table", "table.h5", "--phi", "0.02", "--gradB", "1.78",
+      words=("--table", "--close")),
     C("channel", "--nc", "100", words=("--nc", "64")),
     C("channel", "--a-m", "0", words=("--a-m",)),
     C("channel", "--body-force-N-m3", "1e30", words=("--body-force-N-m3",)),

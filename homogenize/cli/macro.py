@@ -24,7 +24,8 @@ from homogenize.macro.exporters import (NLGEOM_FRACTION, NLGEOM_MODES, ExportSpe
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.fem import Material
 from homogenize.macro.channel import ChannelGeometry, solve_channel
-from homogenize.macro.flow import (BLOOD_PLASMA, CeilingModel, Liquid, field_for_target_gap,
+from homogenize.macro.flow import (BLOOD_PLASMA, CeilingModel, Liquid, closure,
+                                   field_for_target_gap,
                                    plot_channel_flow, solve_channel_flow)
 from homogenize.macro.exporters import DIRECTIONS
 from homogenize.macro.cantilever import MODELS
@@ -268,6 +269,56 @@ def _field_interval(table, phi, gradB, others, f_need, B_range, target):
     return tuple(ends)
 
 
+def _table_field(args):
+    """``(table, others, {body_force_of_field, field_range, field_unit})`` of --table."""
+    for name, v in (("--phi", args.phi), ("--gradB", args.gradB_T_per_m)):
+        if v is None:
+            raise InputError(f"{name} is required with --table")
+    table = read_table(args.table)
+    B_axis = sorted(float(b) for b in table.axes.get("B_T", ()))
+    if len(B_axis) < 2:
+        raise InputError(f"{args.table}: needs at least two B_T values")
+    others = parse_at(args.table_at)
+    return table, others, {"body_force_of_field": lambda B: body_force_from_table(
+        table, args.phi, float(B), args.gradB_T_per_m, **others).mean,
+        "field_range": (B_axis[0], B_axis[-1]), "field_unit": "T"}
+
+
+def _channel_closure(args, geo, mat) -> int:
+    """``channel --close``: the body force (field) that shuts the channel, and where."""
+    ceiling = CeilingModel.from_fem(geo, mat, nc=max(args.nc, 3), order=args.order)
+    field = {}
+    if args.table:
+        table, others, field = _table_field(args)
+    dp = args.pressure_drop_Pa or 0.0
+    r = closure(ceiling, geo.d_m, pressure_drop_Pa=dp,
+                outlet_pressure_Pa=args.outlet_pressure_Pa, **field)
+    out = {"closure": r.to_dict()}
+    interval = ""
+    if r.field is not None:
+        lo, hi = _field_interval(table, args.phi, args.gradB_T_per_m, others,
+                                 r.body_force_N_m3, field["field_range"], 0.0)
+        conf = body_force_from_table(table, args.phi, r.field, args.gradB_T_per_m,
+                                     **others).confidence
+        out["closure"]["field_interval_T"] = [lo, hi]
+        out["closure"]["field_interval_confidence"] = conf
+        interval = (f" = B {r.field:.4g} T ({100 * conf:g} % interval ["
+                    + ", ".join("beyond the table's B range" if v is None else f"{v:.4g}"
+                                for v in (lo, hi))
+                    + f"] T, from the table's force interval) inside the polymer at phi "
+                      f"{args.phi:g}, dB/dz {args.gradB_T_per_m:g} T/m")
+    print(f"the channel shuts against {dp:.4g} Pa at body force {r.body_force_N_m3:.4g} N/m^3"
+          f"{interval}: the ceiling touches the glass at the outlet (x = {r.x_contact_m:.4g} m), "
+          f"y = {r.y_contact_m:.4g} m across the {geo.a_m:g} m channel")
+    print(f"first contact (no pressure) at {r.body_force_first_contact_N_m3:.4g} N/m^3; a shut "
+          f"channel holds {r.lift_off_Pa_per_N_m3:.4g} Pa more inlet pressure per extra N/m^3 "
+          f"(ceiling model: {ceiling.source})")
+    if args.json:
+        out["manifest"] = manifest(config_of(args), None)
+        write_json(args.json, out)
+    return 0
+
+
 def _channel(args) -> int:
     _fill_matrix(args)
     _check_channel_size(args)
@@ -276,9 +327,16 @@ def _channel(args) -> int:
     operating = (args.flow_rate_m3_s, args.pressure_drop_Pa)
     if args.target_gap_m is not None and operating == (None, None):
         raise InputError("--target-gap-m needs --flow-rate-m3-s or --pressure-drop-Pa")
+    if args.close and (args.target_gap_m is not None or args.flow_rate_m3_s is not None
+                       or args.png):
+        raise InputError("--close takes --pressure-drop-Pa (the inlet pressure the shut channel "
+                         "holds), not --target-gap-m, --png or --flow-rate-m3-s (a fixed flow "
+                         "rate never shuts it: the inlet pressure rises to lift the ceiling)")
     if None not in operating:
         raise InputError("give either --flow-rate-m3-s or --pressure-drop-Pa, not both")
     out = {}
+    if args.close:
+        return _channel_closure(args, geo, mat)
     if operating == (None, None):        # the ceiling under the body force, no liquid
         r = solve_channel(geo, mat, args.body_force_N_m3, order=args.order, nc=args.nc,
                           gravity_m_s2=args.gravity_m_s2)
@@ -298,17 +356,7 @@ def _channel(args) -> int:
         if args.target_gap_m is not None:
             field = {}
             if args.table:         # the field B that gives the force, from the batch table
-                for name, v in (("--phi", args.phi), ("--gradB", args.gradB_T_per_m)):
-                    if v is None:
-                        raise InputError(f"{name} is required with --table")
-                table = read_table(args.table)
-                B_axis = sorted(float(b) for b in table.axes.get("B_T", ()))
-                if len(B_axis) < 2:
-                    raise InputError(f"{args.table}: needs at least two B_T values")
-                others = parse_at(args.table_at)
-                field = {"body_force_of_field": lambda B: body_force_from_table(
-                             table, args.phi, float(B), args.gradB_T_per_m, **others).mean,
-                         "field_range": (B_axis[0], B_axis[-1]), "field_unit": "T"}
+                table, others, field = _table_field(args)
             t = field_for_target_gap(ceiling, geo.d_m, args.target_gap_m, **op, **field)
             flow = t.flow
             out["target_gap"] = t.to_dict()
@@ -685,10 +733,16 @@ def register(sub, formatter) -> None:
                    type=float_in("--target-gap-m", 0.0, 1.0, "m", lo_open=True), default=None,
                    help="find the body force that brings the smallest gap to this height [m] "
                         "(e.g. 10e-6 to 20e-6 to hold back cells) (default: none)")
+    g.add_argument("--close", action="store_true",
+                   help="find the body force (with --table: the field) at which the ceiling "
+                        "shuts the channel against --pressure-drop-Pa (default 0: the first "
+                        "contact), where the contact starts, and the pressure a shut channel "
+                        "holds per extra N/m^3")
     g.add_argument("--png", default=None, help="plot of gap and pressure along the channel")
     g.add_argument("--table", default=None,
-                   help="with --target-gap-m: batch table whose body force(B) at --phi and "
-                        "--gradB gives the applied field needed (default: none, body force only)")
+                   help="with --target-gap-m or --close: batch table whose body force(B) at "
+                        "--phi and --gradB gives the applied field needed (default: none, body "
+                        "force only)")
     g.add_argument("--phi", type=float_in("--phi", 0.0, 0.74, lo_open=True), default=None,
                    help="particle volume fraction for --table [-]")
     g.add_argument("--gradB", dest="gradB_T_per_m",
@@ -700,7 +754,9 @@ def register(sub, formatter) -> None:
     add_material_options(p, particle=False,
                          what="--matrix-material fills --E-Pa, --nu, --density-kg-m3.")
     p.set_defaults(func=_channel, outputs=("json", "png"), inputs=("table",),
-                   option_needs={"table": "target_gap_m", "phi": "table",
+                   option_needs={"table": ("target_gap_m", "close"), "phi": "table",
                                  "gradB_T_per_m": "table", "table_at": "table",
+                                 "outlet_pressure_Pa": ("flow_rate_m3_s", "pressure_drop_Pa",
+                                                        "close"),
                                  **{d: ("flow_rate_m3_s", "pressure_drop_Pa") for d in (
-                                     "viscosity_Pa_s", "outlet_pressure_Pa", "png")}})
+                                     "viscosity_Pa_s", "png")}})

@@ -48,7 +48,7 @@ from micro._validate import InputError, check_finite, check_positive
 __all__ = ["Liquid", "BLOOD_PLASMA", "rectangular_duct_conductance_m4_Pa_s",
            "section_conductance_m4_Pa_s", "CeilingModel", "ChannelFlowResult",
            "solve_channel_flow", "FlowInterval", "flow_with_interval", "TargetGapResult",
-           "field_for_target_gap", "plot_channel_flow"]
+           "field_for_target_gap", "ClosureResult", "closure", "plot_channel_flow"]
 
 
 @dataclass(frozen=True)
@@ -578,6 +578,84 @@ def field_for_target_gap(ceiling: CeilingModel, length_m: float, target_gap_m: f
                               flow_rate_m3_s=flow_rate_m3_s, pressure_drop_Pa=pressure_drop_Pa,
                               outlet_pressure_Pa=p_out, liquid=liquid, n_x=n_x)
     return TargetGapResult(t, float(f_need), field_value, field_unit, flow.x_min_gap_m, flow)
+
+
+@dataclass(frozen=True)
+class ClosureResult:
+    """Where and at which body force the ceiling shuts the channel (:func:`closure`).
+
+    body_force_N_m3 : the smallest body force with no flow at ``inlet_pressure_Pa`` [N/m^3]
+    body_force_first_contact_N_m3 : the ceiling first touches the glass at the outlet
+        (``p = p_out``) [N/m^3]; between the two the liquid lifts the ceiling off the contact
+        line and flows
+    y_contact_m, x_contact_m : where the contact starts: the most compliant column of the
+        section (the centre line for a symmetric ceiling) at the outlet ``x = d`` [m]
+    lift_off_Pa_per_N_m3 : how much more inlet pressure a closed channel holds per N/m^3 of
+        extra body force [Pa / (N/m^3)] (the lift-off pressure is linear in f)
+    field, field_unit : the control value giving ``body_force_N_m3`` (None without a map)
+    """
+    inlet_pressure_Pa: float
+    outlet_pressure_Pa: float
+    body_force_N_m3: float
+    body_force_first_contact_N_m3: float
+    y_contact_m: float
+    x_contact_m: float
+    lift_off_Pa_per_N_m3: float
+    field: float | None = None
+    field_unit: str = ""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def closure(ceiling: CeilingModel, length_m: float, *, pressure_drop_Pa: float = 0.0,
+            outlet_pressure_Pa: float = 0.0,
+            body_force_of_field: Callable[[float], float] | None = None,
+            field_range: tuple[float, float] | None = None,
+            field_unit: str = "T") -> ClosureResult:
+    """The body force (and field) at which the channel shuts against ``pressure_drop_Pa``.
+
+    In the gap model ``h_j = b - f d_j + p u_j`` (columns j) a section conducts nothing once a
+    column touches the glass, and it re-opens when the local pressure exceeds its lift-off
+    pressure ``max_j (f d_j - b) / u_j`` (:meth:`CeilingModel.opening_pressure_Pa`). With no
+    flow the pressure upstream of a contact is the inlet's, so the channel holds
+    ``p_in = p_out + pressure_drop_Pa`` exactly when some column is shut at ``p_in``::
+
+        f_close(p_in) = min_j (b + p_in u_j) / d_j
+
+    (the first contact, ``pressure_drop_Pa = 0``, is ``f_close(p_out)``, at the outlet where the
+    pressure is lowest). For a clamped plate strip ``d_j = c u_j`` and this is
+    ``384 D b / (c a^4) + p_in / c``: the body force per area ``f c`` must carry the liquid's
+    pressure and bend the plate by ``b`` at its centre. With an imposed flow rate (a syringe
+    pump) the channel never shuts in this model: the inlet pressure rises to the lift-off
+    pressure, ``lift_off_Pa_per_N_m3`` per N/m^3.
+    """
+    check_positive("length_m", length_m, "m")
+    dp = check_positive("pressure_drop_Pa", pressure_drop_Pa, "Pa", allow_zero=True)
+    p_out = float(check_finite("outlet_pressure_Pa", outlet_pressure_Pa, "Pa"))
+    d = np.asarray(ceiling.down_per_force_m4_N, dtype=float)
+    u = np.asarray(ceiling.up_per_pressure_m_Pa, dtype=float)
+    ok = d > 0
+    if not np.any(ok):
+        raise InputError("the ceiling model does not respond to the body force")
+
+    def f_close(p):
+        h = ceiling.b_m + p * u[ok]
+        if np.any(h <= 0):
+            raise InputError(f"the outlet pressure {p:g} Pa already shuts the channel")
+        r = h / d[ok]
+        return float(r.min()), int(np.flatnonzero(ok)[np.argmin(r)])
+
+    f_first, j = f_close(p_out)
+    f_need, k = f_close(p_out + dp)
+    field_value = None
+    if body_force_of_field is not None:
+        if field_range is None:
+            raise InputError("field_range is required with body_force_of_field")
+        field_value = _invert_field(body_force_of_field, f_need, field_range, field_unit, 0.0)
+    return ClosureResult(p_out + dp, p_out, f_need, f_first, float(ceiling.y_m[k]),
+                         float(length_m), float(d[k] / u[k]) if u[k] > 0 else math.inf,
+                         field_value, field_unit if field_value is not None else "")
 
 
 def _invert_field(force_of, f_need, field_range, unit, target):
