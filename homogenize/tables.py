@@ -875,19 +875,7 @@ class Table:
         default zz), ``norm`` (Euclidean norm of a vector); ignored for scalars.
         """
         q = self.resolve_quantity(quantity)
-        v = self.values[q]
-        shape = v.shape[2:]
-        if not shape:
-            return v
-        if component in (None, ""):
-            component = "z" * len(shape)
-        if component == "norm" and len(shape) == 1:
-            return np.linalg.norm(v, axis=-1)
-        if len(component) != len(shape) or any(c not in _COMPONENTS for c in component):
-            allowed = "x, y, z, norm" if len(shape) == 1 else "xx, xy, ..., zz"
-            raise InputError(f"component {component!r} of {q}: allowed {allowed}")
-        idx = tuple(_COMPONENTS.index(c) for c in component)
-        return v[(slice(None), slice(None)) + idx]
+        return _component(self.values[q], 2, component, q)
 
     def component_disc_err(self, quantity: str, component: str | None = None):
         """(P,) discretization error of one scalar component of ``quantity``'s mean (None when
@@ -895,16 +883,7 @@ class Table:
         q = self.resolve_quantity(quantity)
         if q not in self.disc_err:
             return None
-        e = self.disc_err[q]
-        shape = e.shape[1:]
-        if not shape:
-            return e
-        if component in (None, ""):
-            component = "z" * len(shape)
-        if component == "norm" and len(shape) == 1:
-            return np.linalg.norm(e, axis=-1)
-        idx = tuple(_COMPONENTS.index(c) for c in component)
-        return e[(slice(None),) + idx]
+        return _component(self.disc_err[q], 1, component, q)
 
     def select(self, spec) -> int:
         """Index of the grid point given as an integer or ``axis=value,axis=value``."""
@@ -935,6 +914,24 @@ class Table:
         if not 0 <= i < len(self.points):
             raise InputError(f"point index {i} out of range [0, {len(self.points) - 1}]")
         return i
+
+
+def _component(v: np.ndarray, lead: int, component: str | None, q: str) -> np.ndarray:
+    """One scalar component of an array whose first ``lead`` axes are not components:
+    ``x``/``y``/``z`` (vectors, default z), ``xx``..``zz`` (tensors, default zz), ``norm`` (the
+    Euclidean norm of a vector); scalars are returned as they are."""
+    shape = v.shape[lead:]
+    if not shape:
+        return v
+    if component in (None, ""):
+        component = "z" * len(shape)
+    if component == "norm" and len(shape) == 1:
+        return np.linalg.norm(v, axis=-1)
+    if len(component) != len(shape) or any(c not in _COMPONENTS for c in component):
+        allowed = "x, y, z, norm" if len(shape) == 1 else "xx, xy, ..., zz"
+        raise InputError(f"component {component!r} of {q}: allowed {allowed}")
+    idx = tuple(_COMPONENTS.index(c) for c in component)
+    return v[(slice(None),) * lead + idx]
 
 
 def _same(grid_value, text: str) -> bool:

@@ -413,6 +413,38 @@ def _length(opt: str, hi: float = 10.0):
     return float_in(opt, 0.0, hi, "m", lo_open=True)
 
 
+def _magnet_options(g) -> None:
+    """The field source of `beam` and `export` (magpylib; homogenize.macro.magnets)."""
+    g.add_argument("--magnet", choices=("cuboid", "cylinder", "coil"), default=None,
+                   help="field source (default: none, the uniform --body-force-N-m3)")
+    g.add_argument("--magnet-size", type=_length("--magnet-size"), nargs="+", default=None,
+                   metavar="M",
+                   help="cuboid: A B C edges; cylinder: DIAMETER HEIGHT; coil: RADIUS LENGTH [m]")
+    g.add_argument("--magnet-position", type=float_in("--magnet-position", -10.0, 10.0, "m"),
+                   nargs=3, default=None,
+                   metavar=("X", "Y", "Z"), help="centre of the source in the strip frame [m]")
+    g.add_argument("--magnet-direction", type=float_in("--magnet-direction", -1e6, 1e6), nargs=3,
+                   default=(0.0, 0.0, 1.0),
+                   metavar=("X", "Y", "Z"), help="magnetization direction of a permanent magnet")
+    g.add_argument("--magnet-axis", type=float_in("--magnet-axis", -1e6, 1e6), nargs=3,
+                   default=(0.0, 0.0, 1.0),
+                   metavar=("X", "Y", "Z"), help="axis of a cylinder or coil (cuboid: its C edge)")
+    g.add_argument("--remanence-T", dest="remanence_T", type=float_in("--remanence-T", 0.0, 3.0,
+                                                                       "T", lo_open=True),
+                   default=None,
+                   help="remanent polarization B_r of a permanent magnet [T] (NdFeB ~1.2-1.4)")
+    g.add_argument("--current-A", dest="current_A", type=float_in("--current-A", -1e5, 1e5, "A"),
+                   default=None,
+                   help="coil current [A] (the seed's electromagnet: 1.5 A)")
+    g.add_argument("--turns", type=int_in("--turns", 1, 100000), default=None,
+                   help="coil turns")
+    g.add_argument("--demag-factor", dest="demag_factor",
+                   type=float_in("--demag-factor", 0.0, 1.0), default=None,
+                   help="specimen demagnetizing factor for the field direction (default: "
+                        "Aharoni's prism factor of the strip through its thickness, 0.771 for "
+                        "19.4 x 5 x 1 mm)")
+
+
 #: memory of the FEM per degree of freedom [bytes]: measured peak RSS of `mapsim beam --model
 #: fem` at nz = 2 and 4 (P2, direct solver) is 17-24 kB/DOF above the interpreter; 20 kB keeps
 #: the estimate on the safe side for the AMG path too
@@ -565,31 +597,7 @@ def register(sub, formatter) -> None:
         "pull-in (mapsim beam --gap-m takes the field on the deformed strip). M_eff(H) from "
         "--table at --phi (interpolated, never extrapolated) or demagnetization-limited soft "
         "spheres (--particle-material); the magnet options as in mapsim beam.")
-    g.add_argument("--magnet", choices=("cuboid", "cylinder", "coil"), default=None,
-                   help="field source (default: none, the uniform --body-force-N-m3)")
-    g.add_argument("--magnet-size", type=_length("--magnet-size"), nargs="+", default=None,
-                   metavar="M",
-                   help="cuboid: A B C edges; cylinder: DIAMETER HEIGHT; coil: RADIUS LENGTH [m]")
-    g.add_argument("--magnet-position", type=float_in("--magnet-position", -10.0, 10.0, "m"),
-                   nargs=3, default=None,
-                   metavar=("X", "Y", "Z"), help="centre of the source in the strip frame [m]")
-    g.add_argument("--magnet-direction", type=float_in("--magnet-direction", -1e6, 1e6), nargs=3,
-                   default=(0.0, 0.0, 1.0),
-                   metavar=("X", "Y", "Z"), help="magnetization direction of a permanent magnet")
-    g.add_argument("--magnet-axis", type=float_in("--magnet-axis", -1e6, 1e6), nargs=3,
-                   default=(0.0, 0.0, 1.0),
-                   metavar=("X", "Y", "Z"), help="axis of a cylinder or coil (cuboid: its C edge)")
-    g.add_argument("--remanence-T", dest="remanence_T", type=float_in("--remanence-T", 0.0, 3.0,
-                                                                       "T", lo_open=True),
-                   default=None, help="remanent polarization B_r of a permanent magnet [T]")
-    g.add_argument("--current-A", dest="current_A", type=float_in("--current-A", -1e5, 1e5, "A"),
-                   default=None, help="coil current [A]")
-    g.add_argument("--turns", type=int_in("--turns", 1, 100000), default=None,
-                   help="coil turns")
-    g.add_argument("--demag-factor", dest="demag_factor",
-                   type=float_in("--demag-factor", 0.0, 1.0), default=None,
-                   help="specimen demagnetizing factor for the field direction (default: "
-                        "Aharoni's prism factor of the strip through its thickness)")
+    _magnet_options(g)
     add_export_table_options(p)
     add_material_options(p, what="--matrix-material fills --E-Pa, --nu, --density-kg-m3 not "
                                  "given (the matrix alone: give the composite's numbers for "
@@ -642,34 +650,7 @@ def register(sub, formatter) -> None:
         "[0, t], clamp at x = 0), H_in = H_a - N M with the strip's demagnetizing factor N. "
         "M_eff(H) comes from --table at --phi (interpolated along B_T, never extrapolated) or, "
         "without a table, from demagnetization-limited soft spheres.")
-    g.add_argument("--magnet", choices=("cuboid", "cylinder", "coil"), default=None,
-                   help="field source (default: none, uniform --body-force-N-m3)")
-    g.add_argument("--magnet-size", type=_length("--magnet-size"), nargs="+", default=None,
-                   metavar="M",
-                   help="cuboid: A B C edges; cylinder: DIAMETER HEIGHT; coil: RADIUS LENGTH [m]")
-    g.add_argument("--magnet-position", type=float_in("--magnet-position", -10.0, 10.0, "m"),
-                   nargs=3, default=None,
-                   metavar=("X", "Y", "Z"), help="centre of the source in the strip frame [m]")
-    g.add_argument("--magnet-direction", type=float_in("--magnet-direction", -1e6, 1e6), nargs=3,
-                   default=(0.0, 0.0, 1.0),
-                   metavar=("X", "Y", "Z"), help="magnetization direction of a permanent magnet")
-    g.add_argument("--magnet-axis", type=float_in("--magnet-axis", -1e6, 1e6), nargs=3,
-                   default=(0.0, 0.0, 1.0),
-                   metavar=("X", "Y", "Z"), help="axis of a cylinder or coil (cuboid: its C edge)")
-    g.add_argument("--remanence-T", dest="remanence_T", type=float_in("--remanence-T", 0.0, 3.0,
-                                                                       "T", lo_open=True),
-                   default=None,
-                   help="remanent polarization B_r of a permanent magnet [T] (NdFeB ~1.2-1.4)")
-    g.add_argument("--current-A", dest="current_A", type=float_in("--current-A", -1e5, 1e5, "A"),
-                   default=None,
-                   help="coil current [A] (the seed's electromagnet: 1.5 A)")
-    g.add_argument("--turns", type=int_in("--turns", 1, 100000), default=None,
-                   help="coil turns")
-    g.add_argument("--demag-factor", dest="demag_factor",
-                   type=float_in("--demag-factor", 0.0, 1.0), default=None,
-                   help="specimen demagnetizing factor for the field direction (default: "
-                        "Aharoni's prism factor of the strip through its thickness, 0.771 for "
-                        "19.4 x 5 x 1 mm)")
+    _magnet_options(g)
     g.add_argument("--stations", type=int_in("--stations", 3, 2001), default=101,
                    help="stations along the strip where the field is sampled")
     g.add_argument("--gap-m", dest="gap_m", type=float_in("--gap-m", 0.0, 1.0, "m"),
