@@ -87,8 +87,11 @@ def _export_magnet(args, geometry):
 
 
 def _export_run(args) -> int:
-    """``export``: a magnet deck takes its law from --table itself; the rest as before."""
-    _fill_matrix(args)
+    """``export``: a magnet deck takes its law from --table itself; the rest as before. Without
+    --table the --matrix-material fills E, nu and density not given; with it the table's E_eff,
+    nu_eff and the mixture density come first (the matrix's where the table has none)."""
+    if not getattr(args, "table", None) or getattr(args, "magnet", None) is not None:
+        _fill_matrix(args)         # (a magnet deck takes only M_eff(H) from the table)
     if getattr(args, "magnet", None) is None:
         return wrap_export(_export)(args)
     if args.body_force_N_m3 is not None:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from micro._io import manifest, write_json
 from micro._validate import InputError
-from micro.materials import FE, PDMS
+from micro.materials import FE, PDMS, matrix_preset
 
 from homogenize.cli._common import (config_of, float_in, int_in, one_line_errors, parse_at,
                                     scheduler_address, write_snippet)
@@ -399,9 +399,12 @@ def export_from_table(args) -> int:
         raise InputError(f"--deck {args.deck} is not written from --table (only the material "
                          f"snippet is); give either --table or --deck, not both")
     others = parse_at(args.table_at)
+    matrix = getattr(args, "matrix_material", None)
     mat = effective_material_from_table(read_table(args.table), args.phi, args.B_T,
                                         args.gradB_T_per_m, other_axes=others, E_Pa=args.E_Pa,
-                                        nu=args.nu, density_kg_m3=args.density_kg_m3)
+                                        nu=args.nu, density_kg_m3=args.density_kg_m3,
+                                        matrix=None if matrix in (None, "seed-paper")
+                                        else matrix_preset(matrix))
     f = mat.force
     force = {"mean": f.mean, "low": f.ci_low, "high": f.ci_high}[args.bound]
     if force < 0:

@@ -111,13 +111,17 @@ class EffectiveMaterial:
 def effective_material_from_table(table, phi: float, B_T: float, gradB_T_per_m: float, *,
                                   other_axes: dict | None = None, E_Pa: float | None = None,
                                   E_from_table: bool = True, nu: float | None = None,
-                                  density_kg_m3: float | None = None) -> EffectiveMaterial:
+                                  density_kg_m3: float | None = None,
+                                  matrix=None) -> EffectiveMaterial:
     """Interpolate the effective material of a batch table at (phi, B, gradB).
 
     The body force comes with its interval. ``E_Pa`` given wins; else the table's ``E_eff`` if
-    it holds FEM results and ``E_from_table``; else the PDMS value. ``nu``: given, else the
-    table's ``nu_eff``, else PDMS. The density defaults to the mixture of PDMS and Fe at phi.
+    it holds FEM results and ``E_from_table``; else the matrix's. ``nu``: given, else the
+    table's ``nu_eff``, else the matrix's. The density defaults to the mixture of the matrix and
+    Fe at phi. ``matrix``: anything with ``E_Pa``, ``nu``, ``density_kg_m3`` (e.g. a
+    :class:`micro.materials.MatrixPreset`; default the seed's PDMS).
     """
+    m = PDMS if matrix is None else matrix
     if not isinstance(table, Table):
         table = read_table(table)
     others = dict(other_axes or {})
@@ -129,7 +133,7 @@ def effective_material_from_table(table, phi: float, B_T: float, gradB_T_per_m: 
     elif E_est is not None:
         E, src = E_est.mean, "table"
     else:
-        E, src = PDMS.E_Pa, "PDMS"
+        E, src = m.E_Pa, "PDMS" if matrix is None else "matrix"
     if nu is None:
         if "nu_eff" in table.values:
             coords = {"phi": phi, **mech}
@@ -138,8 +142,8 @@ def effective_material_from_table(table, phi: float, B_T: float, gradB_T_per_m: 
                     coords[a] = v
             nu = interpolate(table, "nu_eff", **coords).mean
         else:
-            nu = PDMS.nu
-    rho = density_kg_m3 if density_kg_m3 is not None else mixture_density_kg_m3(phi, PDMS, FE)
+            nu = m.nu
+    rho = density_kg_m3 if density_kg_m3 is not None else mixture_density_kg_m3(phi, m, FE)
     return EffectiveMaterial(force, E, float(nu), float(rho), E_est, src)
 
 

@@ -289,6 +289,14 @@ def test_export_from_table(table, tmp_path, capsys):
         # mixture density (1 - phi) 1210 + phi 7870 kg/m^3; PDMS E, nu (no FEM in the table)
         assert np.isclose(spec["density_kg_m3"], 0.965 * 1210 + 0.035 * 7870)
         assert spec["E_Pa"] == 2e6 and spec["nu"] == 0.45
+    # a matrix preset: its E and nu where the table has no FEM, the mixture with its density
+    out = tmp_path / "sylgard.inp"
+    assert main(["export", "--to", "abaqus", "--table", str(table), "--phi", "0.035",
+                 "--B", "0.3", "--gradB", "1.78", "--at", "arrangement=chains",
+                 "--matrix-material", "sylgard184-10to1", "--out", str(out)]) == 0
+    spec = parse_abaqus(out.read_text())
+    assert np.isclose(spec["density_kg_m3"], 0.965 * 1030 + 0.035 * 7870)
+    assert spec["E_Pa"] == 2.0e6 and spec["nu"] == 0.49
     capsys.readouterr()
     assert main(["export", "--to", "elmer", "--E-Pa", "2e6", "--nu", "0.45", "--out", "-"]) == 2
     assert "--body-force-N-m3 is required" in capsys.readouterr().err
