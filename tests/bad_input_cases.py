@@ -1162,3 +1162,20 @@ def main(argv=None) -> int:
 if __name__ == "__main__":
     sys.path.insert(0, str(ROOT))
     raise SystemExit(main())
+
+# mapsim beam --gap-m G --follower-fem: the 3D neo-Hookean FEM with the field on the deformed
+# body (issue 35 item 1)
+_BEAM_GAP = ("beam", "--magnet", "cylinder", "--magnet-size", "10e-3", "10e-3", "--remanence-T",
+             "1.3")
+CASES += [
+    C("beam", "--follower-fem", words=("--follower-fem", "--gap-m")),
+    C(*_BEAM_GAP, "--gap-sweep-m", "0.02:0.01:3", "--follower-fem",
+      words=("--follower-fem", "--gap-m")),
+    C(*_BEAM_GAP, "--gap-m", "8e-3", "--follower-fem", "--png", "p.png",
+      words=("--png", "--follower-fem")),
+    C(*_BEAM_GAP[:-2], "--gap-m", "8e-3", "--follower-fem", words=("--magnet cylinder",
+                                                                    "--remanence-T")),
+    C("beam", "--magnet", "coil", "--magnet-size", "1e-2", "1e-2", "--current-A", "1",
+      "--turns", "10", "--gap-m", "8e-3", "--follower-fem", words=("--gap-m", "permanent")),
+    C(*_BEAM_GAP, "--gap-m=-1e-3", "--follower-fem", words=("--gap-m",)),
+]

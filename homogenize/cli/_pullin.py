@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from homogenize.macro.effective import magnetization_from_table
+from homogenize.macro.follower_fem import FollowerFEM, follower_fem_at_gap
 from homogenize.macro.magnets import PermanentMagnet
 from homogenize.macro.pullin import pullin_sweep, place_magnet
 from homogenize.tables import read_table
@@ -88,6 +89,8 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
     """The follower-field elastica against the gap (module docstring); exit 0 on success."""
     if args.gap_m is not None and args.gap_sweep_m is not None:
         raise InputError("give --gap-m or --gap-sweep-m, not both")
+    if getattr(args, "follower_fem", False):
+        return follower_fem_gap(args, strip, mat, M_of_H, phi, law_name, N)
     gaps = (np.array([args.gap_m]) if args.gap_m is not None
             else parse_gap_sweep(args.gap_sweep_m))
     magnet = _magnet_at(args, strip, float(gaps[0]))
@@ -141,6 +144,46 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
         write_json(args.json, json_ready(out))
     if getattr(args, "png", None):
         _plot(args.png, r, lo_hi)
+    return 0
+
+
+def follower_fem_gap(args, strip, mat, M_of_H, phi, law_name, N) -> int:
+    """``--gap-m G --follower-fem``: the 3D neo-Hookean FEM with the field on the deformed
+    body (:func:`homogenize.macro.follower_fem.follower_fem_at_gap`), continued from a far gap
+    to G: its tip deflection, or (G below its pull-in bracket) that the strip has snapped."""
+    if args.gap_m is None:
+        raise InputError("--follower-fem takes one gap, --gap-m G (not --gap-sweep-m)")
+    if getattr(args, "png", None):
+        raise InputError("--png draws the elastica's path (--gap-sweep-m); not with "
+                         "--follower-fem")
+    g = float(args.gap_m)
+    magnet = _magnet_at(args, strip, g)
+    model = FollowerFEM(strip, ElasticMaterial(mat.E_Pa, mat.nu, mat.density_kg_m3), magnet,
+                        M_of_H, nz=args.nz if args.nz is not None else 2, order=args.order,
+                        demag_factor=N, gravity_m_s2=args.gravity_m_s2)
+    r = follower_fem_at_gap(model, g)
+    print(f"magnet: {args.magnet} {tuple(args.magnet_size)} m, B_r {args.remanence_T:g} T, axis "
+          f"at x = {magnet.position_m[0]:.4g} m, y = {magnet.position_m[1]:.4g} m; M_eff(H) from "
+          f"{law_name}, phi = {phi:g}; strip demagnetizing factor N = {N:.4f}; field on the "
+          f"DEFORMED body (follower FEM: 3D neo-Hookean, P{r.order}, {r.divisions} hexahedra of "
+          f"6 tetrahedra{' on the half width' if model.half else ''}, {r.n_dof} dofs), "
+          f"continued from the gap {r.far_gap_m:.4g} m")
+    if r.converged:
+        print(f"gap {g:.4g} m: tip deflection {r.tip_deflection_m:.6g} m")
+    else:
+        lo, hi = r.pull_in_bracket_m
+        print(f"gap {g:.4g} m: below the FEM's pull-in bracket [{lo:.5g}, {hi:.5g}] m (no "
+              f"equilibrium below {lo:.5g} m, tip deflection {r.pull_in_tip_deflection_m:.4g} m "
+              f"at {hi:.5g} m): the strip has snapped to the magnet (no contact in the FEM: "
+              f"--gap-m without --follower-fem models it)")
+    if args.json:
+        write_json(args.json, json_ready({
+            "strip": vars(strip), "gap_definition": GAP_HELP, "magnet": {
+                "kind": args.magnet, "size_m": list(args.magnet_size),
+                "remanence_T": args.remanence_T, "axis_x_m": magnet.position_m[0],
+                "axis_y_m": magnet.position_m[1]},
+            "magnetization": law_name, "phi": phi, "demag_factor": N,
+            "follower_fem": r.to_dict(), "manifest": manifest(config_of(args), None)}))
     return 0
 
 

@@ -668,6 +668,11 @@ def register(sub, formatter) -> None:
                         "M_eff interval")
     g.add_argument("--png", default=None, help="with --gap-m/--gap-sweep-m: tip deflection "
                    "against gap, stable/unstable/contact branches, pull-in and release marked")
+    g.add_argument("--follower-fem", dest="follower_fem", action="store_true",
+                   help="with --gap-m: the 3D neo-Hookean FEM (--order, --nz layers, default 2) "
+                        "with the field on the DEFORMED body, continued from a far gap: its tip "
+                        "deflection, or, below its pull-in bracket, that the strip has snapped "
+                        "(no contact in the FEM)")
     add_material_options(p, what="--matrix-material fills --E-Pa, --nu, --density-kg-m3 (the "
                                  "matrix's: with --table the force and, with --E-from-table, E "
                                  "come from the table); --particle-material sets the saturation "
@@ -680,7 +685,7 @@ def register(sub, formatter) -> None:
                                      "magnet_size", "magnet_position", "magnet_direction",
                                      "magnet_axis", "remanence_T", "current_A", "turns",
                                      "demag_factor", "stations", "gap_m", "gap_sweep_m",
-                                     "png")}})
+                                     "png")}, "follower_fem": "gap_m"})
 
     p = sub.add_parser(
         "channel", formatter_class=formatter, help="ceiling deflection of a microchannel",
