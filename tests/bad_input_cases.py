@@ -1179,3 +1179,7 @@ CASES += [
       "--turns", "10", "--gap-m", "8e-3", "--follower-fem", words=("--gap-m", "permanent")),
     C(*_BEAM_GAP, "--gap-m=-1e-3", "--follower-fem", words=("--gap-m",)),
 ]
+CASES += [
+    C(*_BEAM_GAP, "--gap-m", "8e-3", "--follower-fem", "--nz", "1", "--json", "f.json", code=0,
+      creates=("f.json",), note="the follower FEM at one gap: its tip deflection"),
+]
