@@ -624,6 +624,26 @@ def _staggered_step(body, law, solid, kappa, field_solve, mech_solve, length_cha
     return sol, res, it, newton, hist
 
 
+def _check_loop_inputs(model: str, kappa, tol, relaxation):
+    """``(kappa(|M|) or None, tol, relaxation)`` of the field-mechanics loop, checked: the
+    continuum model has no microstructural stress; the others need kappa (a number or a
+    function of |M| [A/m])."""
+    if model == "continuum":
+        kappa = None
+    elif kappa is None:
+        raise InputError(f"model {model!r} needs kappa (the microstructural stress "
+                         "coefficient): experiments.tables.affine_kappa(phi, Ms) for 'affine', "
+                         "one from relax tables for 'relaxed'")
+    elif not callable(kappa):
+        k0 = float(kappa)
+        kappa = lambda M_abs, k0=k0: np.full(np.shape(M_abs), k0)  # noqa: E731
+    tol = check_positive("tol", tol)
+    relaxation = float(relaxation)
+    if not 0.0 < relaxation <= 1.0:
+        raise InputError(f"relaxation must lie in (0, 1], got {relaxation}")
+    return kappa, tol, relaxation
+
+
 def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied_T, *,
                    model: str = "continuum", kappa=None, tol: float = 1e-4,
                    max_stagger: int = 30, relaxation: float = 1.0,
@@ -670,19 +690,7 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
     check_choice("model", model, MODELS)
     B = _check_steps(B_applied_T)
     ms.check_law(law)
-    if model == "continuum":
-        kappa = None
-    elif kappa is None:
-        raise InputError(f"model {model!r} needs kappa (the microstructural stress "
-                         "coefficient): experiments.tables.affine_kappa(phi, Ms) for 'affine', one from relax "
-                         "tables for 'relaxed'")
-    elif not callable(kappa):
-        k0 = float(kappa)
-        kappa = lambda M_abs, k0=k0: np.full(np.shape(M_abs), k0)  # noqa: E731
-    tol = check_positive("tol", tol)
-    relaxation = float(relaxation)
-    if not 0.0 < relaxation <= 1.0:
-        raise InputError(f"relaxation must lie in (0, 1], got {relaxation}")
+    kappa, tol, relaxation = _check_loop_inputs(model, kappa, tol, relaxation)
     body = specimen.mechanics_body()
     is3 = specimen.geometry == "3d"
     field_rtol = _FIELD_RTOL_3D
@@ -894,18 +902,7 @@ def solve_specimen_in_field(specimen: Specimen, law, solid: fs.NeoHookeanSolid, 
     if len(dist) != n or len(gaps) != n:
         raise InputError("source_distance_m and gaps_m need one value per field step")
     ms.check_law(law)
-    if model == "continuum":
-        kappa = None
-    elif kappa is None:
-        raise InputError(f"model {model!r} needs kappa (the microstructural stress "
-                         "coefficient)")
-    elif not callable(kappa):
-        k0 = float(kappa)
-        kappa = lambda M_abs, k0=k0: np.full(np.shape(M_abs), k0)  # noqa: E731
-    tol = check_positive("tol", tol)
-    relaxation = float(relaxation)
-    if not 0.0 < relaxation <= 1.0:
-        raise InputError(f"relaxation must lie in (0, 1], got {relaxation}")
+    kappa, tol, relaxation = _check_loop_inputs(model, kappa, tol, relaxation)
     body = _supported_cylinder_body(specimen, support)
     plate = support == "plate"
     L0 = specimen.length_m
