@@ -233,3 +233,22 @@ def test_check_option_needs():
                            needs)
     with pytest.raises(InputError, match="--vec has no effect without --kind c"):
         check_option_needs(p.parse_args(["--vec", "1", "0", "0"]), p, needs)
+
+
+@pytest.mark.parametrize("text, want", [("0.5", [0.5]), ("0,0.1,0.5", [0, 0.1, 0.5]),
+                                        ("0:1:3", [0, 0.5, 1.0]), ("2e-3:1e-3:2", [2e-3, 1e-3]),
+                                        (" -1e-3 ", [-1e-3])])
+def test_one_syntax_for_a_list_of_values(text, want):
+    """relax --B, specimen --B/--gap-m and beam --gap-sweep-m read lists the same way."""
+    from homogenize.cli._common import parse_values
+    assert np.allclose(parse_values(text, "--x", "m"), want, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("text, words", [("0:1:x", "START:STOP:COUNT"), ("a,b", "START:STOP"),
+                                         ("0:1:0", "COUNT must be in [1, 1000]"),
+                                         ("0:1:2:3", "START:STOP:COUNT")])
+def test_list_syntax_errors_name_the_option(text, words):
+    from homogenize.cli._common import parse_values
+    with pytest.raises(InputError) as exc:
+        parse_values(text, "--x", "m")
+    assert str(exc.value).startswith("--x") and words in str(exc.value)

@@ -11,6 +11,8 @@ import stat
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from micro._io import atomic_write_text
 from micro._validate import InputError, check_regular_file
 
@@ -19,7 +21,8 @@ from micro._io import json_ready  # noqa: F401  (re-exported for the commands)
 
 __all__ = ["Formatter", "Parser", "NEGATIVE_NUMBER", "one_line_errors", "int_in", "float_in", "json_ready",
            "scheduler_address", "check_outputs", "check_output_dir", "check_input_file",
-           "machine_memory_bytes", "check_memory", "parse_at", "write_snippet", "config_of",
+           "machine_memory_bytes", "check_memory", "parse_at", "parse_values", "write_snippet",
+           "config_of",
            "add_material_options", "fill_from_preset"]
 
 
@@ -262,6 +265,31 @@ def check_output_dir(opt: str, path, inputs=(), writes=None, other_outputs=()) -
         anc = anc.parent
     if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
         raise InputError(f"{opt} {p}: directory {anc} is not writable")
+
+
+def parse_values(text: str, opt: str, unit: str, *, max_count: int = 1000,
+                 min_count: int = 1) -> np.ndarray:
+    """A list of values in the one syntax of every mapsim option that takes several: one value,
+    comma-separated values, or ``START:STOP:COUNT`` (``COUNT`` evenly spaced values from START
+    to STOP, both included). Only the syntax and the count are checked here; each option checks
+    its range and order itself."""
+    text = str(text).strip()
+    try:
+        if ":" in text:
+            a, b, n = text.split(":")
+            a, b, n = float(a), float(b), int(n)
+        else:
+            vals = np.array([float(v) for v in text.split(",")])
+    except ValueError:
+        raise InputError(f"{opt} must be one value, comma-separated values or START:STOP:COUNT "
+                         f"[{unit}], got {text!r}") from None
+    if ":" in text:
+        if not min_count <= n <= max_count:
+            raise InputError(f"{opt}: COUNT must be in [{min_count}, {max_count}], got {n}")
+        vals = np.linspace(a, b, n)
+    if not min_count <= vals.size <= max_count:
+        raise InputError(f"{opt}: {min_count} to {max_count} values, got {vals.size}")
+    return vals
 
 
 def parse_at(text: str | None) -> dict:

@@ -16,7 +16,7 @@ from micro._io import atomic_path, manifest, write_json
 from micro._validate import InputError
 from micro.materials import ElasticMaterial
 
-from homogenize.cli._common import config_of, json_ready, parse_at
+from homogenize.cli._common import config_of, json_ready, parse_at, parse_values
 
 __all__ = ["gap_sweep", "parse_gap_sweep", "permanent_magnet", "GAP_HELP"]
 
@@ -30,20 +30,15 @@ MAX_GAPS = 200
 
 def parse_gap_sweep(text: str) -> np.ndarray:
     """``A:B:N`` -> N gaps from A to B [m] (strictly monotonic, >= 0)."""
-    parts = str(text).split(":")
-    try:
-        if len(parts) != 3:
-            raise ValueError
-        a, b, n = float(parts[0]), float(parts[1]), int(parts[2])
-    except ValueError:
+    if ":" not in str(text):
         raise InputError(f"--gap-sweep-m: expected START:STOP:COUNT [m], e.g. 0.02:0.005:16, "
-                         f"got {text!r}") from None
+                         f"got {text!r}")
+    g = parse_values(text, "--gap-sweep-m", "m", max_count=MAX_GAPS, min_count=2)
+    a, b, n = float(g[0]), float(g[-1]), g.size
     if not (math.isfinite(a) and math.isfinite(b)) or min(a, b) < 0 or a == b:
         raise InputError(f"--gap-sweep-m: START and STOP must be finite, >= 0 m and differ, got "
                          f"{text!r} (a gap below zero puts the magnet inside the strip)")
-    if not 2 <= n <= MAX_GAPS:
-        raise InputError(f"--gap-sweep-m: COUNT must be in [2, {MAX_GAPS}], got {n}")
-    return np.linspace(a, b, n)
+    return g
 
 
 def permanent_magnet(args, position_m) -> PermanentMagnet:

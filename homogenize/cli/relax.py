@@ -13,7 +13,7 @@ from micro.materials import PDMS, ElasticMaterial, matrix_preset
 from micro.rve import RVE
 
 from homogenize.cli._common import (add_material_options, config_of, fill_from_preset,
-                                    float_in, int_in)
+                                    float_in, int_in, parse_values)
 from homogenize.relax import relax
 
 _DOC = """\
@@ -52,17 +52,7 @@ results/relax/green_vs_fem.md; it grows for pairs closer than about one radius."
 
 def _steps(text: str) -> np.ndarray:
     """``"0:1.2:13"`` (start:stop:count) or ``"0,0.1,0.5"`` -> field steps [T]."""
-    try:
-        if ":" in text:
-            a, b, n = text.split(":")
-            n = int(n)
-            if n < 1:
-                raise ValueError
-            return np.linspace(float(a), float(b), n)
-        return np.array([float(v) for v in text.split(",")])
-    except ValueError:
-        raise InputError(f"--B must be START:STOP:COUNT or comma-separated values [T], got "
-                         f"{text!r}") from None
+    return parse_values(text, "--B", "T")
 
 
 def _mean_strain(text, boundary):

@@ -12,8 +12,8 @@ import numpy as np
 from micro._io import atomic_path, manifest, write_json
 from micro._validate import ConvergenceError, InputError
 
-from homogenize.cli._common import check_input_file, config_of, float_in, int_in, json_ready, \
-    parse_at
+from homogenize.cli._common import (check_input_file, config_of, float_in, int_in,
+                                    json_ready, parse_at, parse_values)
 from homogenize.experiments.tables import affine_kappa
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
@@ -116,20 +116,7 @@ _BR = float_in("--remanence-T", 0.0, 3.0, "T", lo_open=True)
 def _gaps(text: str) -> np.ndarray:
     """--gap-m (one value, START:STOP:COUNT or comma-separated) -> gaps [m], > 0, strictly
     decreasing."""
-    try:
-        if ":" in text:
-            a, b, n = text.split(":")
-            n = int(n)
-            if not 1 <= n <= MAX_GAPS:
-                raise InputError(f"--gap-m: COUNT must be in [1, {MAX_GAPS}], got {n}")
-            g = np.linspace(float(a), float(b), n)
-        else:
-            g = np.array([float(v) for v in text.split(",")])
-    except ValueError:
-        raise InputError(f"--gap-m must be one value, START:STOP:COUNT or comma-separated gaps "
-                         f"[m], got {text!r}") from None
-    if g.size > MAX_GAPS:
-        raise InputError(f"--gap-m: at most {MAX_GAPS} gaps, got {g.size}")
+    g = parse_values(text, "--gap-m", "m", max_count=MAX_GAPS)
     try:
         return check_gaps(g)
     except InputError as exc:
