@@ -532,7 +532,8 @@ def parse_study(text: str, path: str = "<study>") -> Study:
             raise InputError(f"{path}: [rve_size] target_rel_precision must be in (0, 1), "
                              f"got {prec:g}")
         quantity = r.get("quantity", "f_eff_N_m3")
-        hits = [q for q in _evaluate.QUANTITIES if q == quantity or q.startswith(quantity + "_")]
+        hits = [q for q in _evaluate.QUANTITIES if (q == quantity or q.startswith(quantity + "_"))
+                and not q.endswith(_evaluate.COARSE)]
         if quantity not in _evaluate.QUANTITIES and len(hits) != 1:
             raise InputError(f"{path}: [rve_size] quantity must be one of (or a unique prefix "
                              f"of) {', '.join(_evaluate.QUANTITIES)}; got {quantity!r}")

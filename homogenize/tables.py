@@ -863,6 +863,8 @@ class Table:
         if name in self.values:
             return name
         hits = [q for q in self.values if q.startswith(name + "_") or q == name]
+        if len(hits) > 1:       # a prefix means the quantity, not its coarse-grid companion
+            hits = [q for q in hits if not q.endswith(COARSE)]
         if len(hits) == 1:
             return hits[0]
         raise InputError(f"{self.path}: no quantity {name!r} in the table; available: "

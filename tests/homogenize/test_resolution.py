@@ -213,3 +213,11 @@ def test_batch_warns_per_grid_population_below_three_voxels_per_radius():
     relax = text.replace("n_particles = 8", 'n_particles = 8\nevaluator = "relax"').replace(
         "gradB_T_per_m = 1.0\n", "")
     assert len(resolution_warnings(parse_study(relax, "r.toml"))) == 2
+
+
+def test_a_prefix_names_the_quantity_not_its_coarse_companion(table):
+    _, out = table
+    t = read_table(out)
+    assert "E_eff_Pa_coarse" in t.values
+    assert t.resolve_quantity("E_eff") == "E_eff_Pa"
+    assert t.resolve_quantity("E_eff_Pa_coarse") == "E_eff_Pa_coarse"
