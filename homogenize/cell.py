@@ -23,7 +23,9 @@ fixed by pinning one matrix node (the loads are balanced, so the pin carries no 
   is variational in the strain and magnetic solutions (error = the product of their errors),
   so the magnetic column stops at :func:`magnetic_tol` (sqrt(tol)) unless its field is kept.
 
-Solver (``solver="fast"``): all load cases in one block (:mod:`homogenize.solvers`): lock-step CG
+Solver (``solver="auto"``, the default, picks ``"matrix-free"`` on even grids of dilute RVEs and
+``"fast"`` otherwise: :func:`_auto_solver`). ``solver="fast"``: all load cases in one block
+(:mod:`homogenize.solvers`): lock-step CG
 preconditioned by a block V-cycle on a pyamg smoothed-aggregation hierarchy (rigid-body near-nullspace, built once),
 DEFLATED by the six rigid-body modes of every stiff particle. Plain AMG-CG needs ~4x more
 iterations at Fe/PDMS contrast (1e5) than at contrast 1, because each stiff particle adds six
@@ -62,6 +64,8 @@ from .mesh import METHODS, VoxelMesh, voxelize
 from .solvers import (AMGOptions, BlockVCycle, BSROp, Deflation, SolverOptions, block_cg,
                       coupled_block_cg, grid_colours, grid_node_coordinates, rigid_body_modes,
                       smoothed_aggregation)
+from .solvers.krylov import colnorms, gram
+from .solvers.krylov import _pinv_spd as pinv_spd
 from scipy.sparse.linalg import splu
 
 __all__ = ["Material", "CellConfig", "homogenize", "CellResult", "homogenize_rve", "homogenize_mesh", "magnetic_tol", "isotropic_projection",
@@ -95,6 +99,8 @@ class CellResult:
         fraction; centre/fraction: voxels with fraction >= 0.5)
     iterations, residuals : per load case, CG iterations and final relative residual
     timings_s : seconds per stage
+    settings : the solver and its settings; ``settings["solver"]`` the one that ran,
+        ``"solver_requested"`` and ``"solver_reason"`` why (``solver="auto"``, memory fallback)
     """
 
     C_eff_Pa: np.ndarray
@@ -121,6 +127,9 @@ class CellResult:
     settings: dict
     mesh: VoxelMesh = field(repr=False)
     fields: dict = field(repr=False, default_factory=dict)
+    #: the solutions (n_dof, k) of the load cases in ``iterations`` order (``keep_solution``):
+    #: an ``initial_guess`` for a neighbouring problem
+    solution: np.ndarray | None = field(repr=False, default=None)
 
     def summary(self) -> dict:
         """JSON-ready dictionary of the scalar and tensor results (no fields, no mesh)."""
@@ -198,6 +207,9 @@ class _CellSolver:
                  options: SolverOptions | None = None):
         if solver not in SOLVERS:
             raise InputError(f"solver must be one of {SOLVERS}, got {solver!r}")
+        if solver == "auto":
+            solver = _auto_solver(mesh.n, float(mesh.fraction.mean()),
+                                  _plain_particles(mesh, _options(options)))[0]
         self.options = _options(options)
         self.mesh, self.lam, self.mu = mesh, lam, mu
         self.n, self.h = mesh.n, mesh.h_m
@@ -360,14 +372,18 @@ class _CellSolver:
                           shape=(3 * n ** 3, 6 * parts.size))
         return Z
 
-    def solve(self, F: np.ndarray, callback=None, tols=None, magnetic: bool = False):
+    def solve(self, F: np.ndarray, callback=None, tols=None, magnetic: bool = False, x0=None):
         """Solve K W = F (pinned node) for the columns of F (n_dof, k), deflated AMG-CG.
 
         ``tols``: one relative residual per column (default: the solver's ``tol`` for all).
         Returns (W, histories): zero-mean periodic fluctuations and the relative residual history
         of every column. The fast path solves all columns in one block; the reference path one
         after another. ``magnetic``: the last column is the magnetic load (its own group of the
-        block CG with ``SolverOptions.block_cg = "strains"``).
+        block CG with ``SolverOptions.block_cg = "strains"``). ``x0``: an initial guess
+        (n_dof, m), e.g. the solutions of a neighbouring problem (the previous field step of
+        :func:`homogenize.relax.relax`); the start of every column is the better (smaller
+        residual) of its own column of ``x0`` (if m = k) and the combination of all columns of
+        ``x0`` of least energy error (Galerkin, :meth:`initial_guess`); None: the usual start.
         """
         # the pinned node's rows are zeroed in F itself for the solve and restored after it (no
         # copy of the load block: one block of memory less at 128^3)
@@ -378,10 +394,12 @@ class _CellSolver:
         pinned = F[rows].copy()
         F[rows] = 0.0
         tols = [self.tol] * F.shape[1] if tols is None else list(tols)
+        X0 = None if x0 is None else self.initial_guess(F, x0)
         try:
             if self.kind == "reference":
                 cols = [block_cg(self.matvec, self.M, F[:, [c]], tol=tols[c],
-                                 maxiter=self.maxiter, deflation=self.deflation, callback=callback)
+                                 maxiter=self.maxiter, deflation=self.deflation, callback=callback,
+                                 x0=None if X0 is None else X0[:, [c]])
                         for c in range(F.shape[1])]
                 W = np.concatenate([c[0] for c in cols], axis=1)
                 hist = [c[1][0] for c in cols]
@@ -390,6 +408,8 @@ class _CellSolver:
                 self.block_cg = mode
                 kw = dict(tol=tols, maxiter=self.maxiter, deflation=self.deflation,
                           callback=callback)
+                if X0 is not None:       # (an experiment's options.krylov need not take x0)
+                    kw["x0"] = X0
                 if mode == "independent":
                     W, hist = block_cg(self.matvec, self.M, F, **kw)
                 else:
@@ -407,6 +427,28 @@ class _CellSolver:
         Wn -= Wn.mean(axis=0)     # zero-mean fluctuation (the pin only fixed the translation)
         return W, hist
 
+    def initial_guess(self, F: np.ndarray, x0) -> np.ndarray:
+        """The start of :meth:`solve` from the guess ``x0`` (n_dof, m) for the loads F (n_dof, k)
+        (pinned rows zero): ``x0`` translated so that the pinned node is at rest (translations
+        cost no energy), then per column the better of its own guess (m = k) and the Galerkin
+        combination ``x0 (x0^T K x0)^+ x0^T f``, by the residual norm. Reductions with the
+        deterministic chunked kernels (independent of the thread count)."""
+        X = np.array(x0, dtype=np.float64, order="C")
+        if X.ndim != 2 or X.shape[0] != F.shape[0]:
+            raise InputError(f"initial guess must have shape ({F.shape[0]}, m), got {X.shape}")
+        Xn = X.reshape(-1, 3, X.shape[1])
+        Xn -= Xn[self.pin].copy()
+        KX = np.ascontiguousarray(self.matvec(X))
+        G = gram(X, KX)
+        coef = np.ascontiguousarray(pinv_spd(G) @ gram(X, F))
+        X0 = np.ascontiguousarray(X @ coef)
+        R = np.ascontiguousarray(F - KX @ coef)
+        if X.shape[1] == F.shape[1]:
+            own = np.ascontiguousarray(F - KX)
+            mine = colnorms(own) < colnorms(R)
+            X0[:, mine] = X[:, mine]
+        return X0
+
     def energy_products(self, U: np.ndarray, V: np.ndarray) -> np.ndarray:
         """U^T K V with the periodic stiffness (singular: rigid translations), (k_U, k_V) [N m].
 
@@ -419,7 +461,26 @@ class _CellSolver:
         return at_rest(U).T @ self.matvec(at_rest(V))
 
 
-SOLVERS = ("fast", "reference", "matrix-free")
+SOLVERS = ("auto", "fast", "reference", "matrix-free")
+#: what ``solver="auto"`` (the default) picks on even grids of dilute RVEs: the matrix-free
+#: geometric multigrid, with as many CG iterations as "fast" there (strains 16-18 at 32^3, phi
+#: 0.01-0.05), cheaper ones and half the memory (the "cell/solver choice ..." records of
+#: results/bench/cell.json: 16^3-64^3, phi 0.01-0.3, monodisperse and lognormal radii, same
+#: RVE and tolerance; results/cell/README.md "Solver choice")
+AUTO_SOLVER = "matrix-free"
+#: ... up to this particle volume fraction of the mesh; above it "auto" picks "fast": dense
+#: stiff particles defeat the trilinear coarse grid of the geometric multigrid (strain /
+#: magnetic CG iterations, matrix-free against fast, particles of ~2.5 voxels: 24^3 phi 0.15
+#: 28 / 58 against 16 / 15, phi 0.2 45 / 126 against 35 / 36, 32^3 phi 0.3 104 / 181-200
+#: against 29-45 / 30-49; rigid particles at phi 0.1, the relaxation bench RVE at 48^3 (100
+#: particles of 6.4 voxels): 53 / 186 against 22 / 55); measured alike up to phi 0.05
+AUTO_MAX_PHI = 0.06
+#: ... and with at most this many particles unless the matrix-free solver builds particle
+#: patches for them (:func:`use_patches`: >= 200 particles or small ones): without patches
+#: its iterations grow with the number of particles (64^3, phi 0.05, particles of ~2.5 voxels:
+#: 100 lognormal 23 / 37 against 18 / 33 for "fast", 143 lognormal 55 / 130 against 39 / 40;
+#: 200 monodisperse with patches 25 / 40 against 37 / 40)
+AUTO_MAX_PLAIN_PARTICLES = 100
 #: the smoothed aggregation of ``solver="reference"``: pyamg's own hierarchy (default strength
 #: and candidate smoothing), the project's repeatable smoother, sparse LU on <= 300 unknowns
 _REFERENCE_AMG = AMGOptions(strength_theta=None, improve_candidates=True, coarse_solver="splu",
@@ -447,6 +508,13 @@ def magnetic_tol(tol: float) -> float:
     return float(min(np.sqrt(tol), 1e-2))
 
 
+def _plain_particles(mesh: VoxelMesh, options: SolverOptions) -> int:
+    """The particles the matrix-free solver would face without patches: 0 where it builds
+    them (:func:`use_patches`), else all of the mesh's."""
+    return 0 if use_patches(mesh.n_particles, mesh.radii_m / mesh.h_m, options) \
+        else int(mesh.n_particles)
+
+
 def use_patches(n_particles: int, radii_voxels, options: SolverOptions | None = None) -> bool:
     """Whether the matrix-free solver builds particle patches for an RVE of ``n_particles``
     particles of radii ``radii_voxels`` [voxels] (``options``, default
@@ -459,19 +527,66 @@ def use_patches(n_particles: int, radii_voxels, options: SolverOptions | None = 
             or float(np.mean(radii_voxels)) < o.patch_small_radius_voxels)
 
 
-def _choose_solver(solver: str, voxels: int, n_cases: int) -> str:
-    """Validate ``solver`` and refuse a grid whose memory estimate exceeds the machine (before
-    allocating). ``"fast"`` falls back to ``"matrix-free"`` when the assembled matrix does not fit
-    but the matrix-free solver does (even voxel counts)."""
+def _matfree_grid(voxels: int) -> bool:
+    """Whether the matrix-free solver's geometric multigrid runs on ``voxels`` per edge."""
+    return voxels % 2 == 0 and voxels >= 8
+
+
+def _auto_solver(voxels: int, phi: float, plain_particles: int = 0) -> tuple[str, str]:
+    """``solver="auto"``: (solver, reason) for a grid of ``voxels`` per edge whose particle
+    volume fraction is ``phi``, with ``plain_particles`` particles the matrix-free solver would
+    face without patches (0 where it builds them), before memory (:data:`AUTO_SOLVER`,
+    :data:`AUTO_MAX_PHI`, :data:`AUTO_MAX_PLAIN_PARTICLES`)."""
+    if not _matfree_grid(voxels):
+        return "fast", (f"auto: fast, voxels={voxels} is odd or below 8 (the matrix-free "
+                        f"geometric multigrid needs an even voxel count >= 8)")
+    if phi > AUTO_MAX_PHI:
+        return "fast", (f"auto: fast, particle volume fraction {phi:.3g} > {AUTO_MAX_PHI:g} "
+                        f"(dense stiff particles: the matrix-free multigrid needs many more "
+                        f"iterations, results/bench/cell.json, solver choice)")
+    if plain_particles > AUTO_MAX_PLAIN_PARTICLES:
+        return "fast", (f"auto: fast, {plain_particles} particles > {AUTO_MAX_PLAIN_PARTICLES} "
+                        f"without particle patches (the matrix-free multigrid needs many more "
+                        f"iterations, results/bench/cell.json, solver choice)")
+    return AUTO_SOLVER, (f"auto: matrix-free, even grid, particle volume fraction "
+                         f"{phi:.3g} <= {AUTO_MAX_PHI:g}, particles with patches or at most "
+                         f"{AUTO_MAX_PLAIN_PARTICLES} (measured as fast or faster than 'fast' "
+                         f"with less memory, results/bench/cell.json, solver choice)")
+
+
+def _choose_solver(solver: str, voxels: int, n_cases: int, reason: bool = False,
+                   phi: float | None = None, plain_particles: int = 0):
+    """Validate ``solver``, resolve ``"auto"`` (:func:`_auto_solver`, with the mesh's particle
+    volume fraction ``phi``) and refuse a grid whose memory estimate exceeds the machine (before
+    allocating). ``"fast"`` falls back to ``"matrix-free"`` when the assembled matrix does not
+    fit but the matrix-free solver does (even voxel counts). Returns the solver, or (solver,
+    reason) with ``reason=True``: why this one (recorded in the result's
+    ``settings["solver_reason"]``). ``"auto"`` without ``phi`` (before the mesh exists, e.g.
+    the command line's memory check) stays ``"auto"`` when both solvers fit the memory
+    (checked against the larger estimate), else becomes the one that fits."""
     if solver not in SOLVERS:
         raise InputError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    why = "requested"
+    if solver == "auto" and phi is None:
+        if not _matfree_grid(voxels):
+            solver, why = _auto_solver(voxels, 0.0)
+        else:
+            try:
+                _budget.check_cell_memory(voxels, "fast", n_cases)
+            except InputError:
+                solver, why = "matrix-free", "auto: only matrix-free fits the memory"
+            else:
+                return ("auto", "auto: resolved on the mesh") if reason else "auto"
+    if solver == "auto":
+        solver, why = _auto_solver(voxels, phi, plain_particles)
     share = _budget.MEMORY_SHARE * _budget.machine_memory_bytes()
-    if (solver == "fast" and voxels % 2 == 0 and voxels >= 8
+    if (solver == "fast" and _matfree_grid(voxels)
             and _budget.cell_memory_bytes(voxels, "fast", n_cases) > share
             and _budget.cell_memory_bytes(voxels, "matrix-free", n_cases) <= share):
-        solver = "matrix-free"
+        solver, why = "matrix-free", (f"{why}; the assembled matrix of 'fast' does not fit in "
+                                      f"memory, matrix-free does")
     _budget.check_cell_memory(voxels, solver, n_cases)
-    return solver
+    return (solver, why) if reason else solver
 
 
 def _material_fields(mesh: VoxelMesh, matrix: Material, particle: Material):
@@ -556,7 +671,7 @@ def _composite_fields(mesh: VoxelMesh, matrix: Material, particle: Material):
 
 def cell_solver(mesh: VoxelMesh, *, matrix: Material = elastic(PDMS),
                 particle: Material = elastic(FE), tol: float = 1e-6, maxiter: int = 2000,
-                solver: str = "fast", options: SolverOptions | None = None):
+                solver: str = "auto", options: SolverOptions | None = None):
     """The solver :func:`homogenize_mesh` builds for ``mesh`` (its phases' fields, the composite
     voxels' laminates, the stiff particles' rigid modes deflated), for experiments on the solver
     itself: ``.matvec`` is the stiffness operator, ``.M`` the preconditioner (the matrix-free
@@ -599,21 +714,33 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                     matrix: Material = elastic(PDMS), particle: Material = elastic(FE),
                     rigid: bool = False, deflate: bool = True, tol: float = 1e-6,
                     maxiter: int = 2000, keep_fields: bool = False, cases=CASES,
-                    progress: bool = False, solver: str = "fast",
+                    progress: bool = False, solver: str = "auto",
                     tol_magnetic: float | None = None,
-                    options: SolverOptions | None = None) -> CellResult:
+                    options: SolverOptions | None = None, initial_guess=None,
+                    keep_solution: bool = False) -> CellResult:
     """Solve the periodic cell problems on a prepared voxel mesh. See :func:`homogenize_rve`.
 
     ``tol_magnetic``: relative residual of the magnetic column, in (0, 1e-2]; default
     :func:`magnetic_tol` of ``tol`` where only its variational stress is used (all six strain
-    cases, no fields kept), else ``tol``."""
+    cases, no fields kept), else ``tol``.
+
+    ``initial_guess``: (n_dof, m) displacement fluctuations to start the CG from (warm start),
+    e.g. the ``solution`` of the same cell problems on a slightly different mesh (the previous
+    field step of :func:`homogenize.relax.relax`); each load case starts from the better of its
+    own column (m = number of load cases) and the least-energy-error combination of all columns
+    (:meth:`_CellSolver.initial_guess`). Same stopping rule (relative residual against the
+    load), so the results agree with a cold start to the solver tolerance.
+    ``keep_solution``: keep the solutions in ``CellResult.solution``."""
     # a residual above 1e-2 returns meaningless moduli (tol 2 gave E_eff 1600x too high)
     check_range("tol", tol, 0.0, 1e-2, "(relative residual)", lo_open=True)
     if tol_magnetic is not None:
         check_range("tol_magnetic", tol_magnetic, 0.0, 1e-2,
                     "(relative residual of the magnetic column)", lo_open=True)
     options = _options(options)
-    solver = _choose_solver(solver, mesh.n, len(cases) + (forces_N is not None))
+    requested = solver
+    solver, solver_reason = _choose_solver(solver, mesh.n, len(cases) + (forces_N is not None),
+                                           reason=True, phi=float(mesh.fraction.mean()),
+                                           plain_particles=_plain_particles(mesh, options))
     t_start = time.perf_counter()
     if rigid:
         # rigid particles as the stiff limit: 1e6 x the matrix modulus, same Poisson's ratio as
@@ -678,7 +805,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     tol_mag = magnetic_column_tol(1.0)
     tols = [tol * f_cg] * len(cases) + ([magnetic_column_tol(f_cg)]
                                         if forces_N is not None else [])
-    W, histories = solver.solve(F, callback=callback, tols=tols, magnetic=forces_N is not None)
+    W, histories = solver.solve(F, callback=callback, tols=tols, magnetic=forces_N is not None,
+                                x0=initial_guess)
     if bar is not None:
         bar.close()
     for c, name in enumerate(names):
@@ -777,6 +905,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 "tol_magnetic_cg": tols[-1] if forces_N is not None else None,
                 "method": mesh.method,
                 "solver": solver.kind,
+                # what was asked for ("auto" by default) and why solver.kind was chosen
+                "solver_requested": requested, "solver_reason": solver_reason,
                 # no AMG below the geometric levels with matfree_coarse = "lu" (a diagnostic)
                 "amg_levels": len(solver.ml.levels) if solver.ml is not None else 0,
                 "amg_operator_complexity": (float(solver.ml.operator_complexity())
@@ -794,6 +924,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                 "patch_shell_voxels": patches.shell_voxels if patches is not None else None,
                 "patched_particles": int(patches.particles.size) if patches is not None else 0,
                 "patch_node_share": patches.node_share if patches is not None else None,
+                "warm_start": initial_guess is not None,
                 "C_linear_error_rel": err_lin, "stress_mag_linear_error_rel": err_stress,
                 "virial_from_dipoles": virial_stress_Pa is not None}
     return CellResult(
@@ -805,7 +936,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                         else (mesh.fraction >= 0.5).mean()),
         n_particles=mesh.n_particles, n_unresolved=int((~mesh.resolved).sum()),
         iterations=iters, residuals=resid, residual_history=hist, timings_s=timings,
-        settings=settings, mesh=mesh, fields=fields)
+        settings=settings, mesh=mesh, fields=fields, solution=W if keep_solution else None)
 
 
 def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
@@ -814,7 +945,7 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
                    rigid: bool = False,
                    method: str = "composite", deflate: bool = True, tol: float = 1e-6,
                    maxiter: int = 2000, keep_fields: bool = False, progress: bool = False,
-                   solver: str = "fast", tol_magnetic: float | None = None,
+                   solver: str = "auto", tol_magnetic: float | None = None,
                    options: SolverOptions | None = None) -> CellResult:
     """Effective stiffness, body force and magnetic stress of an RVE by periodic voxel FEM.
 
@@ -854,7 +985,14 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         ``options.patch_tol_factor`` x these (``settings["tol_cg"]``), which gives the error
         of the solver without patches at ``tol``.
     keep_fields : bool -- keep the displacement fields (for VTU/PNG output)
-    solver : {"fast", "reference", "matrix-free"} -- "fast" (default): numba assembly, all load
+    solver : {"auto", "fast", "reference", "matrix-free"} -- "auto" (default): "matrix-free" on
+        even voxel counts >= 8 where the mesh's particle volume fraction is at most
+        :data:`AUTO_MAX_PHI` (0.06) and the particles are at most
+        :data:`AUTO_MAX_PLAIN_PARTICLES` (100) or get particle patches (:func:`use_patches`),
+        else "fast" (odd grids; dense stiff particles or many without patches, where the
+        geometric multigrid needs 2-5x the iterations); the solver that ran and why are in
+        ``settings["solver"]``, ``["solver_reason"]`` (results/cell/README.md "Solver
+        choice"). "fast": numba assembly, all load
         cases in one block (CG in lock-step, block V-cycle with parallel multicolour Gauss-Seidel
         on every level, numba BSR products); "reference": BLAS assembly, pyamg's default
         hierarchy and own V-cycle, scipy products, one load case after another;
@@ -863,11 +1001,11 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         multigrid (trilinear transfer, element-wise Galerkin coarse operators) down to <= 64^3,
         pyamg below (:mod:`homogenize.solvers._matfree`); a fraction of the memory, for grids whose
         assembled matrix does not fit ("fast" switches to it then).
-        Same C_eff to the solver tolerance. "fast" stays the default: its iteration count does
-        not depend on the microstructure, while the trilinear coarse level of "matrix-free"
-        needs 2-4x more iterations with many or small particles
-        (results/cell/multigrid_robustness.json; the cause, its first coarse space:
-        results/cell/coarse_space_experiments.json).
+        Same C_eff to the solver tolerance. The iteration count of "fast" does not depend on
+        the microstructure, while the trilinear coarse level of "matrix-free" needs 2-4x more
+        iterations with many or small particles (results/cell/multigrid_robustness.json; the
+        cause, its first coarse space: results/cell/coarse_space_experiments.json; the
+        particle patches recover most of it) and with dense particles (hence "auto").
     options : :class:`homogenize.solvers.SolverOptions`, optional -- the solver's settings
         (AMG, matrix-free multigrid, particle patches, block CG); default ``SolverOptions()``
 
@@ -903,7 +1041,7 @@ class CellConfig:
     method: str = "composite"
     tol: float = 1e-6
     maxiter: int = 2000
-    solver: str = "fast"
+    solver: str = "auto"
 
     def __post_init__(self):
         if isinstance(self.voxels, bool) or not isinstance(self.voxels, (int, np.integer)) \

@@ -77,7 +77,7 @@ from micro.nearfield import MU_MAX, chord_permeability, near_field_correction_N
 from micro.rve import RVE, minimum_image
 
 from ._green import periodic_displaceability, rigid_sphere_displaceability
-from .cell import homogenize_mesh, tensor_to_voigt, voigt_to_tensor
+from .cell import SOLVERS, homogenize_mesh, tensor_to_voigt, voigt_to_tensor
 from .mesh import voxelize
 
 __all__ = ["relax", "RelaxResult", "equilibrium", "Equilibrium", "fem_displaceability",
@@ -88,6 +88,8 @@ __all__ = ["relax", "RelaxResult", "equilibrium", "Equilibrium", "fem_displaceab
 
 BOUNDARIES = ("free", "strain")
 ELASTIC_MODELS = ("green", "fem")
+#: the cell FEM solvers of :func:`relax` (``cell_solver``; homogenize.cell.SOLVERS)
+CELL_SOLVERS = SOLVERS
 
 
 # ------------------------------------------------------------------------------------------
@@ -721,7 +723,8 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
           demag_factor=None, accuracy: float = 1e-6, cell_tol: float = 1e-6,
           progress: bool = False, mean_strain=None,
           near_field_mu_max: float = MU_MAX,
-          max_substep_halvings: int = MAX_SUBSTEP_HALVINGS) -> RelaxResult:
+          max_substep_halvings: int = MAX_SUBSTEP_HALVINGS, cell_solver: str = "auto",
+          cell_warm_start: bool = True) -> RelaxResult:
     """Relax an RVE through increasing field steps (coupled magneto-mechanics).
 
     Parameters
@@ -759,6 +762,12 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
         (field, starting field, residual evaluations and last residual of each failed try)
     demag_factor, accuracy : passed to :func:`micro.dipoles.solve`
     cell_tol : CG tolerance of the cell FEM
+    cell_solver : the cell FEM's solver (:func:`homogenize.cell.homogenize_mesh`; default
+        "auto"), with "fast" and then "reference" as fallbacks on a relaxed RVE where it fails
+    cell_warm_start : bool -- start the cell FEM's CG of every field step from the previous
+        step's solutions (:meth:`homogenize.cell._CellSolver.initial_guess`: the relaxed RVE
+        moves little between steps); same stopping rule, so the results agree with cold starts
+        to ``cell_tol``. False: every step from scratch
 
     Returns
     -------
@@ -810,7 +819,9 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
     stiffen = (_near_field_stiffening(a_mean, min_gap_m if min_gap_m is not None
                                       else 0.05 * a_mean, near_field_mu_max)
                if near_field else 1.0)
+    check_choice("cell_solver", cell_solver, CELL_SOLVERS)
     steps, rves = [], []
+    cell_guess = None              # the previous field step's cell FEM solutions (warm start)
     u = np.zeros((rve.n, 3))
     B_done = 0.0                   # field of the last converged state (u = 0 at zero field)
     eq_kw = dict(law=law, law_params=law_params, min_gap_m=min_gap_m, tol=tol,
@@ -864,12 +875,17 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
                                                        rve.box_m, g0, matrix,
                                                        np.asarray(rve.centers_m), stiffen):
                 vir -= np.outer(dv, fv) / rve.box_m ** 3
-            res = _cell(voxelize(r_rel, voxels), forces, vir, matrix, cell_tol)
+            res = _cell(voxelize(r_rel, voxels), forces, vir, matrix, cell_tol, cell_solver,
+                        cell_guess)
             t["cell"] += time.perf_counter() - t0
             if isinstance(res, str):          # the cell FEM failed on this geometry
                 rec["cell_error"] = res
                 steps.append(rec)
                 continue
+            if cell_warm_start:
+                cell_guess = res.solution
+            rec["cell_solver"] = res.settings["solver"]
+            rec["cell_iterations"] = dict(res.iterations)
             C = res.C_eff_Pa
             sig_mag = np.asarray(res.stress_mag_Pa, dtype=float)
             rec["stress_mag_Pa"] = sig_mag.tolist()
@@ -904,7 +920,8 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
                 "direction": n.tolist(), "min_gap_m": min_gap_m, "tol": tol,
                 "n_particles": rve.n, "box_m": rve.box_m, "phi": rve.phi,
                 "demag_factor": demag_factor,
-                "max_substep_halvings": int(max_substep_halvings)}
+                "max_substep_halvings": int(max_substep_halvings),
+                "cell_solver": cell_solver, "cell_warm_start": bool(cell_warm_start)}
     return RelaxResult(steps=tuple(steps), rve=rves[-1], rves=tuple(rves), settings=settings,
                        timings_s=t)
 
@@ -927,17 +944,20 @@ def _check_mean_strain(mean_strain, boundary):
     return 0.5 * (E + E.T)
 
 
-def _cell(mesh, forces, virial, matrix, tol):
-    """Cell FEM with rigid particles on a relaxed RVE; the reference solver when the fast AMG
-    hierarchy breaks down (touching rigid particles can make its coarse matrix indefinite);
-    the error message if both fail."""
+def _cell(mesh, forces, virial, matrix, tol, solver="auto", initial_guess=None):
+    """Cell FEM with rigid particles on a relaxed RVE, started from ``initial_guess`` (the
+    previous step's solutions; its ``solution`` is kept for the next step); "fast" and then the
+    reference solver when ``solver`` fails (touching rigid particles can make the coarse
+    matrix of an AMG hierarchy indefinite); the error message if all fail."""
     errors = []
-    for solver in ("fast", "reference"):
+    order = [solver] + [s for s in ("fast", "reference") if s != solver]
+    for s in order:
         try:
             return homogenize_mesh(mesh, forces_N=forces, virial_stress_Pa=virial, matrix=matrix,
-                                   rigid=True, tol=tol, solver=solver)
+                                   rigid=True, tol=tol, solver=s, initial_guess=initial_guess,
+                                   keep_solution=True)
         except (np.linalg.LinAlgError, RuntimeError, ValueError) as exc:
-            errors.append(f"{solver}: {exc}")
+            errors.append(f"{s}: {exc}")
     return "cell FEM failed on the relaxed RVE (" + "; ".join(errors) + ")"
 
 
@@ -1001,11 +1021,16 @@ def magnetostriction_curve(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
     out = {k: [] for k in ("B_T", "strain_relaxed", "strain_affine", "M_eff_relaxed_A_per_m",
                            "M_eff_affine_A_per_m", "E_parallel_relaxed_Pa",
                            "E_parallel_affine_Pa")}
+    guess = None       # the as-placed mesh is the same at every step: its strain solutions too
     for s in res.steps:
         st = solve_dipoles(rve, s["B_T"] * n, 0.0, law, demag_factor=demag_factor,
                            **dict(law_params or {}))
         aff = homogenize_mesh(mesh, forces_N=st.total_force_N,
-                              virial_stress_Pa=st.virial_stress_Pa, matrix=matrix, rigid=True)
+                              virial_stress_Pa=st.virial_stress_Pa, matrix=matrix, rigid=True,
+                              solver=relax_kw.get("cell_solver", "auto"),
+                              initial_guess=guess,
+                              keep_solution=relax_kw.get("cell_warm_start", True))
+        guess = aff.solution
         out["B_T"].append(s["B_T"])
         out["strain_relaxed"].append(float(n @ np.asarray(s["strain_mag"]) @ n))
         out["strain_affine"].append(float(n @ np.asarray(aff.strain_mag) @ n))

@@ -233,6 +233,80 @@ def _matfree_records(sizes) -> list[dict]:
     return out
 
 
+def choice_rve(voxels: int, phi: float, dispersity: str, seed: int = 1):
+    """The RVEs of :func:`_solver_choice_records`: volume fraction ``phi``, radii monodisperse
+    (25 nm) or the seed's lognormal (mean 25 nm in [10, 50] nm, gsd 1.4), as many particles as
+    give a mean radius of ~2.5 voxels on a ``voxels``^3 grid (at least 8)."""
+    from micro.particles import Monodisperse, default_distribution
+    mono = dispersity == "monodisperse"
+    dist = Monodisperse(25e-9) if mono else default_distribution()
+    # <r^3> / <r>^3: 1 monodisperse, ~1.4 for the seed's lognormal (as bench_rve)
+    n_part = max(8, int(round(phi * (voxels / 2.5) ** 3 / (4.0 / 3.0 * np.pi)
+                              / (1.0 if mono else 1.4))))
+    return generate_rve(phi, n_part, seed, distribution=dist)
+
+
+#: the grids, volume fractions and radius distributions of the solver choice (issue 37)
+CHOICE_SIZES, CHOICE_PHIS = (16, 32, 64), (0.01, 0.05, 0.3)
+CHOICE_DISPERSITIES = ("monodisperse", "lognormal")
+
+
+def _solver_choice_records(sizes=CHOICE_SIZES, phis=CHOICE_PHIS,
+                           dispersities=CHOICE_DISPERSITIES, matfree_only=()) -> list[dict]:
+    """solver="matrix-free" against solver="fast" (the assembled BSR + pyamg SA) on the same RVE
+    (:func:`choice_rve`; 6 strains + random particle forces, tol 1e-6), each run in its own
+    process (peak RSS): what ``solver="auto"`` picks (homogenize.cell._choose_solver) rests on
+    these. ``ratio`` = fast seconds / matrix-free seconds; ``max_rel_error`` = the largest
+    C_eff difference over max |C_eff|; ``stress_mag_rel_diff`` likewise for the magnetic stress
+    (its column stops at sqrt(tol)). Grids in ``matfree_only`` run the matrix-free solver alone
+    (the assembled one may not fit)."""
+    from homogenize.cell import _choose_solver, _plain_particles, _options
+    out = []
+    for n in sizes:
+        for phi in phis:
+            for disp in dispersities:
+                name = f"cell/solver choice {n}^3 phi {phi:g} {disp} (6 strains + magnetic)"
+                m = _run_peer(f"choice|matrix-free|{phi!r}|{disp}", n, 1, None)
+                a = ({"error": "not run (matrix-free only at this grid)"} if n in matfree_only
+                     else _run_peer(f"choice|fast|{phi!r}|{disp}", n, 1, None))
+                mesh = voxelize(choice_rve(n, phi, disp), n)
+                auto, reason = _choose_solver("auto", n, 7, reason=True,
+                                              phi=float(mesh.fraction.mean()),
+                                              plain_particles=_plain_particles(mesh, _options(None)))
+                rec = {"name": name, "n": 3 * n ** 3, "voxels": n, "phi": phi,
+                       "dispersity": disp, "seconds": m.get("seconds"),
+                       "reference": "solver=fast (assembled BSR, pyamg SA), same RVE and tol",
+                       "reference_seconds": a.get("seconds"),
+                       "ratio": (a["seconds"] / m["seconds"]
+                                 if "seconds" in a and "seconds" in m else None),
+                       "max_rel_error": None, "auto_choice": auto, "auto_reason": reason,
+                       **_machine()}
+                if "error" in m:
+                    rec["skipped"] = m["error"]
+                    out.append(rec)
+                    continue
+                if "C_eff_Pa" in a:
+                    Cm, Ca = np.array(m["C_eff_Pa"]), np.array(a["C_eff_Pa"])
+                    Sm, Sa = np.array(m["stress_mag_Pa"]), np.array(a["stress_mag_Pa"])
+                    rec["max_rel_error"] = float(np.abs(Cm - Ca).max() / np.abs(Ca).max())
+                    rec["stress_mag_rel_diff"] = float(np.abs(Sm - Sa).max() / np.abs(Sa).max())
+                rec.update({
+                    "peak_rss_GB": m["peak_rss_GB"], "reference_peak_rss_GB": a.get("peak_rss_GB"),
+                    "memory_ratio": (a["peak_rss_GB"] / m["peak_rss_GB"]
+                                     if a.get("peak_rss_GB") and m["peak_rss_GB"] else None),
+                    "E_eff_Pa": m["E_eff_Pa"], "reference_E_eff_Pa": a.get("E_eff_Pa"),
+                    "iterations": m["iterations"], "reference_iterations": a.get("iterations"),
+                    "timings_s": m["timings_s"], "reference_timings_s": a.get("timings_s"),
+                    "max_residual": m["max_residual"], "tol_cg": m.get("tol_cg"),
+                    "reference_max_residual": a.get("max_residual"),
+                    "n_particles": m["n_particles"], "phi_voxel": m["phi_voxel"],
+                    "mean_radius_voxels": m["mean_radius_voxels"],
+                    "patched_particles": m.get("patched_particles"),
+                    **({"reference_skipped": a["error"]} if "error" in a else {})})
+                out.append(rec)
+    return out
+
+
 def bench_records(quick: bool) -> list[dict]:
     recs = [_assembly_record(12 if quick else 32)]
     recs += _contrast_records(12 if quick else 24)
@@ -240,6 +314,7 @@ def bench_records(quick: bool) -> list[dict]:
     recs += _method_records((12, 16) if quick else (32, 64))
     recs += _matfree_records((12, 16) if quick else (32, 64, 128))
     recs += _peer_records(15 if quick else 33)
+    recs += (_solver_choice_records((12, 16), (0.05,)) if quick else _solver_choice_records())
     return recs
 
 
@@ -311,6 +386,20 @@ def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
                  **{k: r.settings.get(k) for k in ("patch_shell_voxels", "patched_particles",
                                                    "tol_cg")},
                  **_residual_fields(r)}
+    elif tool.startswith("choice|"):             # solver choice: "choice|solver|phi|dispersity"
+        _, solver, phi, dispersity = tool.split("|")
+        rve = choice_rve(voxels, float(phi), dispersity, seed)
+        forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
+        t0 = time.perf_counter()
+        r = homogenize_rve(rve, voxels, forces_N=forces, solver=solver)
+        C = r.C_eff_Pa
+        extra = {"iterations": r.iterations, "E_eff_Pa": r.E_eff_Pa, "timings_s": r.timings_s,
+                 "n_particles": r.n_particles, "phi_voxel": r.phi_voxel,
+                 "stress_mag_Pa": np.asarray(r.stress_mag_Pa).tolist(),
+                 "mean_radius_voxels": float(np.mean(rve.radii_m) / rve.box_m * voxels),
+                 **{k: r.settings.get(k) for k in ("solver", "solver_reason", "patched_particles",
+                                                   "tol_cg")},
+                 **_residual_fields(r)}
     elif tool.startswith("full-"):               # 6 strains + magnetic load, given method
         rve = bench_rve(voxels, seed)
         forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
@@ -373,7 +462,11 @@ def _run_peer(tool: str, voxels: int, seed: int, threads: int | None) -> dict:
         p = subprocess.run(["/usr/bin/time", "-v", sys.executable, "-c", code], env=env,
                            capture_output=True, text=True)
         if p.returncode != 0:
-            return {"error": p.stderr.strip().splitlines()[-1] if p.stderr.strip() else "failed"}
+            # the child's last line before /usr/bin/time's report (its exception)
+            lines = p.stderr.strip().splitlines()
+            cut = [i for i, ln in enumerate(lines) if "Command being timed" in ln]
+            lines = lines[:cut[0]] if cut else lines
+            return {"error": lines[-1].strip() if lines else "failed"}
         rss = [ln for ln in p.stderr.splitlines() if "Maximum resident set size" in ln]
         with open(out) as fh:
             res = json.load(fh)

@@ -272,11 +272,15 @@ def register(sub, formatter):
                         "stress_mag are variational: C_eff's error is ~ tol^2; the magnetic "
                         "case stops at sqrt(tol) unless --vtu/--png keep its field, stress_mag's "
                         "error is the product of the two: see results/cell/README.md)")
-    p.add_argument("--solver", default="fast", choices=("fast", "reference", "matrix-free"),
-                   help="cell solver: 'fast' (assembled matrix, AMG; switches to matrix-free "
-                        "when the assembled matrix does not fit in memory), 'reference' "
-                        "(assembled, one load case at a time), 'matrix-free' (no assembled fine "
-                        "matrix, geometric multigrid; even --voxels; for large grids)")
+    p.add_argument("--solver", default="auto",
+                   choices=("auto", "fast", "reference", "matrix-free"),
+                   help="cell solver: 'auto' (default: 'matrix-free' on even --voxels for "
+                        "dilute RVEs: particle volume fraction <= 0.06 and <= 100 particles or "
+                        "particle patches; else 'fast'; the choice and its reason are in the "
+                        "result's settings), 'fast' (assembled matrix, AMG; switches "
+                        "to matrix-free when the assembled matrix does not fit in memory), "
+                        "'reference' (assembled, one load case at a time), 'matrix-free' (no "
+                        "assembled fine matrix, geometric multigrid; even --voxels)")
     p.add_argument("--json", required=True, type=Path, help="result JSON file (written atomically)")
     p.add_argument("--vtu", type=Path, default=None,
                    help="write the local fields (displacement, stress in VTK order XX YY ZZ XY "

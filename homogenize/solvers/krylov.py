@@ -67,17 +67,26 @@ def _dots(A, B):
     return out
 
 
-def _cg_start(A, F, tol, deflation):
-    """The start of both block CGs: X (the deflated start or zero), the active residual block,
-    the histories and the active columns. Returns (X, Xa, R, hist, idx, fa, tols): ``Xa`` is X
-    itself when every column is active (one block less memory), else a copy of the active
-    columns; columns converged at the start stay in X; ``fa`` the active columns' load norms."""
+def _cg_start(A, F, tol, deflation, x0=None):
+    """The start of both block CGs: X (the deflated start, zero, or the initial guess ``x0``
+    (n, k) with the deflation's correction ``X = x0 + Z E^-1 Z^T (F - A x0)``), the active
+    residual block, the histories and the active columns. Returns (X, Xa, R, hist, idx, fa,
+    tols): ``Xa`` is X itself when every column is active (one block less memory), else a copy
+    of the active columns; columns converged at the start stay in X; ``fa`` the active
+    columns' load norms."""
     F = np.ascontiguousarray(F, dtype=np.float64)
     n, k = F.shape
     fn = np.linalg.norm(F, axis=0)
     fn[fn == 0.0] = 1.0
     tols = np.broadcast_to(np.asarray(tol, dtype=np.float64), (k,))
-    if deflation is not None:
+    if x0 is not None:
+        X = np.array(x0, dtype=np.float64, order="C")      # a copy: x0 is not changed
+        if X.shape != F.shape:
+            raise ValueError(f"x0 must have the shape of F {F.shape}, got {X.shape}")
+        R = A.residual(X, F) if hasattr(A, "residual") else F - A(X)
+        if deflation is not None:
+            deflation.correct(X, R)
+    elif deflation is not None:
         X = deflation.start(F)
         R = A.residual(X, F) if hasattr(A, "residual") else F - A(X)
     else:
@@ -106,7 +115,7 @@ def _record_step(hist, idx, res, tols, k, it, callback):
 
 
 def block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None = None,
-             callback=None):
+             callback=None, x0=None):
     """Preconditioned CG on the k columns of F at once, with in-place updates (X, R, P, the
     product A P and the preconditioned residual are the only vectors).
 
@@ -123,13 +132,16 @@ def block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None = None,
         move the particles rigidly) grows until CG diverges below ~1e-9; the correction removes it.
     callback : callable or None -- ``callback(iteration, n_converged, worst_residual)`` after
         every step (progress reporting)
+    x0 : ndarray (n, k) or None -- initial guess (warm start; None: zero, or the deflated start);
+        the relative residual stays ``||f - A x|| / ||f||``, so a good guess saves iterations and
+        a column already converged at the start takes none
 
     Returns ``(X, histories)``: the solutions and, per column, the list of relative residuals
     (first entry: the start). Each column follows exactly the recursion of a single-vector CG
     (its own step lengths); converged columns leave the block.
     """
     k = F.shape[1]
-    X, Xa, R, hist, idx, fa, tols = _cg_start(A, F, tol, deflation)
+    X, Xa, R, hist, idx, fa, tols = _cg_start(A, F, tol, deflation, x0)
     if idx.size == 0:
         return X, hist
     P = _own(M(R), R)
@@ -216,7 +228,7 @@ def _group_pinv(G, groups):
 
 
 def coupled_block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None = None,
-                     callback=None, groups=None):
+                     callback=None, groups=None, x0=None):
     """Block preconditioned CG (O'Leary, Linear Algebra Appl. 29, 1980) on the k columns of F:
     every column's step is taken in the span of ALL the block's search directions, so each
     column sees a Krylov space k times larger per iteration (the outlying eigenvalues a weak
@@ -237,7 +249,7 @@ def coupled_block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None 
         One group per column is :func:`block_cg`'s independent recursion.
     """
     k = F.shape[1]
-    X, Xa, R, hist, idx, fa, tols = _cg_start(A, F, tol, deflation)
+    X, Xa, R, hist, idx, fa, tols = _cg_start(A, F, tol, deflation, x0)
     del F
     if idx.size == 0:
         return X, hist

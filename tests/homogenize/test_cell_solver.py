@@ -177,7 +177,11 @@ def test_variational_stiffness_error_is_quadratic_in_the_solution_error():
     scale_C = np.abs(ref.C_eff_Pa).max()
     scale_s = np.abs(ref.stress_mag_Pa).max()
     for tol in (1e-3, 1e-4, 1e-5, 1e-6):
-        r = homogenize_rve(rve, 12, forces_N=forces, tol=tol)
+        # "fast" (since issue 37 the default "auto" is the matrix-free solver on this even grid,
+        # whose particle patches stop with a residual that is no longer a bound of the linear
+        # error: at tol 1e-3 its variational error is 3.6e-4 against a linear estimate of
+        # 2.9e-5; at the default 1e-6, 2.9e-10)
+        r = homogenize_rve(rve, 12, forces_N=forces, tol=tol, solver="fast")
         err_C = np.abs(r.C_eff_Pa - ref.C_eff_Pa).max() / scale_C
         err_s = np.abs(r.stress_mag_Pa - ref.stress_mag_Pa).max() / scale_s
         lin = r.settings["C_linear_error_rel"]

@@ -448,3 +448,25 @@ def test_substepping_failure_names_field_and_every_attempt():
 def test_substep_limit_refused(bad):
     with pytest.raises(InputError, match="max_substep_halvings"):
         relax(pair(2), [0.1], law="linear", voxels=None, max_substep_halvings=bad)
+
+
+def test_cell_warm_start_and_auto_solver_agree_with_cold_fast(small_sweep):
+    """Issue 37: the cell FEM of every field step started from the previous step's solutions with
+    the default solver ("auto": matrix-free here) gives the outputs of cold "fast" solves to the
+    solver tolerance (rigid particles: C_eff ~1e-5), with fewer strain iterations after the
+    first step."""
+    rve, new = small_sweep
+    old = relax(rve, [0.05, 0.2], law="linear", matrix=SOFT, voxels=16, cell_solver="fast",
+                cell_warm_start=False)
+    assert new.settings["cell_solver"] == "auto" and new.settings["cell_warm_start"]
+    assert [s["cell_solver"] for s in new.steps] == ["matrix-free"] * 2
+    assert [s["cell_solver"] for s in old.steps] == ["fast"] * 2
+    for a, b in zip(old.steps, new.steps):
+        for k, rtol in (("C_eff_Pa", 3e-5), ("stress_mag_Pa", 1e-5), ("strain_mag", 1e-4)):
+            va, vb = np.asarray(a[k]), np.asarray(b[k])
+            assert np.abs(va - vb).max() < rtol * np.abs(va).max(), k
+    # the first step starts cold, the second from the first's solutions
+    its = [sum(v for k, v in s["cell_iterations"].items() if k != "magnetic") for s in new.steps]
+    assert its[1] < its[0]
+    with pytest.raises(InputError, match="cell_solver"):
+        relax(rve, [0.05], law="linear", matrix=SOFT, voxels=16, cell_solver="fastest")
