@@ -261,6 +261,7 @@ def _solver_choice_records(sizes=CHOICE_SIZES, phis=CHOICE_PHIS,
     (its column stops at sqrt(tol)). Grids in ``matfree_only`` run the matrix-free solver alone
     (the assembled one may not fit)."""
     from homogenize.cell import _choose_solver, _plain_particles, _options
+    from micro import InputError
     out = []
     for n in sizes:
         for phi in phis:
@@ -269,10 +270,14 @@ def _solver_choice_records(sizes=CHOICE_SIZES, phis=CHOICE_PHIS,
                 m = _run_peer(f"choice|matrix-free|{phi!r}|{disp}", n, 1, None)
                 a = ({"error": "not run (matrix-free only at this grid)"} if n in matfree_only
                      else _run_peer(f"choice|fast|{phi!r}|{disp}", n, 1, None))
-                mesh = voxelize(choice_rve(n, phi, disp), n)
-                auto, reason = _choose_solver("auto", n, 7, reason=True,
-                                              phi=float(mesh.fraction.mean()),
-                                              plain_particles=_plain_particles(mesh, _options(None)))
+                try:        # what solver="auto" picks for this RVE (none if it cannot be placed)
+                    mesh = voxelize(choice_rve(n, phi, disp), n)
+                    auto, reason = _choose_solver(
+                        "auto", n, 7, reason=True, phi=float(mesh.fraction.mean()),
+                        plain_particles=_plain_particles(mesh, _options(None)))
+                except InputError as exc:
+                    auto, reason = None, f"placement: {exc}"
+                    m = {"error": reason}
                 rec = {"name": name, "n": 3 * n ** 3, "voxels": n, "phi": phi,
                        "dispersity": disp, "seconds": m.get("seconds"),
                        "reference": "solver=fast (assembled BSR, pyamg SA), same RVE and tol",
