@@ -64,7 +64,7 @@ from .mesh import METHODS, VoxelMesh, voxelize
 from .solvers import (AMGOptions, BlockVCycle, BSROp, Deflation, SolverOptions, block_cg,
                       coupled_block_cg, grid_colours, grid_node_coordinates, rigid_body_modes,
                       smoothed_aggregation)
-from .solvers.krylov import colnorms, gram
+from .solvers.krylov import CG_CHUNK, block_directions, colnorms, gram
 from .solvers.krylov import _pinv_spd as pinv_spd
 from scipy.sparse.linalg import splu
 
@@ -441,8 +441,11 @@ class _CellSolver:
         KX = np.ascontiguousarray(self.matvec(X))
         G = gram(X, KX)
         coef = np.ascontiguousarray(pinv_spd(G) @ gram(X, F))
-        X0 = np.ascontiguousarray(X @ coef)
-        R = np.ascontiguousarray(F - KX @ coef)
+        # X0 = X coef and R = F - K X coef, row by row (numba: the same sums on any thread count)
+        X0 = np.empty(F.shape)
+        block_directions(X, np.zeros(F.shape), coef, CG_CHUNK, X0)
+        R = np.empty(F.shape)
+        block_directions(KX, np.ascontiguousarray(F), np.ascontiguousarray(-coef), CG_CHUNK, R)
         if X.shape[1] == F.shape[1]:
             own = np.ascontiguousarray(F - KX)
             mine = colnorms(own) < colnorms(R)

@@ -131,3 +131,23 @@ def test_cli_default_solver_is_auto(tmp_path):
     assert main(["homogenize", str(path), "--voxels", "8", "--json", str(out), "--quiet"]) == 0
     s = json.loads(out.read_text())["settings"]
     assert s["solver"] == "matrix-free" and s["solver_requested"] == "auto"
+
+
+def test_warm_start_independent_of_the_thread_count(rve):
+    """The warm start's reductions and combinations are the chunked numba kernels: the same
+    numbers on one thread and on all."""
+    import numba
+    mesh = voxelize(rve, 12)
+    F = _forces(rve.n)
+    a = homogenize_mesh(mesh, forces_N=F, rigid=True, keep_solution=True)
+    shift = np.random.default_rng(2).normal(size=rve.centers_m.shape) * 0.03 * rve.box_m / 12
+    moved = voxelize(replace(rve, centers_m=rve.centers_m + shift), 12)
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = homogenize_mesh(moved, forces_N=F, rigid=True, initial_guess=a.solution)
+    finally:
+        numba.set_num_threads(threads)
+    many = homogenize_mesh(moved, forces_N=F, rigid=True, initial_guess=a.solution)
+    np.testing.assert_array_equal(one.C_eff_Pa, many.C_eff_Pa)
+    np.testing.assert_array_equal(one.stress_mag_Pa, many.stress_mag_Pa)
