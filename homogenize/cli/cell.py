@@ -104,8 +104,6 @@ def _cmd(args) -> int:
     rve = RVE.load(args.rve)
     vpr = voxels_per_radius(float(np.mean(rve.radii_m)), rve.box_m, args.voxels)
     warning = resolution_warning(float(np.mean(rve.radii_m)), rve.box_m, args.voxels)
-    if warning:
-        print(f"mapsim homogenize: {warning}", file=sys.stderr)
     state = mag = None
     if field is not None:
         B, G = field
@@ -116,6 +114,8 @@ def _cmd(args) -> int:
                "dipole_iterations": state.iterations}
     res = homogenize(rve, state, cfg, keep_fields=bool(args.vtu or args.png),
                      progress=not args.quiet)
+    if warning:                  # after the solve: a refused input stays one line
+        print(f"mapsim homogenize: {warning}", file=sys.stderr)
     out = res.summary()
     out["rve_file"] = str(args.rve)
     out["voxels_per_radius"] = vpr      # mean particle radius in voxels (homogenize.resolution)
