@@ -78,7 +78,7 @@ import dataclasses
 from micro.dipoles import METHODS, SUMMATIONS
 from micro.magnetization import LAW_ALIASES, LAW_NAMES
 from homogenize import _evaluate
-from homogenize._budget import check_memory
+from homogenize._budget import cheapest_cell_bytes, check_memory
 from homogenize.resolution import coarse_voxels
 
 __all__ = ["Study", "Task", "load_study", "parse_study", "AXIS_ORDER"]
@@ -161,8 +161,8 @@ _CELL_RULES = {"method": ("enum", ("composite", "laminate", "centre", "fraction"
 #: resident memory per realization held by the client [bytes] (task, future, stored results)
 _BYTES_PER_TASK = 4e3
 #: memory of one RVE realization per particle [bytes] (measured ~0.5 kB/particle for the
-#: placement; the dipole solve about doubles it), and of one cell solve per voxel
-_BYTES_PER_PARTICLE, _BYTES_PER_VOXEL = 1.6e3, 6e3
+#: placement; the dipole solve about doubles it); the cell solve's from homogenize._budget
+_BYTES_PER_PARTICLE = 1.6e3
 
 
 def _check_rule(where: str, key: str, v, rules=None):
@@ -609,7 +609,7 @@ def _check_study_size(path, n_points: int, realizations: int, n_particles: int, 
     check_memory(f"{path}: {n_points} grid points x {realizations} realizations "
                  f"({n_tasks:.3g} tasks)", n_tasks * _BYTES_PER_TASK,
                  "use fewer realizations or grid values")
-    per = 0.3e9 + _BYTES_PER_PARTICLE * n_particles + (_BYTES_PER_VOXEL * voxels ** 3 if fem
+    per = 0.3e9 + _BYTES_PER_PARTICLE * n_particles + (cheapest_cell_bytes(voxels) if fem
                                                        else 0.0)
     check_memory(f"{path}: one realization of n_particles = {n_particles}"
                  + (f" with voxels = {voxels}" if fem else ""), 2 * per,

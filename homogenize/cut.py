@@ -61,7 +61,7 @@ from micro.rve import minimum_image
 
 from . import _assembly as asm
 from .solvers import AMGOptions, grid_node_coordinates, rigid_body_modes, smoothed_aggregation
-from ._budget import check_memory
+from ._budget import check_memory, cut_cell_bytes as memory_estimate_bytes
 from .cell import CASES, isotropic_projection, voigt_to_tensor
 from .mesh import _as_geometry
 
@@ -684,14 +684,6 @@ cut_cell_problem = _cut_cell_problem
 # ------------------------------------------------------------------------------------------------
 # public entry points
 # ------------------------------------------------------------------------------------------------
-
-def memory_estimate_bytes(voxels: int) -> int:
-    """Peak memory of one cut-voxel cell solve [bytes]: the assembled two-field matrix, its
-    smoothed-aggregation hierarchy (sparse LU at the bottom) and the work vectors, ~13.5 kB per
-    grid node, plus the Python base. Measured peak RSS (one dilute sphere, one load case):
-    1.75 GB at 48^3 (model 1.79), 3.63 GB at 64^3 (model 3.84)."""
-    return int(0.3e9 + 13.5e3 * int(voxels) ** 3)
-
 
 def check_cut_memory(voxels: int, what: str | None = None) -> int:
     """Refuse (:class:`micro.InputError`) a cut-voxel solve whose memory estimate exceeds the

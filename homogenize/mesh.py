@@ -25,8 +25,9 @@ import numpy as np
 
 from micro._validate import InputError, check_choice, check_positive
 
-__all__ = ["VoxelMesh", "voxelize", "sphere_voxel_fractions", "METHODS", "estimate_memory_bytes",
-           "check_memory"]
+from homogenize._budget import check_cheapest_cell_memory
+
+__all__ = ["VoxelMesh", "voxelize", "sphere_voxel_fractions", "METHODS"]
 
 METHODS = ("centre", "fraction", "composite", "laminate")
 
@@ -196,42 +197,6 @@ def _cut_fractions(lower, c, r):
     return np.clip((area * wts).sum(axis=(1, 2)), 0.0, 1.0)
 
 
-def estimate_memory_bytes(voxels: int, method: str = "composite", n_cases: int = 7) -> int:
-    """Peak memory of one voxel cell solve with the assembled AMG solver [bytes] (a model:
-    27 3x3 blocks of float64 per node for the matrix, x ~2.2 for the AMG hierarchy and Gauss-Seidel
-    copies, plus ~12 work vectors per load case; measured within 30 % at 32^3-64^3,
-    results/bench/cell.json)."""
-    N = int(voxels) ** 3
-    matrix = 27 * 9 * 8 * N
-    vectors = 12 * n_cases * 3 * 8 * N
-    return int(3.2 * matrix + vectors + 200 * N)
-
-
-def machine_memory_bytes() -> int:
-    """Physical memory of this machine [bytes] (24 GiB where the OS does not tell)."""
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):
-        return 24 * 2 ** 30
-
-
-def check_memory(voxels: int, method: str = "composite", n_cases: int = 7) -> int:
-    """Refuse (InputError) a cell whose memory estimate exceeds the machine, before allocating:
-    the estimate of the cheapest solver that can run it (matrix-free for even voxel counts >= 8,
-    else assembled); the solver actually chosen is checked again by the cell solve."""
-    need = estimate_memory_bytes(voxels, method, n_cases)
-    if int(voxels) % 2 == 0 and int(voxels) >= 8:
-        from homogenize.solvers._matfree import memory_estimate_bytes
-        need = min(need, memory_estimate_bytes(int(voxels), n_cases))
-    have = machine_memory_bytes()
-    if need > have:
-        raise InputError(
-            f"voxels={voxels} needs an estimated {need / 2 ** 30:.1f} GiB for the cell problems "
-            f"({3 * int(voxels) ** 3:.3g} DOF, {n_cases} load cases), more than this machine's "
-            f"{have / 2 ** 30:.1f} GiB; use fewer voxels")
-    return need
-
-
 def voxelize(rve, voxels: int, *, method: str = "composite", subsamples: int = 4) -> VoxelMesh:
     """Voxel mesh of an RVE.
 
@@ -254,7 +219,7 @@ def voxelize(rve, voxels: int, *, method: str = "composite", subsamples: int = 4
     if isinstance(voxels, bool) or int(voxels) != voxels or voxels < 4:
         raise InputError(f"voxels must be an integer >= 4 (voxels per cube edge), got {voxels!r}")
     n = int(voxels)
-    check_memory(n, method)
+    check_cheapest_cell_memory(n)      # the one memory model (homogenize._budget)
     s = int(subsamples)
     if s < 1 or s != subsamples:
         raise InputError(f"subsamples must be an integer >= 1, got {subsamples!r}")

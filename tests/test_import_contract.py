@@ -19,9 +19,10 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS = (
     ("micro",),                                                   # particle scale
     ("homogenize._kernels", "homogenize._assembly", "homogenize._stats", "homogenize._green",
-     "homogenize._effective_media"),                              # kernels, element maths
+     "homogenize._effective_media", "homogenize._budget"),        # kernels, element maths,
+                                                                  # the memory model
     ("homogenize.solvers",),                                      # the solver layer
-    ("homogenize.mesh", "homogenize._budget"),                    # grids, memory model
+    ("homogenize.mesh",),                                         # grids
     ("homogenize.cell", "homogenize.cut", "homogenize._conforming", "homogenize._cell_output",
      "homogenize.relax", "homogenize.resolution"),                # cell problems
     ("homogenize._evaluate", "homogenize._study", "homogenize.tables"),   # batch tables
@@ -159,3 +160,22 @@ def test_the_checks_catch_a_violation():
     ring = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert _circles(["d", "a", "b", "c"], ring) == [["a", "b", "c"]]
     assert _circles(["a", "b"], {"a": {"b"}}) == []
+
+
+def test_one_memory_model():
+    """homogenize._budget is the only place that reads the machine's memory and the only one
+    that defines a cell solve's memory estimate (issue 33: one model, one threshold); it sits in
+    the lowest layer of homogenize, so that the solvers and the mesh can use it."""
+    import re
+    readers, estimates = [], []
+    for mod, path in _modules().items():
+        text = path.read_text(encoding="utf-8")
+        if "SC_PHYS_PAGES" in text or "virtual_memory(" in text:
+            readers.append(mod)
+        if re.search(r"^def \w*(memory|_bytes)\w*\(", text, re.M) and "cell" in text \
+                and re.search(r"^def \w*cell\w*bytes\(|^def \w*memory_estimate\w*\(|"
+                              r"^def estimate_memory\w*\(", text, re.M):
+            estimates.append(mod)
+    assert readers == ["homogenize._budget"]
+    assert estimates == ["homogenize._budget"]
+    assert _layer("homogenize._budget") == 1

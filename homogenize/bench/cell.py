@@ -22,7 +22,7 @@ from micro.materials import FE, PDMS
 from micro.particles import generate_rve
 from homogenize.cell import homogenize_rve, isotropic_projection
 from homogenize.cell import Material, homogenize_mesh
-from homogenize.mesh import estimate_memory_bytes, voxelize
+from homogenize.mesh import voxelize
 import numba
 
 __all__ = ["bench_records", "bench_rve", "SOLVER_CONFIG"]
@@ -177,7 +177,7 @@ def _method_records(sizes) -> list[dict]:
                "peak_rss_GB": comp["peak_rss_GB"], "reference_peak_rss_GB": cent["peak_rss_GB"],
                "memory_ratio": cent["peak_rss_GB"] / comp["peak_rss_GB"],
                "iterations": comp["iterations"], "timings_s": comp["timings_s"],
-               "memory_estimate_GB": estimate_memory_bytes(n) / 1e9, **_machine()}
+               "memory_estimate_GB": _budget.assembled_cell_bytes(n) / 1e9, **_machine()}
         prev = _add_growth(rec, prev, n, comp)
         out.append(rec)
     return out

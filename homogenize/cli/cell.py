@@ -14,12 +14,13 @@ from micro.materials import FE, PDMS, matrix_preset, particle_preset
 from micro.materials import ElasticMaterial as Material
 from micro.rve import RVE
 
+from homogenize._budget import check_cheapest_cell_memory
 from homogenize.resolution import resolution_warning, voxels_per_radius
 from homogenize._cell_output import plot_slice, write_pvd
 from homogenize.cell import CellConfig, _choose_solver, homogenize
 from homogenize.cut import check_cut_memory
 from homogenize.cli.rve import _core_law_params
-from homogenize.cli._common import (add_material_options, check_memory, config_of,
+from homogenize.cli._common import (add_material_options, config_of,
                                     fill_from_preset, float_in, int_in)
 from homogenize.studies.cell_studies import (dilute_convergence_study, phi_study,
                                              plot_dilute_convergence, plot_phi_study)
@@ -37,16 +38,13 @@ pairwise virial stress come from micro.dipoles.solve. A manifest is written next
 # stiffness contrast overflows the solver (1e300 Pa did).
 _MODULUS = (1e2, 1e13)
 _VOXELS = (4, 256)
-#: peak memory of one cell solve [bytes]: a base of 1 GB (interpreter, numba, dipoles) plus
-#: 6 kB per voxel (measured peak RSS: 1.05 GB at 32^3, 1.35 GB at 48^3, i.e. ~4 kB/voxel)
-_CELL_BASE_BYTES, _CELL_BYTES_PER_VOXEL = 1e9, 6e3
 _VECTOR_LIMITS = {"B": 50.0, "gradB": 1e4}
 
 
 def _check_voxels(opt: str, n: int) -> None:
-    """Refuse a voxel grid whose memory estimate exceeds the machine, before any work."""
-    check_memory(f"{opt} {n} ({n ** 3:.3g} voxels)",
-                 _CELL_BASE_BYTES + _CELL_BYTES_PER_VOXEL * n ** 3, f"use fewer {opt}")
+    """Refuse a voxel grid whose memory estimate exceeds the machine, before any work (the
+    project's memory model, homogenize._budget)."""
+    check_cheapest_cell_memory(n, what=f"{opt} {n} ({n ** 3:.3g} voxels)")
 
 
 def _parse_vec(text: str | None, name: str, unit: str):

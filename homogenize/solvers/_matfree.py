@@ -38,7 +38,7 @@ from . import _patches
 from .._kernels import block_acc
 
 __all__ = ["ElementField", "element_field", "MatFreeOperator", "coarsen", "GeometricVCycle",
-           "child_prolongations", "prolongation_matrix", "typed_bsr", "memory_estimate_bytes"]
+           "child_prolongations", "prolongation_matrix", "typed_bsr"]
 
 # per node-neighbour slot s = (dx+1) + 3 (dy+1) + 9 (dz+1): for corner a, the corner b = a + d of
 # the same voxel, or -1
@@ -691,29 +691,3 @@ class GeometricVCycle:
             self.coarse_op.release()
 
 
-def memory_estimate_bytes(voxels: int, n_cases: int = 7, cut_fraction: float = 0.1) -> int:
-    """Peak memory model of one matrix-free cell solve [bytes].
-
-    Per fine node: 11 vectors of 3 n_cases float64 (the load block, whose pinned rows the solve
-    zeroes in place; block CG: X, the active X, R, P, Q -- kept through the preconditioner by the
-    coupled block CG --, the preconditioned residual, and one spare for the copies made when
-    columns leave the block; V-cycle: its result and the fine residual; the energy products
-    afterwards reuse that space), the diagonal
-    blocks and their inverses (2 x 72 B), node and element types and indices (16 B); the cut
-    voxels' own 24x24 matrices (4.6 kB each, ``cut_fraction`` of the voxels on the fine level and
-    half as many on the coarse one; the operator's own stencil rows, ~2 nodes of 1.9 kB per cut
-    voxel, replace them once the hierarchy is built); the assembled (n/2)^3 Galerkin matrix with
-    its pyamg hierarchy (3 x 27 blocks of 72 B per coarse node); the particle patches' factors
-    at their limit (:data:`homogenize.solvers._patches.BYTES_PER_NODE` per node); plus the Python/numba
-    base (0.6 GB).
-    Measured peak RSS (bench, 7 load cases, _rve(n) with cut voxels ~5 %): 0.32 GB at 32^3
-    (model 0.71), 0.93 GB at 64^3 (model 1.50), 5.35 GB at 128^3 (model 7.8): the model is an
-    upper bound, as the refusal before allocating needs.
-    """
-    N = int(voxels) ** 3
-    vec = 11 * 3 * int(n_cases) * 8 * N
-    per_node = (2 * 72 + 16) * N
-    cut = 1.5 * cut_fraction * N * 24 * 24 * 8
-    coarse = 3 * 27 * 72 * (N // 8)
-    patches = _patches.BYTES_PER_NODE * N
-    return int(vec + per_node + cut + coarse + patches + 0.6e9)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 import numba as nb
 
+from homogenize._budget import PATCH_BYTES_PER_NODE
 from micro._numba import parallel_and_serial
 from micro.rve import minimum_image
 
@@ -34,8 +35,9 @@ __all__ = ["ParticlePatches", "patch_nodes", "patch_colours", "patch_factor_byte
 #: gains no iterations from its patches: results/cell/README.md)
 MAX_NODES = 1000
 #: the packed factors of all patches together take at most this many bytes per grid node
-#: (smallest patches first; the matrix-free memory estimate counts it in full)
-BYTES_PER_NODE = 640
+#: (smallest patches first; the matrix-free memory estimate of homogenize._budget, which owns
+#: the number, counts it in full)
+BYTES_PER_NODE = PATCH_BYTES_PER_NODE
 #: storage of the factors (the solves compute in float64 either way)
 FACTOR_DTYPE = np.float32
 

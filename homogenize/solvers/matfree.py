@@ -15,7 +15,7 @@ The implementation (numba kernels) is in the private ``_matfree`` and ``_patches
 only names what may be used from outside them.
 """
 from ._matfree import (ElementField, GeometricVCycle, MatFreeOperator, child_prolongations,
-                       coarsen, element_field, grid_colours, memory_estimate_bytes,
+                       coarsen, element_field, grid_colours,
                        node_stencils, prolong_add, prolongation_matrix, restrict,
                        stiffness_times_sparse, typed_bsr, typed_rows_bsr)
 from .._assembly import CORNERS
@@ -24,5 +24,5 @@ from ._patches import ParticlePatches, patch_colours, patch_nodes, select_patche
 __all__ = ["ElementField", "element_field", "coarsen", "MatFreeOperator", "GeometricVCycle",
            "typed_bsr", "typed_rows_bsr", "stiffness_times_sparse", "node_stencils",
            "restrict", "prolong_add", "prolongation_matrix", "child_prolongations",
-           "grid_colours", "memory_estimate_bytes", "ParticlePatches", "patch_nodes",
+           "grid_colours", "ParticlePatches", "patch_nodes",
            "patch_colours", "select_patches", "CORNERS"]

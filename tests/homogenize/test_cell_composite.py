@@ -10,7 +10,8 @@ import pytest
 from homogenize import _assembly as asm
 from homogenize.cell import (Material, bulk_shear, hashin_shtrikman_bounds, homogenize_mesh,
                              homogenize_rve)
-from homogenize.mesh import check_memory, sphere_voxel_fractions, voxelize
+from homogenize._budget import check_cheapest_cell_memory as check_memory
+from homogenize.mesh import sphere_voxel_fractions, voxelize
 from micro._validate import InputError
 from micro.materials import FE, PDMS, elastic
 
