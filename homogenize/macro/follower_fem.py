@@ -48,13 +48,13 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from scipy.constants import mu_0 as MU0
 from skfem import Basis
 
 from homogenize.macro.cantilever import Strip, beam_divisions
 from homogenize.macro.fem import (FEMSolution, _NeoHookeanAssembler, box_mesh,
                                   probe_displacement, vector_basis)
-from homogenize.macro.magnets import PermanentMagnet, _call_M, _internal_field, sample_field
+from homogenize.macro.magnets import PermanentMagnet
+from homogenize.macro.pullin import magnet_below, magnet_body_force
 from micro._validate import InputError, check_choice, check_positive, check_range
 from micro.materials import ElasticMaterial
 
@@ -65,13 +65,6 @@ __all__ = ["FollowerFEM", "FollowerFEMResult", "follower_fem_at_gap", "FD_STEP_R
 #: to the magnet (>= ~t near pull-in), truncation ~(1e-3)^2, noise ~1e-10 / 1e-3: the Jacobian
 #: to ~1e-6; the converged states do not depend on it
 FD_STEP_REL = 1e-3
-
-
-def _magnet_at(magnet, gap_m):
-    x, y, _ = magnet.position_m
-    half = 0.5 * (magnet.dimensions_m[2] if magnet.shape == "cuboid"
-                  else magnet.dimensions_m[1])
-    return dataclasses.replace(magnet, position_m=(x, y, -gap_m - half))
 
 
 class FollowerFEM:
@@ -161,21 +154,12 @@ class FollowerFEM:
     def body_force(self, points_m, gap_m, jacobian=True):
         """``f`` [N/m^3] at points (P, 3) [m] (self-weight included) and ``d f / d x`` (P, 3, 3)
         [N/m^4] (None without ``jacobian``)."""
-        src = _magnet_at(self.magnet, gap_m)
-        p = np.asarray(points_m, float)
-        hs = self.fd_step_m
-        offs = (np.vstack([np.zeros(3), hs * np.eye(3), -hs * np.eye(3)]) if jacobian
-                else np.zeros((1, 3)))
-        allp = (offs[:, None, :] + p[None, :, :]).reshape(-1, 3)
-        B, grad = sample_field(src, allp)
-        Ha = np.linalg.norm(B, axis=1) / MU0
-        M = _call_M(self.M_of_H, _internal_field(self.M_of_H, Ha, self.demag))
-        f = (M[:, None] * grad).reshape(len(offs), -1, 3)
-        f0 = f[0].copy()
+        f0, D = magnet_body_force(magnet_below(self.magnet, gap_m), self.M_of_H, self.demag,
+                                  points_m, self.fd_step_m if jacobian else None)
+        f0 = f0.copy()
         f0[:, 2] -= self.weight_N_m3
         if not jacobian:
             return f0, None
-        D = np.stack([(f[1 + j] - f[4 + j]) / (2 * hs) for j in range(3)], axis=-1)
         return f0, 0.5 * (D + np.swapaxes(D, 1, 2))
 
     def _positions(self, u):

@@ -131,7 +131,7 @@ from micro._validate import ConvergenceError, InputError, check_finite, check_po
 from micro.materials import PDMS, ElasticMaterial
 
 __all__ = ["BranchTrace", "LimitPoint", "EventPoint", "PathFollowingError", "trace_branch",
-           "place_magnet", "MagnetElastica", "PullInResult", "pullin_sweep",
+           "place_magnet", "magnet_below", "magnet_body_force", "MagnetElastica", "PullInResult", "pullin_sweep",
            "one_mode_pullin", "OneModeResult", "FD_HESSIAN_REL", "REALISTIC_CASE"]
 
 #: step of the central differences of the force with respect to position, relative to
@@ -451,6 +451,37 @@ def _half_height(magnet):
                   else magnet.dimensions_m[2])
 
 
+def magnet_below(magnet, gap_m: float):
+    """``magnet`` moved along z so that its top face lies ``gap_m`` below the strip's underside
+    (z = 0), at its own x and y."""
+    x, y, _ = magnet.position_m
+    return dataclasses.replace(magnet, position_m=(x, y, -gap_m - _half_height(magnet)))
+
+
+def magnet_body_force(source, M_of_H, demag_factor: float, points_m, step_m=None,
+                      axes=(0, 1, 2)):
+    """The body force ``f = M(H_in) grad|B_a|`` [N/m^3] of a source at points (P, 3) [m]
+    (``H_in + N M = |H_a|``), and with ``step_m`` its derivative along the coordinates ``axes``
+    by central differences, ``D[:, a, k] = d f_a / d x_axes[k]`` (P, 3, len(axes)) [N/m^4]
+    (None without ``step_m``). All shifted points are evaluated in one call."""
+    p = np.asarray(points_m, float)
+    if step_m is None:
+        offs = np.zeros((1, 3))
+    else:
+        e = np.eye(3)[list(axes)] * step_m
+        offs = np.vstack([np.zeros(3), e, -e])
+    allp = (offs[:, None, :] + p[None, :, :]).reshape(-1, 3)
+    B, grad = sample_field(source, allp)
+    Ha = np.linalg.norm(B, axis=1) / MU0
+    M = _call_M(M_of_H, _internal_field(M_of_H, Ha, demag_factor))
+    f = (M[:, None] * grad).reshape(len(offs), -1, 3)
+    if step_m is None:
+        return f[0], None
+    k = len(axes)
+    D = np.stack([(f[1 + j] - f[1 + k + j]) / (2 * step_m) for j in range(k)], axis=-1)
+    return f[0], D
+
+
 def _over_face(magnet, x, y_lo, y_hi):
     """True where the segment ``{x} x [y_lo, y_hi]`` lies (partly) over the top face."""
     xm, ym, _ = magnet.position_m
@@ -553,9 +584,7 @@ class MagnetElastica:
 
     # ---------------------------------------------------------------- geometry
     def magnet_at(self, gap_m):
-        x, y, _ = self.magnet.position_m
-        return dataclasses.replace(self.magnet,
-                                   position_m=(x, y, -gap_m - _half_height(self.magnet)))
+        return magnet_below(self.magnet, gap_m)
 
     def kinematics(self, theta_full):
         """Tangents, normals (N+1, 2) and centreline nodes r (N+1, 2) in the (x, z) plane."""
@@ -589,26 +618,12 @@ class MagnetElastica:
     # ---------------------------------------------------------------- the force
     def force_and_gradient(self, points_m, gap_m, hessian=True):
         """Body force (x, z) at 3D points [N/m^3] and its derivative d f_a / d r_b (x, z)."""
-        src = self.magnet_at(gap_m)
-        p = np.asarray(points_m, float)
-        if hessian:
-            hs = self.fd_step
-            offs = np.array([[0, 0, 0], [hs, 0, 0], [-hs, 0, 0], [0, 0, hs], [0, 0, -hs]])
-        else:
-            offs = np.zeros((1, 3))
-        allp = (offs[:, None, :] + p[None, :, :]).reshape(-1, 3)
-        B, grad = sample_field(src, allp)
-        Ha = np.linalg.norm(B, axis=1) / MU0
-        Hin = _internal_field(self.M_of_H, Ha, self.demag)
-        M = _call_M(self.M_of_H, Hin)
-        f = (M[:, None] * grad).reshape(len(offs), -1, 3)[:, :, [0, 2]]
+        f, D = magnet_body_force(self.magnet_at(gap_m), self.M_of_H, self.demag, points_m,
+                                 self.fd_step if hessian else None, axes=(0, 2))
         if not hessian:
-            return f[0], None
-        H = np.empty(f.shape[1:] + (2,))
-        H[:, :, 0] = (f[1] - f[2]) / (2 * hs)
-        H[:, :, 1] = (f[3] - f[4]) / (2 * hs)
-        H = 0.5 * (H + np.swapaxes(H, 1, 2))
-        return f[0], H
+            return f[:, [0, 2]], None
+        H = D[:, [0, 2], :]
+        return f[:, [0, 2]], 0.5 * (H + np.swapaxes(H, 1, 2))
 
     def _points(self, r, nrm):
         c = self.eta.size
