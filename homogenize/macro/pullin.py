@@ -107,8 +107,8 @@ x and y when given) and call :func:`pullin_sweep` with ``gap_sweep_m=numpy.linsp
 already uses; print ``sweep_gap_m``/``sweep_tip_deflection_m``/``sweep_contact_force_N``/
 ``sweep_branch`` and ``pull_in_gap_m``/``release_gap_m`` (``PullInResult.to_dict()`` is JSON
 ready), plot ``gap_m`` against ``tip_deflection_m`` with the stable/unstable/contact parts and
-the two gaps marked. :class:`~micro._validate.InputError` -> exit 2;
-:class:`PathFollowingError` (a :class:`~micro._validate.ConvergenceError`) -> exit 3, its
+the two gaps marked. :class:`~micro.common.validate.InputError` -> exit 2;
+:class:`PathFollowingError` (a :class:`~micro.common.validate.ConvergenceError`) -> exit 3, its
 ``last_converged`` dict holds the last converged state (gap, deflection, shape) to be written
 and named as such.
 """
@@ -126,13 +126,20 @@ from homogenize.macro.cantilever import Strip
 from homogenize.macro.closed_form import bending_stiffness_N_m2
 from homogenize.macro.magnets import (PermanentMagnet, _call_M, _check_overlap, _internal_field,
                                       sample_field)
-from micro._validate import ConvergenceError, InputError, check_finite, check_positive, \
+from micro.common.validate import ConvergenceError, InputError, check_finite, check_positive, \
     check_range
 from micro.materials import PDMS, ElasticMaterial
 
 __all__ = ["BranchTrace", "LimitPoint", "EventPoint", "PathFollowingError", "trace_branch",
            "place_magnet", "magnet_below", "magnet_body_force", "MagnetElastica", "PullInResult", "pullin_sweep",
-           "one_mode_pullin", "OneModeResult", "FD_HESSIAN_REL", "REALISTIC_CASE"]
+           "one_mode_pullin", "OneModeResult", "FD_HESSIAN_REL", "REALISTIC_CASE",
+           "LyingBranch", "ContactRelease", "solve_lying", "relax_on_face", "deep_contact_start",
+           "lying_contact_branch", "contact_release", "LYING_MIN_GAP_REL"]
+
+#: the smallest gap the strip lying on the face is started from, relative to the thickness:
+#: at a zero gap the whole strip lies flat on the face (every node in contact, a degenerate
+#: start); below it the sweep reports "unmodelled"
+LYING_MIN_GAP_REL = 0.1
 
 #: step of the central differences of the force with respect to position, relative to
 #: ``min(t, smallest magnet dimension)``. The force varies on the distance ``d`` to the magnet
@@ -756,6 +763,84 @@ class MagnetElastica:
                 "the strip reaches the plane of the magnet's face away from its tip: not "
                 f"modelled (gap {gap_m:g} m)", {"gap_m": gap_m, "theta_rad": np.asarray(theta)})
 
+    # ---------------------------------------------------------------- lying on the face
+    def node_gaps_m(self, theta, gap_m):
+        """Height of the bottom face above the face's plane at the nodes 1..N, (N,) [m]."""
+        return self.bottom_face(theta)[1:, 1] + gap_m
+
+    def _node_gap_jacobian(self, th):
+        """``D[k-1, j-1] = d gamma_k / d theta_j`` (N, N) for the nodes k = 1..N, and
+        ``D2[k-1, j-1] = d^2 gamma_k / d theta_j^2`` (each ``gamma_k`` is a sum of functions of
+        one ``theta_j`` each: no mixed second derivatives)."""
+        c, s = np.cos(th), np.sin(th)
+        D = self.C[1:, 1:] * c[None, 1:]
+        D2 = -self.C[1:, 1:] * s[None, 1:]
+        i = np.arange(self.N)
+        D[i, i] += 0.5 * self.t * s[1:]
+        D2[i, i] += 0.5 * self.t * c[1:]
+        return D, D2
+
+    def system_lying(self, u, gap_m, active):
+        """``(R, J, dR/dg)`` with the bottom face on the face's plane at the nodes ``active``
+        (node numbers in 1..N, sorted); ``u`` = (theta_1..N [rad], the contact forces at the
+        active nodes [N]). ``active = [N]`` is :meth:`system_contact` (the tip alone)."""
+        act = np.asarray(active, int) - 1
+        n, m = self.N, act.size
+        u = np.asarray(u, float)
+        th = self._full(u)
+        lam = u[n:]
+        R0, J0, Rp0 = self.system_free(u[:n], gap_m)
+        D, D2 = self._node_gap_jacobian(th)
+        Da = D[act]
+        gam = self.node_gaps_m(u[:n], gap_m)[act]
+        R = np.concatenate([R0 - Da.T @ lam, -gam])
+        J = np.zeros((n + m, n + m))
+        J[:n, :n] = J0 - np.diag(D2[act].T @ lam)
+        J[:n, n:] = -Da.T
+        J[n:, :n] = -Da
+        Rp = np.concatenate([Rp0, -np.ones(m)])
+        return R, J, Rp
+
+    def stable_lying(self, J):
+        """Hessian positive definite on the tangent space of the active contacts (``J`` from
+        :meth:`system_lying`)."""
+        n = self.N
+        Da = -J[n:, :n]
+        if Da.shape[0] == 0:
+            Z = np.eye(n)
+        else:
+            q, _ = np.linalg.qr(np.column_stack([Da.T, np.eye(n)]))
+            Z = q[:, Da.shape[0]:n]
+        Hc = Z.T @ J[:n, :n] @ Z
+        return bool(np.all(np.linalg.eigvalsh(0.5 * (Hc + Hc.T)) > 0.0))
+
+    def clamp_reaction_N(self, u, gap_m, active=()):
+        """Vertical force of the clamp on the strip [N] (upward positive), from moments alone.
+
+        ``u`` = (theta_1..N, the contact forces at the nodes ``active``). The first half segment
+        ``[0, h/2]`` is a lever held by the clamp: its equation (``d Pi / d theta_0``, which the
+        clamp's moment balances) reads ``M_c = -mu_1/2 - (h/2) sum_{k>=1} F_z,k + m_0,x`` (the
+        bending moment ``mu_1/2 = EI theta_1 / h`` in the first segment, ``F_z,k`` the nodal
+        magnetic and contact forces, ``m_0`` the distributed moment at the clamp's node), and
+        the rotation of the whole strip about the clamp gives ``M_c`` = minus the moment about
+        the clamp of all the loads (:meth:`magnetic_moment_about_clamp_Nm`, evaluated at the
+        cross-section points, plus ``sum lambda_k x_k`` of the contact forces at the bottom
+        edge). Solved for ``sum F_z`` this gives the clamp's reaction without summing the
+        forces: the force balance ``sum lambda = F_magnetic - V_clamp`` is then a check of the
+        equilibrium (exact for the discrete model, to the Newton tolerance)."""
+        act = np.asarray(active, int) - 1
+        u = np.asarray(u, float)
+        th = u[:self.N]
+        lam = u[self.N:]
+        M_mag = self.magnetic_moment_about_clamp_Nm(th, gap_m)
+        r = self.kinematics(self._full(th))[2]
+        M_mag -= float(np.sum(r[:, 0] * self.area * self.wq)) * self.weight_N_m3   # weight
+        M_con = float(np.sum(lam * self.bottom_face(th)[1:, 0][act]))
+        ld = self._loads(self._full(th), gap_m, hessian=False)
+        mu_half = self.EI * th[0] / self.h
+        sum_fz = (2.0 / self.h) * (M_mag + M_con - mu_half + ld["m"][0, 0])
+        return float(-(sum_fz + ld["P"][0, 1]))
+
 
 # ============================================================================================
 # the sweep
@@ -821,6 +906,12 @@ class PullInResult:
     n_cross: int
     demag_factor: float
     follower: bool
+    # the strip lying on the face (nodes in contact other than the tip alone)
+    n_contact: np.ndarray = None
+    contact_length_m: np.ndarray = None
+    sweep_n_contact: np.ndarray = None
+    sweep_contact_length_m: np.ndarray = None
+    contact_jumps_m: tuple = ()
 
     def to_dict(self) -> dict:
         out = {}
@@ -882,6 +973,384 @@ def _interp_branch(p, u, g):
     """u at g on a branch segment monotone in p (p decreasing or increasing)."""
     order = np.argsort(p)
     return np.array([np.interp(g, p[order], u[order, j]) for j in range(u.shape[1])])
+
+
+# ============================================================================================
+# the strip lying on the magnet: distributed unilateral contact with an active set
+
+@dataclass(frozen=True, eq=False)
+class LyingBranch:
+    """The contact branch of the strip lying on the face's plane, from deep contact (the
+    smallest gap) opening the gap until every contact force vanishes (release) or the branch
+    folds (a snap-off).
+
+    gap_m (n,) [m]; theta_rad (n, N) rotations theta_1..N [rad]; contact_forces_N (n, N) the
+    contact force at each node 1..N [N] (0 where the node is free); contact_force_N (n,) their
+    sum [N]; n_contact (n,) nodes in contact; contact_length_m (n,) arc length from the first
+    to the last node in contact [m] (0 for one node); node_gaps_m (n, N) heights of the bottom
+    face above the plane at the nodes [m] (0 in contact); stable (n,) bool; active: tuple of the
+    active sets (node numbers 1..N) of the points; release_gap_m, release_tip_deflection_m;
+    release_by: "contact force zero" | "fold of the contact branch"; events: tuple of
+    ``(gap_m, "add" | "drop", node)``, the changes of the active set along the branch.
+    """
+    gap_m: np.ndarray
+    theta_rad: np.ndarray
+    contact_forces_N: np.ndarray
+    contact_force_N: np.ndarray
+    n_contact: np.ndarray
+    contact_length_m: np.ndarray
+    node_gaps_m: np.ndarray
+    stable: np.ndarray
+    active: tuple
+    release_gap_m: float
+    release_tip_deflection_m: float
+    release_by: str
+    events: tuple
+    fold_gaps_m: tuple = ()
+
+
+def _newton_lying(model, u, g, active, r_scale, max_it=80, max_step_rad=0.1):
+    """Damped Newton at fixed gap and active set (rotation update limited to
+    ``max_step_rad``); the converged u, or None."""
+    n = model.N
+    u = np.asarray(u, float).copy()
+    for _ in range(max_it):
+        R, J, _ = model.system_lying(u, g, active)
+        try:
+            du = np.linalg.solve(J, -R)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(du)):
+            return None
+        big = np.abs(du[:n]).max()
+        u = u + min(1.0, max_step_rad / max(big, 1e-300)) * du
+        if big < 1e-12 and np.max(np.abs(R / r_scale)) < 1e-8:
+            return u
+    return None
+
+
+def solve_lying(model, gap_m, theta_guess, active, *, lam_scale=None, max_outer=40,
+                max_newton=80):
+    """Equilibrium of the strip with frictionless unilateral contact on the face's plane at a
+    fixed gap: a primal-dual active-set iteration (Newton at a fixed active set, then nodes
+    whose contact force is negative leave the set and nodes below the plane join it; one node
+    at a time once a set repeats). Returns ``(theta (N,), forces (N,) per node [N], active)``
+    or raises :class:`PathFollowingError`."""
+    n, L = model.N, model.L
+    ls = lam_scale or max(model.EI / L**2, abs(model.magnetic_force_N(np.zeros(n), gap_m)[1]))
+    tol_l, tol_g = 1e-10 * ls, 1e-10 * L
+    A = sorted(set(int(k) for k in active))
+    th = np.asarray(theta_guess, float).copy()
+    lam = np.zeros(n)
+    lam[np.array(A, int) - 1] = ls / max(len(A), 1)
+    seen = set()
+    for _ in range(max_outer):
+        rs = np.concatenate([np.full(n, model.EI / L), np.full(len(A), L)])
+        u = _newton_lying(model, np.concatenate([th, lam[np.array(A, int) - 1]]), gap_m, A, rs,
+                          max_it=max_newton)
+        if u is None:
+            raise PathFollowingError(f"no equilibrium on the face found at the gap {gap_m:g} m "
+                                     f"(active nodes {A})", {"gap_m": gap_m, "theta_rad": th})
+        th = u[:n]
+        lam = np.zeros(n)
+        lam[np.array(A, int) - 1] = u[n:]
+        gam = model.node_gaps_m(th, gap_m)
+        drop = [k for k in A if lam[k - 1] < -tol_l]
+        add = [k for k in range(1, n + 1) if k not in A and gam[k - 1] < -tol_g]
+        if not drop and not add:
+            return th, lam, tuple(A)
+        seen.add(tuple(A))
+        new = sorted((set(A) - set(drop)) | set(add))
+        if tuple(new) in seen:              # cycling: change the worst node only
+            worst_drop = min(drop, key=lambda k: lam[k - 1] / ls, default=None)
+            worst_add = min(add, key=lambda k: gam[k - 1] / L, default=None)
+            if worst_add is None or (worst_drop is not None
+                                     and lam[worst_drop - 1] / ls < gam[worst_add - 1] / L):
+                new = sorted(set(A) - {worst_drop})
+            else:
+                new = sorted(set(A) | {worst_add})
+        A = new
+    raise PathFollowingError(f"the active set did not settle at the gap {gap_m:g} m",
+                             {"gap_m": gap_m, "theta_rad": th})
+
+
+class _Proximal:
+    """``model`` with ``mu/2 |theta - theta_ref|^2`` added to the energy (one implicit step of
+    the gradient flow); duck-types what :func:`solve_lying` uses."""
+
+    def __init__(self, model, theta_ref, mu):
+        self.m, self.ref, self.mu = model, np.asarray(theta_ref, float).copy(), float(mu)
+        self.N, self.L, self.EI = model.N, model.L, model.EI
+
+    def system_lying(self, u, g, active):
+        R, J, Rp = self.m.system_lying(u, g, active)
+        n = self.N
+        R = R.copy()
+        R[:n] += self.mu * (np.asarray(u[:n]) - self.ref)
+        J = J.copy()
+        J[np.arange(n), np.arange(n)] += self.mu
+        return R, J, Rp
+
+    def node_gaps_m(self, theta, g):
+        return self.m.node_gaps_m(theta, g)
+
+    def magnetic_force_N(self, theta, g):
+        return self.m.magnetic_force_N(theta, g)
+
+
+def relax_on_face(model, gap_m, theta0, *, active=(), max_steps=400):
+    """The stable state the strip settles in at the gap ``gap_m`` from ``theta0`` (e.g. the
+    fold of the free branch, after the snap): implicit steps of the gradient flow of the
+    energy with the unilateral contact (each a :func:`solve_lying` of the energy plus
+    ``mu/2 |theta - theta_k|^2``, ``mu`` large enough for a convex step, decreasing as the
+    residual falls), then Newton with the active set. Returns ``(theta, forces, active)``."""
+    n, L = model.N, model.L
+    ls = max(model.EI / L**2, abs(model.magnetic_force_N(np.zeros(n), gap_m)[1]))
+    th = np.asarray(theta0, float).copy()
+    A = tuple(active)
+    lam = np.zeros(n)
+    mu = model.EI / model.h
+    for _ in range(max_steps):
+        try:
+            th_new, lam_new, A_new = solve_lying(_Proximal(model, th, mu), gap_m, th, A,
+                                                 lam_scale=ls, max_newton=15)
+        except PathFollowingError:
+            mu *= 4.0
+            continue
+        step = float(np.abs(th_new - th).max())
+        th, lam, A = th_new, lam_new, A_new
+        if step < 1e-4:
+            try:
+                th2, lam2, A2 = solve_lying(model, gap_m, th, A, lam_scale=ls, max_newton=15)
+            except PathFollowingError:
+                th2 = None
+            if th2 is not None:
+                u = np.concatenate([th2, lam2[np.array(A2, int) - 1]])
+                if model.stable_lying(model.system_lying(u, gap_m, A2)[1]):
+                    return th2, lam2, A2
+        mu = max(mu * 0.5, 1e-4 * model.EI / model.h) if step < 0.05 else mu * 2.0
+    raise PathFollowingError(f"the strip did not settle at the gap {gap_m:g} m",
+                             {"gap_m": gap_m, "theta_rad": th})
+
+
+def deep_contact_start(model, gap_m, *, lam_scale=None):
+    """A stable equilibrium with the strip lying on the face at the gap ``gap_m`` (> 0).
+
+    Guesses: the strip leaves the clamp flat, comes down over a length ``l`` along the shape of
+    a uniformly loaded beam landing flat with zero moment (``z = -g (3 xi^4 - 8 xi^3 +
+    6 xi^2)``, ``xi = x / l``) and lies flat beyond, the nodes beyond ``l`` in contact; ``l``
+    from the uniform-load estimate ``(72 EI g / q)^(1/4)`` then shorter and longer; the first
+    guess that settles (:func:`solve_lying`) on a stable state is returned as
+    ``(theta, forces, active)``."""
+    n, L, g = model.N, model.L, float(gap_m)
+    ls = lam_scale or max(model.EI / L**2, abs(model.magnetic_force_N(np.zeros(n), g)[1]))
+    q = max(abs(model.magnetic_force_N(np.zeros(n), g)[1]) / L, 1e-300)
+    l0 = (72.0 * model.EI * g / q) ** 0.25
+    s = model.s[1:]
+    fails = []
+    for l in sorted({min(max(f * l0, 2 * model.h), L) for f in
+                     (1.0, 0.8, 1.25, 0.6, 1.6, 0.45, 2.0, 0.3, 2.5)},
+                    key=lambda x: abs(math.log(x / l0))):
+        xi = np.clip(s / l, 0.0, 1.0)
+        slope = -12.0 * g * xi * (xi - 1.0) ** 2 / l
+        th0 = np.arctan(slope)
+        active = [k for k in range(1, n + 1) if s[k - 1] >= l - 1e-12 * L] or [n]
+        try:
+            th, lam, A = solve_lying(model, g, th0, active, lam_scale=ls)
+        except PathFollowingError as exc:
+            fails.append(str(exc))
+            continue
+        u = np.concatenate([th, lam[np.array(A, int) - 1]])
+        if model.stable_lying(model.system_lying(u, g, A)[1]):
+            return th, lam, A
+        fails.append(f"l = {l:g} m: unstable")
+    raise PathFollowingError(f"no stable state lying on the face at the gap {g:g} m: "
+                             + "; ".join(fails[-3:]), {"gap_m": g})
+
+
+def lying_contact_branch(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_segments=400,
+                         through_folds=False, start=None, gap_min_m=None,
+                         direction=1.0) -> LyingBranch:
+    """Follow the strip lying on the face's plane from deep contact at ``gap_start_m`` opening
+    the gap (up to ``gap_max_m``) until every contact force vanishes (the release gap).
+
+    Along the way the active set changes: a node whose contact force reaches zero leaves it
+    (event "drop", located by Brent's method on the smallest force), a free node reaching the
+    plane joins it (event "add", on the smallest height of the free nodes); each active set is
+    a branch of :meth:`MagnetElastica.system_lying` followed by :func:`trace_branch`. The
+    branch ends when the set is empty (release_by "contact force zero"; the last point is the
+    free strip touching the plane with zero force) or at a fold (the contact state disappears:
+    release_by "fold of the contact branch", a snap-off).
+    """
+    n, L = model.N, model.L
+    g0 = float(gap_start_m)
+    ls = max(model.EI / L**2, abs(model.magnetic_force_N(np.zeros(n), g0)[1]))
+    th, lam, A = start if start is not None else deep_contact_start(model, g0, lam_scale=ls)
+    # the scale of the contact forces: the magnetic pull on the bent strip
+    ls = max(ls, abs(model.magnetic_force_N(th, g0)[1]), float(np.sum(lam)))
+    A = list(A)
+    u = np.concatenate([th, lam[np.array(A, int) - 1]])
+    g = g0
+    rows = []          # (gap, theta, forces per node, stable, active)
+    events = []
+    release_by, release_gap, release_defl = "", math.nan, math.nan
+    ds = 0.02
+    direction = float(np.sign(direction) or 1.0)
+    folds = []
+
+    def drop_fun(act):
+        return lambda uu, p: float(np.min(uu[n:])) / ls
+
+    def add_fun(act):
+        free = np.array([k for k in range(1, n + 1) if k not in act], int) - 1
+
+        def fun(uu, p):
+            return float(np.min(model.node_gaps_m(uu[:n], p)[free])) / L
+        return fun
+
+    for _ in range(max_segments):
+        act = tuple(A)
+        m = len(act)
+        system = (lambda uu, p, act=act: model.system_lying(uu, p, act))
+        evs = [("drop", drop_fun(act))]
+        if m < n:
+            evs.append(("add", add_fun(act)))
+        tr = trace_branch(
+            system, u, g, direction=direction, p_max=gap_max_m, p_min=0.5 * g0 if gap_min_m is None else gap_min_m,
+            events=evs,
+            ds=ds, ds_max=ds_max,
+            u_scale=np.concatenate([np.full(n, math.sqrt(n)), np.full(m, ls)]), p_scale=L,
+            r_scale=np.concatenate([np.full(n, model.EI / L), np.full(m, L)]),
+            ftol=1e-9, xtol=1e-10, max_steps=1500, stop_at_fold=not through_folds,
+            stability=lambda uu, p, J: model.stable_lying(J))
+        for k in range(len(tr.p)):
+            if rows and k == 0:
+                continue                            # the event point, already recorded
+            f = np.zeros(n)
+            f[np.array(act, int) - 1] = tr.u[k, n:]
+            rows.append((float(tr.p[k]), tr.u[k, :n].copy(), f, bool(tr.stable[k]), act))
+        ev = tr.event
+        if ev is None:
+            raise PathFollowingError("the contact branch did not end within its steps",
+                                     {"gap_m": float(tr.p[-1]), "theta_rad": tr.u[-1, :n]})
+        g, u = float(ev.p), ev.u.copy()
+        direction = float(np.sign(tr.dp_ds[-1])) or direction
+        folds.extend(float(lp.p) for lp in tr.limit_points)
+        if ev.name == "drop":
+            j = int(np.argmin(u[n:]))
+            events.append((g, "drop", act[j]))
+            A = [k for i, k in enumerate(act) if i != j]
+            u = np.delete(u, n + j)
+            if not A:
+                release_by, release_gap = "contact force zero", g
+                release_defl = model.tip_deflection_m(u[:n])
+                f = np.zeros(n)
+                rows.append((g, u[:n].copy(), f, rows[-1][3], ()))
+                break
+        elif ev.name == "add":
+            free = [k for k in range(1, n + 1) if k not in act]
+            k_new = free[int(np.argmin(model.node_gaps_m(u[:n], g)[np.array(free) - 1]))]
+            events.append((g, "add", k_new))
+            A = sorted(act + (k_new,))
+            u = np.insert(u, n + A.index(k_new), 0.0)
+        elif ev.name == "fold":
+            release_by, release_gap = "fold of the contact branch", g
+            release_defl = model.tip_deflection_m(u[:n])
+            break
+        else:                                   # p_min / p_max: the strip still on the face
+            break
+        ds = 0.005
+    else:
+        raise PathFollowingError("too many changes of the contact set", {"gap_m": g})
+    gap = np.array([r[0] for r in rows])
+    th = np.array([r[1] for r in rows])
+    F = np.array([r[2] for r in rows])
+    act_l = tuple(r[4] for r in rows)
+    s = model.s
+    clen = np.array([s[max(a)] - s[min(a)] if a else 0.0 for a in act_l])
+    ng = np.array([model.node_gaps_m(t, p) for t, p in zip(th, gap)])
+    out = LyingBranch(gap, th, F, F.sum(axis=1), np.array([len(a) for a in act_l]), clen, ng,
+                      np.array([r[3] for r in rows], bool), act_l, release_gap, release_defl,
+                      release_by, tuple(events), tuple(folds))
+    for a in (out.gap_m, out.theta_rad, out.contact_forces_N, out.contact_force_N,
+              out.n_contact, out.contact_length_m, out.node_gaps_m, out.stable):
+        a.flags.writeable = False
+    return out
+
+
+def _join_branches(down, up):
+    """One branch from ``down`` (traced closing the gap from a point) reversed and ``up``
+    (traced opening the gap from the same point)."""
+    def cat(a, b):
+        return np.concatenate([np.asarray(a)[::-1], np.asarray(b)[1:]])
+    out = LyingBranch(cat(down.gap_m, up.gap_m), cat(down.theta_rad, up.theta_rad),
+                      cat(down.contact_forces_N, up.contact_forces_N),
+                      cat(down.contact_force_N, up.contact_force_N),
+                      cat(down.n_contact, up.n_contact),
+                      cat(down.contact_length_m, up.contact_length_m),
+                      cat(down.node_gaps_m, up.node_gaps_m), cat(down.stable, up.stable),
+                      tuple(down.active[::-1]) + tuple(up.active[1:]), up.release_gap_m,
+                      up.release_tip_deflection_m, up.release_by,
+                      tuple(down.events[::-1]) + tuple(up.events),
+                      tuple(down.fold_gaps_m) + tuple(up.fold_gaps_m))
+    for a in (out.gap_m, out.theta_rad, out.contact_forces_N, out.contact_force_N,
+              out.n_contact, out.contact_length_m, out.node_gaps_m, out.stable):
+        a.flags.writeable = False
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ContactRelease:
+    """The quasi-static opening of the gap from deep contact (:func:`contact_release`).
+
+    pieces : tuple of :class:`LyingBranch`, the stable contact segments the strip passes
+        through, in the order of opening (the first from deep contact; each later one whole,
+        from its closing fold or the smallest gap to where it ends opening);
+    jumps_m : the gaps at which the strip snapped from one piece to the next (the folds);
+    release_gap_m : where the last contact force vanishes (release_by "contact force zero") or
+        the last piece folds with no contact state to land on (release_by "fold of the contact
+        branch": a snap-off to the free strip) [m]; release_tip_deflection_m [m].
+    """
+    pieces: tuple
+    jumps_m: tuple
+    release_gap_m: float
+    release_tip_deflection_m: float
+    release_by: str
+
+
+def contact_release(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_jumps=8):
+    """Open the gap from the strip lying on the face at ``gap_start_m`` until the strip lets go.
+
+    The contact branch from deep contact (:func:`lying_contact_branch`) is followed opening
+    the gap; if it folds (the contact state disappears), the strip snaps: the state it settles
+    in just beyond the fold is found by the gradient flow (:func:`relax_on_face`, from the fold
+    state); with the strip still on the face, that stable contact segment is traced whole
+    (closing to its own fold, opening to its end) and followed on; without contact the strip
+    has snapped off (released at the fold). Ends where every contact force vanishes.
+    """
+    L = model.L
+    g0 = float(gap_start_m)
+    up = lying_contact_branch(model, g0, gap_max_m, ds_max=ds_max)
+    pieces, jumps = [up], []
+    for _ in range(max_jumps):
+        if up.release_by != "fold of the contact branch":
+            break
+        g_f = float(up.release_gap_m)
+        g_j = g_f + 1e-6 * L
+        th, lam, A = relax_on_face(model, g_j, up.theta_rad[-1], active=up.active[-1])
+        if not A:
+            break                                 # snapped off the face: released at the fold
+        jumps.append(g_f)
+        kw = dict(ds_max=ds_max, start=(th, lam, A), gap_min_m=min(g0, g_j))
+        down = lying_contact_branch(model, g_j, gap_max_m, direction=-1.0, **kw)
+        up = lying_contact_branch(model, g_j, gap_max_m, direction=1.0, **kw)
+        pieces.append(_join_branches(down, up))
+    else:
+        raise PathFollowingError(f"more than {max_jumps} snaps between contact states opening "
+                                 f"the gap", {"gap_m": float(up.gap_m[-1])})
+    last = pieces[-1]
+    return ContactRelease(tuple(pieces), tuple(jumps), float(last.release_gap_m),
+                          float(last.release_tip_deflection_m), last.release_by)
 
 
 def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagnet, M_of_H,
@@ -1045,8 +1514,29 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
         else:
             contact_end_gap = g_lost
 
+    # the strip lying on the face: where the tip-only contact above does not reach the
+    # smallest gap (a second point of the strip reached the face, or the tip-only branch
+    # folded), the distributed contact with an active set, from deep contact at the smallest
+    # gap opened until the strip lets go (contact_release); it replaces the tip-only branch
+    # from the smallest gap and gives the release gap
+    lying = None
+    if np.isfinite(contact_end_gap) or release_by == "fold of the contact branch":
+        g_deep = max(g_min, LYING_MIN_GAP_REL * strip.thickness_m)
+        try:
+            lying = contact_release(model, g_deep, g_far, ds_max=ds_max)
+        except PathFollowingError:
+            lying = None                      # keep the tip-only result (contact_end_gap says)
+        if lying is not None and lying.release_by:
+            contact = None
+            release_gap, release_by = lying.release_gap_m, lying.release_by
+            release_defl = lying.release_tip_deflection_m
+            contact_end_gap = g_deep if g_deep > g_min + tol_gap else math.nan
+        else:
+            lying = None
+
     # the path: the free branch, then the contact branch
     th_rows, gap_l, lam_l, br_l, st_l, part_l = [], [], [], [], [], []
+    act_l, nc_l, cl_l = [], [], []
     for k in range(len(free.p)):
         part_l.append(0)
         th_rows.append(free.u[k])
@@ -1054,6 +1544,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
         lam_l.append(0.0)
         br_l.append("free")
         st_l.append(bool(free.stable[k]))
+        act_l.append(None)
     for i_part, c_br in enumerate((contact_top, contact)):
         if c_br is None:
             continue
@@ -1064,6 +1555,28 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
             lam_l.append(c_br.u[k, -1])
             br_l.append("contact")
             st_l.append(bool(c_br.stable[k]))
+            act_l.append("tip")
+    # the pieces of the strip on the face, in the order of the path (closing the gap: the
+    # piece the strip leaves last first, deep contact last)
+    for i_piece, pc in enumerate(lying.pieces[::-1] if lying is not None else ()):
+        for k in range(len(pc.gap_m) - 1, -1, -1):
+            part_l.append(3 + i_piece)
+            th_rows.append(np.asarray(pc.theta_rad[k]))
+            gap_l.append(float(pc.gap_m[k]))
+            lam_l.append(float(pc.contact_force_N[k]))
+            br_l.append("contact")
+            st_l.append(bool(pc.stable[k]) and pc.n_contact[k] > 0)
+            act_l.append(tuple(pc.active[k]))
+    for a in act_l:
+        if a is None:
+            nc_l.append(0)
+            cl_l.append(0.0)
+        elif a == "tip":
+            nc_l.append(1)
+            cl_l.append(0.0)
+        else:
+            nc_l.append(len(a))
+            cl_l.append(float(model.s[max(a)] - model.s[min(a)]) if a else 0.0)
     th = np.array(th_rows)
     gap_arr = np.array(gap_l)
     lam_arr = np.array(lam_l)
@@ -1142,6 +1655,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     seg = 0
     g_prev = g_far
     sw_def, sw_tg, sw_lam, sw_br = [], [], [], []
+    sw_nc, sw_cl = [], []
     for g in legs:
         closing = g < g_prev
         if seg is not None and not contains(seg, g):
@@ -1156,16 +1670,28 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
             sw_tg.append(math.nan)
             sw_lam.append(math.nan)
             sw_br.append("unmodelled")
+            sw_nc.append(-1)
+            sw_cl.append(math.nan)
             continue
         a, b = segs[seg]
         guess = _interp_branch(gap_arr[a:b + 1], np.column_stack([th[a:b + 1],
                                                                   lam_arr[a:b + 1]]), g)
+        nc, cl = 0, 0.0
         if br_arr[a] == "free":
             u = _solve_at(model.system_free, guess[:-1], g, 1e-9, rs_free)
             lam = 0.0
-        else:
+        elif act_l[a] == "tip":
             u = _solve_at(model.system_contact, guess, g, 1e-9, rs_contact)
             u, lam = u[:-1], float(u[-1])
+            nc = 1
+        else:
+            j = a + int(np.argmin(np.abs(gap_arr[a:b + 1] - g)))
+            u, f_nodes, act = solve_lying(model, g, guess[:-1], act_l[j])
+            lam = float(np.sum(f_nodes))
+            nc = len(act)
+            cl = float(model.s[max(act)] - model.s[min(act)]) if act else 0.0
+        sw_nc.append(nc)
+        sw_cl.append(cl)
         sw_def.append(model.tip_deflection_m(u))
         sw_tg.append(model.tip_gap_m(u, g))
         sw_lam.append(lam)
@@ -1177,7 +1703,10 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                   theta_rad=np.column_stack([np.zeros(len(th)), th]), s_m=model.s.copy(),
                   sweep_gap_m=np.array(legs, float), sweep_tip_deflection_m=np.array(sw_def),
                   sweep_tip_gap_m=np.array(sw_tg), sweep_contact_force_N=np.array(sw_lam),
-                  sweep_branch=np.array(sw_br))
+                  sweep_branch=np.array(sw_br), n_contact=np.array(nc_l, int),
+                  contact_length_m=np.array(cl_l, float),
+                  sweep_n_contact=np.array(sw_nc, int),
+                  sweep_contact_length_m=np.array(sw_cl, float))
     for arr in arrays.values():
         arr.flags.writeable = False
     return PullInResult(**arrays, pull_in_gap_m=pull_in_gap,
@@ -1186,7 +1715,8 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                         snap_back_gap_m=snap_back, far_gap_m=g_far, release_by=release_by,
                         contact_end_gap_m=contact_end_gap,
                         n_segments=model.N, n_cross=model.n_cross,
-                        demag_factor=model.demag, follower=model.follower)
+                        demag_factor=model.demag, follower=model.follower,
+                        contact_jumps_m=tuple(lying.jumps_m) if lying is not None else ())
 
 
 def place_magnet_xy(magnet, gap_m):
