@@ -11,9 +11,9 @@ from homogenize.macro.effective import magnetization_from_table
 from homogenize.macro.follower_fem import FollowerFEM, follower_fem_at_gap
 from homogenize.macro.magnets import PermanentMagnet
 from homogenize.macro.pullin import pullin_sweep, place_magnet
-from homogenize.tables import read_table
-from micro._io import atomic_path, manifest, write_json
-from micro._validate import InputError
+from homogenize.tables.batch import read_table
+from micro.common.files import atomic_path, manifest, write_json
+from micro.common.validate import InputError
 from micro.materials import ElasticMaterial
 
 from homogenize.cli._common import config_of, json_ready, parse_at, parse_values
@@ -116,18 +116,23 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
     print(f"pull-in gap {r.pull_in_gap_m:.4g} m{iv('pull_in_gap_m')} (tip deflection there "
           f"{r.pull_in_tip_deflection_m:.4g} m): closing the gap below it the strip {snap}")
     if math.isfinite(r.release_gap_m):
+        jumps = (f"; opening from deep contact the strip snapped between contact states at "
+                 + ", ".join(f"{g:.4g}" for g in r.contact_jumps_m) + " m"
+                 if r.contact_jumps_m else "")
         print(f"release gap {r.release_gap_m:.4g} m{iv('release_gap_m')} ({r.release_by}); "
-              f"snap back at {r.snap_back_gap_m:.4g} m")
+              f"snap back at {r.snap_back_gap_m:.4g} m{jumps}")
     else:
-        print("release gap: not determined (no contact traced in the range, or the contact is "
-              "not the tip alone: see the JSON's contact_end_gap_m)")
+        print("release gap: not determined (no contact traced in the range, or the contact "
+              "could not be followed: see the JSON's contact_end_gap_m)")
     print(f"{'gap [m]':>10} {'tip deflection [m]':>19} {'tip gap [m]':>12} "
-          f"{'contact force [N]':>18}  branch")
-    for g, d, tg, fc, b in zip(r.sweep_gap_m, r.sweep_tip_deflection_m, r.sweep_tip_gap_m,
-                               r.sweep_contact_force_N, r.sweep_branch):
+          f"{'contact force [N]':>18} {'nodes on face':>13} {'contact length [m]':>18}  branch")
+    for g, d, tg, fc, nc, cl, b in zip(r.sweep_gap_m, r.sweep_tip_deflection_m,
+                                       r.sweep_tip_gap_m, r.sweep_contact_force_N,
+                                       r.sweep_n_contact, r.sweep_contact_length_m,
+                                       r.sweep_branch):
         # on contact the tip gap is zero to round-off (its sign is noise): printed as 0
         tg = 0.0 if abs(tg) < 1e-9 * strip.length_m else tg
-        print(f"{g:10.4g} {d:19.6g} {tg:12.4g} {fc:18.4g}  {b}")
+        print(f"{g:10.4g} {d:19.6g} {tg:12.4g} {fc:18.4g} {nc:13d} {cl:18.4g}  {b}")
     out = {"strip": vars(strip), "gap_definition": GAP_HELP, "magnet": {
         "kind": args.magnet, "size_m": list(args.magnet_size), "remanence_T": args.remanence_T,
         "axis_x_m": magnet.position_m[0], "axis_y_m": magnet.position_m[1]},
@@ -193,10 +198,10 @@ def _plot(path, r, lo_hi):
     contact = np.asarray(r.branch) == "contact"
     for sel, style, lab in ((stable & ~contact, "-", "free, stable"),
                             (~stable & ~contact, ":", "free, unstable"),
-                            (contact, "-", "tip on the magnet")):
+                            (contact, "-", "on the magnet")):
         if sel.any():
             ax.plot(np.where(sel, g, np.nan), np.where(sel, d, np.nan), style,
-                    color="C3" if lab.startswith("tip") else "C0", label=lab)
+                    color="C3" if lab.startswith("on") else "C0", label=lab)
     if math.isfinite(r.pull_in_gap_m):
         ax.axvline(1e3 * r.pull_in_gap_m, color="k", ls="--", lw=0.8,
                    label=f"pull-in {1e3 * r.pull_in_gap_m:.3g} mm")

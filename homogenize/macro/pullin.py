@@ -49,8 +49,21 @@ force [N], >= 0; the contact is frictionless (the tip may slide on the plane). T
 surface is the whole PLANE of the face (a magnet flush in a holder plate): the strip shortens
 as it bends, and with a soft strip the tip reaches the plane near or beyond the magnet's rim
 (``PullInResult.tip_over_magnet`` says where; contact with the rim's edge itself is not
-modelled). Contact of any other point of the bottom face with the plane (the strip starting to
-lie on the magnet) is not modelled: the contact branch ends there (``contact_end_gap_m``).
+modelled).
+
+*The strip lying on the face.* The same unilateral contact at the bottom edge of EVERY node,
+``gamma_k = z_k - (t/2) cos theta_k + g >= 0`` (k = 1..N), with an active set: a Lagrange
+multiplier ``lambda_k >= 0`` (the contact force at node k [N]) and ``gamma_k = 0`` at the nodes
+in contact, ``gamma_k > 0`` and no force elsewhere (:meth:`MagnetElastica.system_lying`; the
+tip-only contact above is the set ``{N}``, with the same residual and Jacobian). At a fixed gap
+the set is found by a primal-dual active-set iteration (:func:`solve_lying`); along the branch
+(:func:`lying_contact_branch`) a node leaves the set where its force reaches zero and joins it
+where its gap reaches zero, both located by Brent's method. The contact is only at the nodes
+(between them the bottom face may dip below the plane by ``~h^2`` times the curvature); with
+the trapezoidal kinematics the forces of a flat-lying stretch may alternate node to node around
+their mean (a distributed moment on the cross-sections), so that a node inside the stretch can
+lift off (at 16 segments, 3 mm, the realistic case has nodes 13, 14 and 16 on the face); the
+contact length is the arc length between the first and the last node in contact.
 
 Path following
 --------------
@@ -75,7 +88,16 @@ monotone control variable. The cantilever is traced as follows:
    (the two branches meet at zero contact force), and ``g_r > g*``: the hysteresis. Opening
    further, the strip returns to the small-deflection branch (``snap_back_gap_m``). For the
    soft 2 MPa strip of the realistic case the tip-only contact branch folds below the pull-in
-   gap (``release_by``): that case needs the strip lying on the magnet (not modelled).
+   gap, or a second node reaches the face: then
+3. the strip lying on the face (:func:`contact_release`): from deep contact at the smallest gap
+   (at least ``LYING_MIN_GAP_REL`` t; a length of the strip on the face, found from the shape
+   of a beam landing flat, :func:`deep_contact_start`), the distributed contact is followed
+   opening the gap; where it folds the strip snaps, and the state it settles in is found by a
+   gradient flow with the contact (:func:`relax_on_face`); a contact state: its stable
+   segment is traced whole and followed on (``contact_jumps_m`` lists these snaps); until
+   every contact force vanishes (the release gap, ``release_by`` "contact force zero") or a
+   fold leaves no contact state (a snap-off, "fold of the contact branch"). These segments
+   replace the tip-only branch from the smallest gap in the path and the sweep.
 
 The quasi-static sweep moves along stable segments and jumps, at the end of one, to the next
 stable segment containing the gap (towards the magnet when closing, away when opening).
@@ -94,7 +116,10 @@ along z, centred under the tip, no self-weight, ``n_cross`` = 3: the pull-in gap
 with 3.08 mm of tip deflection at the fold; the tip deflects 2 mm at a gap of 11.55 mm. The
 one-mode Galerkin model gives 11.44 mm (+1.1 %). With E = 1 MPa: 12.94 mm (3.41 mm), 2 mm at
 13.29 mm (one mode: 13.10 mm). The user's fixed-point estimate (snap at ~12.3 mm, 2 mm at
-~12.6 mm) lies between the two moduli. See :data:`REALISTIC_CASE` for the contact side.
+~12.6 mm) lies between the two moduli. With the strip lying on the face, the release gap is
+12.325 / 12.253 / 12.203 mm at 16 / 32 / 64 segments (from deep contact at 3 mm, through two
+snaps between contact states: the tip settles at the magnet's rim), above the pull-in gap: see
+:data:`REALISTIC_CASE`.
 
 CLI wiring
 ----------
@@ -158,16 +183,23 @@ REALISTIC_CASE = {
     "pull_in_gap_m": 11.316e-3, "pull_in_tip_deflection_m": 3.08e-3,
     "gap_for_2mm_tip_deflection_m": 11.55e-3,
     "one_mode_pull_in_gap_m": 11.44e-3,
-    # at 16 segments, n_cross 3, the tip-only contact branches found: one from the touch point
-    # of the unstable free branch (12.33 mm, the tip's edge at x = 14.8 mm, on the plane just
-    # beyond the magnet's rim) closing to a fold at 11.68 mm; one from deep contact, between
-    # 9.46 mm (fold) and 10.60 mm (fold; below ~9.5 mm a second point of the strip reaches the
-    # face: the strip starts to lie on the magnet, not modelled). Neither exists at the
-    # pull-in gap 11.33 mm: the state the strip snaps into is not a tip-only contact, and the
-    # release gap of this case is NOT determined (pullin_sweep reports the fold at 10.60 mm
-    # with release_by = "fold of the contact branch"). A stable free branch with the tip
-    # hovering near the rim exists between 12.33 and 13.17 mm (snap back at 13.17 mm).
-    "release_gap_m": None,
+    # the release, with the strip lying on the face (contact_release from deep contact at
+    # 3 mm, n_cross 3). At 16 segments: at 3 mm nodes 13, 14 and 16 are on the face (3.75 mm of
+    # the strip); opening, the nodes lift one by one to the tip alone (8.58 mm); that tip-only
+    # branch, the tip over the face at x ~ 15.7 mm, folds at 10.60 mm; the strip snaps to the
+    # tip resting at the magnet's rim (x ~ 15.3 mm; stable between 8.53 mm and 11.80 mm: this
+    # is also the state it snaps into at the pull-in gap, found by relax_on_face from the
+    # fold); at 11.80 mm it snaps to the tip just beyond the rim (x ~ 14.97 mm: the branch from
+    # the touch point of the unstable free branch, stable between 11.68 mm and the release) and
+    # lets go where the contact force vanishes, 12.325 mm (the touch point). At 32 and 64
+    # segments the branch over the face folds at 9.01 and 9.03 mm and the rim branch holds
+    # without a fold up to the release. Release gap at 16 / 32 / 64 segments: 12.325 / 12.253
+    # / 12.203 mm (differences 0.072, 0.050 mm: converging, more slowly than h^2 -- the tip
+    # lets go at the rim, where the field varies steeply); > the pull-in gap: the hysteresis.
+    # A stable free branch with the tip hovering near the rim exists between the release and
+    # 13.17 mm (snap back to the small-deflection branch at 13.17 mm, 16 segments).
+    "release_gap_m": 12.203e-3,                  # at 64 segments, n_cross 3
+    "release_gap_m_by_segments": {16: 12.325e-3, 32: 12.253e-3, 64: 12.203e-3},
     "E_1MPa": {"pull_in_gap_m": 12.94e-3, "pull_in_tip_deflection_m": 3.41e-3,
                "gap_for_2mm_tip_deflection_m": 13.29e-3},
 }
@@ -850,10 +882,14 @@ class PullInResult:
     """Equilibrium path of the strip against the magnet gap, pull-in and release.
 
     The path (all traced equilibria, in the order traced: the free branch from a far gap through
-    the fold to the touch point, then the contact branch down to the smallest gap):
+    the fold to the touch point, then the contact branches: the tip-only one from the touch
+    point, then the pieces of the strip lying on the face, the one it leaves last first):
     gap_m (n,) magnet gap [m]; tip_deflection_m (n,) downward deflection of the tip's centre
-    [m]; tip_gap_m (n,) gap between the tip's bottom edge and the face [m] (0 on contact);
-    contact_force_N (n,) [N] (0 on the free branch); branch (n,) "free" | "contact";
+    [m]; tip_gap_m (n,) gap between the tip's bottom edge and the face [m] (0 on tip contact;
+    > 0 where the strip lies on the face with its tip lifted); contact_force_N (n,) the total
+    contact force [N] (0 on the free branch); n_contact (n,) nodes in contact;
+    contact_length_m (n,) arc length from the first to the last node in contact [m] (0 for
+    the tip alone); branch (n,) "free" | "contact";
     stable (n,) bool; tip_x_m (n,) x of the tip's bottom edge [m]; tip_over_magnet (n,) bool:
     that edge lies over the magnet's face (False: beside it, on the plane of the face); theta_rad
     (n, N+1) cross-section rotations at ``s_m`` (N+1,) [m].
@@ -866,17 +902,20 @@ class PullInResult:
     small-deflection branch it left at pull-in (= release_gap_m unless a stable free branch
     with the tip hovering near the face exists between them; nan without contact);
     release_by : "contact force zero" (lift-off), "fold of the contact branch" (the contact
-    state disappears: if that gap is below the pull-in gap, the traced tip contact is not the
-    state the strip snaps into -- see the module docstring) or "" (no contact traced);
-    far_gap_m : the gap the path started from [m]; contact_end_gap_m : where, closing the gap
-    on contact, a second point of the strip's bottom face reaches the face's plane (the strip
-    starts to lie on the magnet: not modelled), or the contact branch turns back (a fold: the
-    tip would slide over the face, not modelled either); the contact branch ends there (nan if
-    it reaches the smallest gap). Sweep gaps beyond it are nan, branch "unmodelled".
+    state disappears with no contact state to land on: a snap-off) or "" (no contact traced);
+    contact_jumps_m : the gaps at which, opening the gap from deep contact, the strip snapped
+    from one contact state to another before the release (the strip lying on the face);
+    far_gap_m : the gap the path started from [m]; contact_end_gap_m : the smallest gap with
+    a modelled contact state: nan if the contact reaches the smallest gap of the sweep; the
+    strip lying on the face starts at ``LYING_MIN_GAP_REL`` t at least (below it the whole
+    strip lies flat, a degenerate start); if the lying contact could not be followed, where
+    the tip-only branch ends (a second point of the strip reaching the face, or a fold). Sweep
+    gaps below it are nan, branch "unmodelled".
 
     The quasi-static sweep (history: the strip starts straight, the magnet brought from far to
     the first gap, then moved through the sweep, and back if ``round_trip``):
-    sweep_gap_m, sweep_tip_deflection_m, sweep_tip_gap_m, sweep_contact_force_N, sweep_branch.
+    sweep_gap_m, sweep_tip_deflection_m, sweep_tip_gap_m, sweep_contact_force_N, sweep_branch,
+    sweep_n_contact (-1 where unmodelled), sweep_contact_length_m.
     """
     gap_m: np.ndarray
     tip_deflection_m: np.ndarray
@@ -1216,8 +1255,8 @@ def lying_contact_branch(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_segm
         if m < n:
             evs.append(("add", add_fun(act)))
         tr = trace_branch(
-            system, u, g, direction=direction, p_max=gap_max_m, p_min=0.5 * g0 if gap_min_m is None else gap_min_m,
-            events=evs,
+            system, u, g, direction=direction, p_max=gap_max_m,
+            p_min=0.5 * g0 if gap_min_m is None else gap_min_m, events=evs,
             ds=ds, ds_max=ds_max,
             u_scale=np.concatenate([np.full(n, math.sqrt(n)), np.full(m, ls)]), p_scale=L,
             r_scale=np.concatenate([np.full(n, model.EI / L), np.full(m, L)]),
