@@ -38,12 +38,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.constants import mu_0 as MU0
 
-from . import _kernels as K
-from ._ewald import PeriodicSum
-from ._validate import ConvergenceError, InputError, check_choice, check_finite, check_positive, check_range
-from .magnetization import DEFAULT_LAW, MagnetizationLaw, get_law
-from .materials import SEED
-from .rve import minimum_image
+from micro import _kernels as K
+from micro._ewald import PeriodicSum
+from micro.common.validate import ConvergenceError, InputError, Range, check_choice, check_finite, check_positive
+from micro.magnetization import DEFAULT_LAW, MagnetizationLaw, get_law
+from micro.materials import SEED
+from micro.rve import minimum_image
 from scipy.spatial import cKDTree
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -54,10 +54,24 @@ from scipy.constants import k as KB
 __all__ = ["MagneticState", "ConvergenceError", "solve", "applied_gradient", "DipoleSum",
            "langevin_coupling", "LANGEVIN_LAMBDA_MAX",
            "dipole_field_direct", "dipole_pair_interactions", "FieldConfig", "magnetize", "METHODS", "SUMMATIONS",
-           "PME_ABOVE_N"]
+           "PME_ABOVE_N", "FIELD_RANGES"]
 
 METHODS = ("anderson", "fixed-point", "newton-krylov")
 SUMMATIONS = ("auto", "ewald", "pme")
+#: The allowed values of the magnetic stage's numeric settings, defined once: FieldConfig,
+#: solve, DipoleSum, the study files' rules (homogenize.tables._study) and the CLI options
+#: (``FIELD_RANGES["tol"].arg("--tol")``) all check these objects. tol: a relative residual
+#: below 1e-14 is not reachable in double precision, above 1e-2 the moments are meaningless.
+FIELD_RANGES = {
+    "tol": Range(1e-14, 1e-2, "(relative residual)"),
+    "accuracy": Range(1e-12, 1e-2, "(relative accuracy)"),
+    "demag_factor": Range(0.0, 1.0),
+    "damping": Range(0.0, 2.0, lo_open=True, hi_open=True),
+    "max_iter": Range(1, 10 ** 5, integer=True),
+    "c_powder": Range(0.0, 1.0, lo_open=True),
+    "rho_kg_m3": Range(0.0, 3e4, "kg/m^3", lo_open=True),
+    "sigma_s_Am2_kg": Range(0.0, 300.0, "A m^2/kg", lo_open=True),
+}
 _STALL_ITERATIONS = 40         # Anderson gives up after this many iterations without progress
 PME_ABOVE_N = 3000            # "auto": plain Ewald below, PME above (both O(N^1.5)/O(N log N))
 
@@ -145,14 +159,14 @@ class DipoleSum:
     def __init__(self, box_m, centers_m, *, accuracy=1e-6, summation="pme", demag_factor=None,
                  alpha_per_m=None, pme_order=None, pme_grid=None):
         self.box_m = check_positive("box_m", box_m, "m")
-        check_range("accuracy", accuracy, 1e-12, 0.1, "(relative)")
+        FIELD_RANGES["accuracy"].check("accuracy", accuracy)
         check_choice("summation", summation, ("ewald", "pme"))
         c = np.asarray(centers_m, dtype=float)
         if c.ndim != 2 or c.shape[1] != 3:
             raise InputError(f"centers_m must have shape (N, 3), got {c.shape}")
         check_finite("centers_m", c, "m")
         if demag_factor is not None:
-            check_range("demag_factor", demag_factor, 0.0, 1.0)
+            FIELD_RANGES["demag_factor"].check("demag_factor", demag_factor)
         self.demag_factor = demag_factor
         u = np.mod(c / self.box_m, 1.0)
         u[u >= 1.0] = 0.0
@@ -572,15 +586,15 @@ def solve(rve, B_T, gradB_T_per_m, law=DEFAULT_LAW, *, demag_factor=None, tol=1e
     law_obj = law if isinstance(law, MagnetizationLaw) else get_law(law, **law_params)
     if getattr(law_obj, "bind", None) is not None:
         law_obj = law_obj.bind(rve)        # per-particle core radii (core-shell laws)
-    check_range("tol", tol, 1e-15, 1e-1, "(relative)")
+    R = FIELD_RANGES
+    R["tol"].check("tol", tol)
     check_choice("method", method, METHODS)
     check_choice("summation", summation, SUMMATIONS)
-    check_positive("rho_kg_m3", rho_kg_m3, "kg/m^3")
-    check_positive("sigma_s_Am2_kg", sigma_s_Am2_kg, "A m^2/kg")
-    check_range("c_powder", c_powder, 0.0, 1.0, lo_open=True)
-    if int(max_iter) < 1:
-        raise InputError(f"max_iter must be >= 1, got {max_iter}")
-    check_range("damping", damping, 0.0, 2.0, lo_open=True, hi_open=True)
+    R["rho_kg_m3"].check("rho_kg_m3", rho_kg_m3)
+    R["sigma_s_Am2_kg"].check("sigma_s_Am2_kg", sigma_s_Am2_kg)
+    R["c_powder"].check("c_powder", c_powder)
+    R["max_iter"].check("max_iter", max_iter)
+    R["damping"].check("damping", damping)
     B, G = applied_gradient(B_T, gradB_T_per_m)
     if law_obj.name == "langevin":
         _check_langevin_coupling(c, box, m_sat, law_obj.T_K)
@@ -699,12 +713,12 @@ class FieldConfig:
     def __post_init__(self):
         check_choice("method", self.method, METHODS)
         check_choice("summation", self.summation, SUMMATIONS)
-        check_range("tol", self.tol, 0.0, 1e-2, "(relative residual)", lo_open=True)
-        check_range("accuracy", self.accuracy, 0.0, 1e-2, "(relative accuracy)", lo_open=True)
+        for key in ("tol", "accuracy", "c_powder", "rho_kg_m3", "sigma_s_Am2_kg"):
+            FIELD_RANGES[key].check(key, getattr(self, key))
         check_finite("B_T", self.B_T, "T")
         check_finite("gradB_T_per_m", self.gradB_T_per_m, "T/m")
         if self.demag_factor is not None:
-            check_range("demag_factor", self.demag_factor, 0.0, 1.0, "")
+            FIELD_RANGES["demag_factor"].check("demag_factor", self.demag_factor)
 
     @property
     def B_vector_T(self) -> np.ndarray:

@@ -1,8 +1,6 @@
 """Shared pieces of the CLI: help formatter, option types with ranges, output-path safety."""
 from __future__ import annotations
 
-import math
-
 import argparse
 import fnmatch
 import os
@@ -13,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._io import atomic_write_text
-from micro._validate import InputError, check_regular_file
+from micro.common.files import atomic_write_text
+from micro.common.validate import InputError, Range, check_finite, check_regular_file
 
-from homogenize._budget import check_memory, machine_memory_bytes
-from micro._io import json_ready  # noqa: F401  (re-exported for the commands)
+from homogenize.voxels._budget import check_memory, machine_memory_bytes
+from micro.common.files import json_ready  # noqa: F401  (re-exported for the commands)
 
 __all__ = ["Formatter", "Parser", "NEGATIVE_NUMBER", "one_line_errors", "int_in", "float_in", "json_ready",
            "scheduler_address", "check_outputs", "check_output_dir", "check_input_file",
@@ -81,36 +79,15 @@ class _OneLineError:
 
 def int_in(name: str, lo: int, hi: int):
     """argparse type: an integer in [lo, hi]; anything else is a usage error (exit 2)."""
-    def conv(text):
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"{name} must be an integer in [{lo}, {hi}], got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer in [{lo}, {hi}], got {v}")
-        return v
-    return conv
+    return Range(lo, hi, integer=True).arg(name)
 
 
 def float_in(name: str, lo: float, hi: float, unit: str = "", lo_open: bool = False,
              hi_open: bool = False):
-    """argparse type: a finite float in the interval (ends open as asked)."""
-    u = f" {unit}" if unit else ""
-    left, right = ("(" if lo_open else "["), (")" if hi_open else "]")
-
-    def conv(text):
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"{name} must be a number in {left}{lo:g}, {hi:g}{right}{u}, got {text!r}") from None
-        bad = (v != v or (v <= lo if lo_open else v < lo) or (v >= hi if hi_open else v > hi))
-        if bad:
-            raise argparse.ArgumentTypeError(
-                f"{name} must be in {left}{lo:g}, {hi:g}{right}{u}, got {text}")
-        return v
-    return conv
+    """argparse type: a finite float in the interval (ends open as asked). A parameter with a
+    range defined by its owner (``FIELD_RANGES``, ``CELL_RANGES``) uses ``RANGES[key].arg(opt)``
+    instead, the same checks and messages."""
+    return Range(lo, hi, unit, lo_open, hi_open).arg(name)
 
 
 def scheduler_address(text):
@@ -290,6 +267,45 @@ def parse_values(text: str, opt: str, unit: str, *, max_count: int = 1000,
     if not min_count <= vals.size <= max_count:
         raise InputError(f"{opt}: {min_count} to {max_count} values, got {vals.size}")
     return vals
+
+
+#: the applied flux density's range [T] on every command that takes one field
+B_LIMIT_T = 50.0
+
+
+def add_field_options(g, *, default_B=None, help_B: str = "") -> None:
+    """The one syntax of an applied field on every mapsim command: ``--B`` its magnitude
+    mu0 |H| [T] and ``--B-direction BX BY BZ`` its direction (any length; default 0 0 1, along
+    z). A vector is never written into ``--B``: ``'Bx,By,Bz'`` reads as a list, and the commands
+    that sweep the field (``relax --B``, ``specimen --B``) take lists in the one syntax of
+    :func:`parse_values`."""
+    g.add_argument("--B", dest="B_T", type=_field_magnitude, default=default_B,
+                   help=help_B or "applied flux density mu0 |H| [T], along --B-direction")
+    g.add_argument("--B-direction", dest="B_direction", nargs=3, metavar=("BX", "BY", "BZ"),
+                   type=float_in("--B-direction", -1e6, 1e6), default=None,
+                   help="direction of the applied field (any length) [-] (default: 0 0 1)")
+
+
+def _field_magnitude(text):
+    """argparse type of ``--B`` (one field): a number in [-50, 50] T; a comma list is refused
+    with the syntax of a direction."""
+    if "," in str(text) or ":" in str(text):
+        raise argparse.ArgumentTypeError(
+            f"--B takes one value [T] here, got {text!r}; give a direction with "
+            f"--B-direction BX BY BZ (the field is --B times the unit direction)")
+    return float_in("--B", -B_LIMIT_T, B_LIMIT_T, "T")(text)
+
+
+def field_vector(B_T: float, direction) -> np.ndarray | float:
+    """The applied flux density of ``--B`` and ``--B-direction``: ``B_T`` along the unit
+    direction (a 3-vector [T]), or the scalar ``B_T`` (along z) without a direction."""
+    if direction is None:
+        return float(B_T)
+    d = np.asarray(direction, dtype=float)
+    check_finite("--B-direction", d)
+    if np.linalg.norm(d) == 0:
+        raise InputError("--B-direction must not be the zero vector")
+    return float(B_T) * d / np.linalg.norm(d)
 
 
 def parse_at(text: str | None) -> dict:
