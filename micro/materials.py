@@ -44,15 +44,20 @@ from dataclasses import dataclass
 
 from scipy.constants import mu_0 as MU0
 
-from ._validate import InputError, check_positive, check_range
+from micro.common.validate import InputError, Range, check_positive, check_range
 
-__all__ = ["ElasticMaterial", "Constituent", "FE", "FE3O4", "PDMS", "SeedParameters", "SEED", "GRAVITY_M_S2",
+__all__ = ["ElasticMaterial", "POISSON_RANGE", "Constituent", "FE", "FE3O4", "PDMS", "SeedParameters", "SEED", "GRAVITY_M_S2",
            "mixture_density_kg_m3", "elastic", "ParticlePreset", "MatrixPreset",
            "PARTICLE_PRESETS", "MATRIX_PRESETS", "DEFAULT_PRESET", "particle_preset",
            "matrix_preset", "radius_bounds_m"]
 
 #: Standard acceleration of gravity [m/s^2] (the seed paper's self-weight uses 9.81).
 GRAVITY_M_S2 = 9.81
+
+
+#: Poisson's ratio of an isotropic solid, (-1, 0.5): defined once here and used by
+#: ElasticMaterial, the cell's CELL_RANGES["nu"], the study rules and the CLI options.
+POISSON_RANGE = Range(-1.0, 0.5, lo_open=True, hi_open=True)
 
 
 @dataclass(frozen=True)
@@ -73,7 +78,7 @@ class ElasticMaterial:
 
     def __post_init__(self):
         check_positive("E_Pa (Young's modulus)", self.E_Pa, "Pa")
-        check_range("nu (Poisson's ratio)", self.nu, -1.0, 0.5, "", lo_open=True, hi_open=True)
+        POISSON_RANGE.check("nu (Poisson's ratio)", self.nu)
         check_positive("density_kg_m3", self.density_kg_m3, "kg/m^3", allow_zero=True)
 
     @property

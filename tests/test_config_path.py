@@ -159,6 +159,18 @@ def test_the_cli_options_are_the_owners_range_objects():
         assert _action(command, option).type.range is r, (command, option)
 
 
+def test_poissons_ratio_is_the_materials_range_everywhere():
+    from micro.materials import POISSON_RANGE, ElasticMaterial
+    assert CELL_RANGES["nu"] is POISSON_RANGE
+    for command, option in (("homogenize", "--matrix-nu"), ("homogenize", "--particle-nu"),
+                            ("relax", "--matrix-nu"), ("beam", "--nu"), ("specimen", "--nu")):
+        assert _action(command, option).type.range is POISSON_RANGE, (command, option)
+    for v in (-1.0, 0.5, math.nan):
+        with pytest.raises(InputError, match=r"nu \(Poisson's ratio\) must be"):
+            ElasticMaterial(2e6, v)
+    assert ElasticMaterial(2e6, 0.4999).nu == 0.4999
+
+
 def test_range_messages_keep_the_project_format():
     r = Range(1e-14, 1e-2, "(relative residual)")
     with pytest.raises(InputError, match=r"^tol must be in \[1e-14, 0.01\] \(relative residual\), "

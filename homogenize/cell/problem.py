@@ -50,7 +50,7 @@ import scipy.sparse as sp
 from micro.common.progress import progress_bar
 
 from micro.common.validate import ConvergenceError, InputError, Range, check_finite
-from micro.materials import FE, PDMS, ElasticMaterial, elastic
+from micro.materials import FE, PDMS, POISSON_RANGE, ElasticMaterial, elastic
 from micro.rve import minimum_image
 
 from homogenize.voxels import _assembly as asm
@@ -90,7 +90,7 @@ CELL_RANGES = {
     "tol_magnetic": Range(1e-14, 1e-2, "(relative residual of the magnetic column)"),
     "maxiter": Range(1, 10 ** 6, integer=True),
     "E_Pa": Range(1e2, 1e13, "Pa"),
-    "nu": Range(-1.0, 0.5, lo_open=True, hi_open=True),
+    "nu": POISSON_RANGE,                    # micro.materials' own, that of ElasticMaterial
 }
 
 

@@ -227,7 +227,7 @@ def register(sub, formatter):
                        help="FEM homogenization of an RVE: C_eff, E_eff, f_eff, magnetic stress")
     p.add_argument("rve", type=Path, help="RVE file (HDF5, from `mapsim rve`)")
     p.add_argument("--voxels", type=_R["voxels"].arg("--voxels"),
-                   default=64, help="voxels per cube edge (>= 4)")
+                   default=64, help=_R["voxels"].describe())
     add_field_options(p, help_B="applied flux density mu0 |H| [T], along --B-direction; enables "
                                 "the magnetic load case (default: none)")
     p.add_argument("--gradB", default=None,
