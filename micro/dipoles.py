@@ -43,8 +43,7 @@ from micro._ewald import PeriodicSum
 from micro.common.validate import ConvergenceError, InputError, Range, check_choice, check_finite, check_positive
 from micro.magnetization import DEFAULT_LAW, MagnetizationLaw, get_law
 from micro.materials import SEED
-from micro.rve import minimum_image
-from scipy.spatial import cKDTree
+from micro.box import PeriodicBox
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.optimize import NoConvergence, newton_krylov
@@ -168,8 +167,7 @@ class DipoleSum:
         if demag_factor is not None:
             FIELD_RANGES["demag_factor"].check("demag_factor", demag_factor)
         self.demag_factor = demag_factor
-        u = np.mod(c / self.box_m, 1.0)
-        u[u >= 1.0] = 0.0
+        u = PeriodicBox(self.box_m).fractional(c)
         alpha = None if alpha_per_m is None else float(alpha_per_m) * self.box_m
         self._sum = PeriodicSum(u, accuracy, summation, alpha, pme_order, grid=pme_grid)
         self.n = c.shape[0]
@@ -348,13 +346,12 @@ class _NearFieldPreconditioner:
         cut = self.factor * 2.0 * float(radii_m.max())
         if n < 2 or cut >= 0.5 * box_m:        # tiny box: leave it to Anderson alone
             return
-        tree = cKDTree(np.mod(centers_m, box_m), boxsize=box_m * (1 + 1e-12))
-        pr = tree.query_pairs(cut, output_type="ndarray")
-        if pr.shape[0] == 0:
+        pbox = PeriodicBox(box_m)
+        i, j, _ = pbox.pairs_within(centers_m, cut)
+        if i.size == 0:
             return
-        i, j = pr[:, 0], pr[:, 1]
         d = centers_m[i] - centers_m[j]
-        d = minimum_image(d, box_m)
+        d = pbox.minimum_image(d)
         r = np.sqrt(np.einsum("ij,ij->i", d, d))
         keep = (r < self.factor * (radii_m[i] + radii_m[j])) & (r > 0)
         if not keep.any():
@@ -496,8 +493,7 @@ def langevin_coupling(centers_m, box_m, m_sat_Am2, T_K):
     lam_img = MU0 * m_sat_Am2 ** 2 / (4 * math.pi * box_m ** 3 * KB * T_K)
     if n < 2:
         return lam_img, np.zeros(n, dtype=np.int64)
-    tree = cKDTree(np.mod(centers_m, box_m), boxsize=box_m * (1 + 1e-12))
-    d, j = tree.query(np.mod(centers_m, box_m), k=2)
+    d, j = PeriodicBox(box_m).nearest(centers_m, k=2)
     d, j = np.maximum(d[:, 1], 1e-300), j[:, 1]
     lam = MU0 * m_sat_Am2 * m_sat_Am2[j] / (4 * math.pi * d ** 3 * KB * T_K)
     return np.maximum(lam, lam_img), j

@@ -29,17 +29,17 @@ from pathlib import Path
 import numpy as np
 from scipy import special
 
-from . import _kernels as K
-from ._io import open_regular
-from ._validate import (InputError, check_choice, check_header, check_positive, check_range,
+from micro import _kernels as K
+from micro.common.files import open_regular
+from micro.common.validate import (InputError, check_choice, check_header, check_positive, check_range,
                         check_regular_file)
-from .materials import FE, FE3O4, SEED
-from .rve import RVE, minimum_image
+from micro.materials import FE, FE3O4, SEED
+from micro.box import PeriodicBox
+from micro.rve import RVE
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 from scipy.spatial.distance import pdist
-from micro._progress import progress_bar
-from scipy.spatial import cKDTree
+from micro.common.progress import progress_bar
 
 __all__ = ["ParticleConfig", "place", "LogNormal", "Histogram", "Monodisperse", "CoreShell", "default_distribution",
            "generate_rve", "describe", "cluster_packing_density", "pair_correlation",
@@ -717,11 +717,12 @@ def _relax(x, radii, gap, box, iters, push_scale=1.01):
     nxt = np.empty(x.shape[0], dtype=np.int64)
     disp = np.empty_like(x)
     x = np.ascontiguousarray(x)
+    pbox = PeriodicBox(box)
     for _ in range(iters):
         K.placement_build_cells(x, box, ncell, head, nxt)
         if K.placement_relax_step(x, radii, gap, push_scale, box, ncell, head, nxt, disp) == 0:
             return True, x
-        x = np.mod(x + disp, box)
+        x = pbox.wrap(x + disp)
     return False, x
 
 
@@ -767,7 +768,7 @@ def _compress(radii, box, gap, rng, max_attempts, progress=False):
     finally:
         if bar is not None:
             bar.close()
-    return np.mod(x * (box / L), box)
+    return PeriodicBox(box).wrap(x * (box / L))
 
 
 def generate_rve(phi, n, seed, *, distribution=None, composition=None, arrangement="dispersed",
@@ -985,19 +986,16 @@ def _check_vector(name, value):
 def _unwrap(centers, box):
     """Unwrap a compact group of centres (extent < box/2) relative to its first member."""
     d = centers - centers[0]
-    return centers[0] + minimum_image(d, box)
+    return centers[0] + PeriodicBox(box).minimum_image(d)
 
 
 def pair_distances(rve: RVE, r_max_m: float):
-    """All centre pairs whose minimum-image distance is below ``r_max_m``: (i, j, d [m])."""
+    """All centre pairs whose minimum-image distance is below ``r_max_m``: (i, j, d [m]), with
+    i < j, sorted by i then j (:meth:`micro.box.PeriodicBox.pairs_within`)."""
 
     if rve.n < 2:
         return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
-    tree = cKDTree(rve.centers_m, boxsize=rve.box_m)
-    pairs = tree.query_pairs(r_max_m, output_type="ndarray")
-    i, j = pairs[:, 0], pairs[:, 1]
-    d = rve.minimum_image(rve.centers_m[j] - rve.centers_m[i])
-    return i, j, np.linalg.norm(d, axis=1)
+    return rve.box.pairs_within(rve.centers_m, r_max_m)
 
 
 def min_surface_gap_m(rve: RVE) -> float:

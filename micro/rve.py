@@ -1,8 +1,8 @@
 """The representative volume element (RVE): spheres in a periodic cube, and its HDF5 I/O.
 
 An :class:`RVE` is immutable: its arrays are private read-only copies. Positions are wrapped
-into ``[0, L)^3``; every geometric question that involves periodic images uses the minimum
-image convention of :meth:`RVE.minimum_image`.
+into ``[0, L)^3``; every geometric question that involves periodic images is answered by its
+box, :attr:`RVE.box` (a :class:`micro.box.PeriodicBox`: wrapping, minimum image, pair search).
 
 HDF5 layout (``RVE.save``): one dataset per array field, each with a ``units`` attribute;
 root attributes ``box_m`` (with ``box_m_units``), ``seed`` (``-1`` stored with
@@ -19,13 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ._io import _default as _json_default, atomic_path, is_regular_file, open_regular, write_json
-from ._validate import InputError
-from .materials import SEED
-from micro._io import open_hdf5
+from micro.common.files import _default as _json_default, atomic_path, is_regular_file, open_regular, write_json
+from micro.common.validate import InputError
+from micro.materials import SEED
+from micro.common.files import open_hdf5
 import h5py
 
-__all__ = ["RVE", "minimum_image", "FORMAT_VERSION", "check_sidecar_manifest", "sidecar_path"]
+from micro.box import PeriodicBox
+
+__all__ = ["RVE", "PeriodicBox", "FORMAT_VERSION", "check_sidecar_manifest", "sidecar_path"]
 
 FORMAT_VERSION = 1
 
@@ -52,14 +54,6 @@ def _frozen_array(name, value, dtype, shape):
         raise InputError(f"RVE.{name} must be finite")
     arr.setflags(write=False)
     return arr
-
-
-def minimum_image(d_m, box_m: float) -> np.ndarray:
-    """Separations (..., 3) or coordinates [m] mapped to their shortest image in a periodic cube
-    of edge ``box_m`` [m]: ``d - L round(d / L)``, each component in [-L/2, L/2]. The one
-    implementation of the project's periodic geometry (the numba kernels repeat it inline)."""
-    d = np.asarray(d_m, dtype=float)
-    return d - box_m * np.round(d / box_m)
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,8 +116,7 @@ class RVE:
         if np.any(self.m_sat_Am2 < 0):
             raise InputError("RVE.m_sat_Am2 must be >= 0 A m^2 (a saturation moment)")
         # Positions on the far face are the same points as on the near face: wrap them.
-        wrapped = np.mod(self.centers_m, box)
-        wrapped[wrapped >= box] = 0.0
+        wrapped = PeriodicBox(box).wrap(self.centers_m)
         if not np.array_equal(wrapped, self.centers_m):
             wrapped.setflags(write=False)
             object.__setattr__(self, "centers_m", wrapped)
@@ -184,14 +177,19 @@ class RVE:
         return float(self.m_sat_Am2.sum() / self.mass_kg.sum()) if self.n else float("nan")
 
     # ------------------------------------------------------------------ periodic geometry
+    @property
+    def box(self) -> PeriodicBox:
+        """The periodic cube of edge ``box_m`` [m] (wrapping, minimum image, pair search)."""
+        return PeriodicBox(self.box_m)
+
     def minimum_image(self, d_m: np.ndarray) -> np.ndarray:
         """Map separation vectors (..., 3) [m] to their shortest periodic image."""
-        return minimum_image(d_m, self.box_m)
+        return self.box.minimum_image(d_m)
 
     def translated(self, shift_m) -> "RVE":
         """A copy with every centre moved by ``shift_m`` (3,) [m] and wrapped into the box."""
         shift = np.asarray(shift_m, dtype=float).reshape(3)
-        return self._replace(centers_m=np.mod(self.centers_m + shift, self.box_m))
+        return self._replace(centers_m=self.box.wrap(self.centers_m + shift))
 
     def _replace(self, **changes) -> "RVE":
         kw = {k: getattr(self, k) for k in ("box_m", "centers_m", "radii_m", "core_radii_m",
@@ -376,22 +374,8 @@ def _first_overlap(rve: "RVE"):
     """(i, j, depth [m]) of the deepest overlapping pair of particles (periodic), or None."""
     if rve.n < 2:
         return None
-    from scipy.spatial import cKDTree
-    L = rve.box_m
-    c = np.mod(rve.centers_m, L)
-    c[c >= L] = 0.0
     r = rve.radii_m
-    reach = 2.0 * float(r.max())
-    if reach >= L / 2:                 # huge particles: brute force over minimum images
-        d = np.linalg.norm(minimum_image(c[:, None, :] - c[None, :, :], L), axis=-1)
-        i, j = np.triu_indices(rve.n, 1)
-        dist = d[i, j]
-    else:
-        pairs = cKDTree(c, boxsize=L).query_pairs(reach, output_type="ndarray")
-        if len(pairs) == 0:
-            return None
-        i, j = pairs[:, 0], pairs[:, 1]
-        dist = np.linalg.norm(minimum_image(c[i] - c[j], L), axis=-1)
+    i, j, dist = rve.box.pairs_within(rve.centers_m, 2.0 * float(r.max()))
     depth = (r[i] + r[j]) * (1 - _OVERLAP_RTOL) - dist
     k = int(np.argmax(depth)) if len(depth) else 0
     if len(depth) and depth[k] > 0:

@@ -17,15 +17,13 @@ ROOT = Path(__file__).resolve().parents[1]
 #: layers from the bottom: a module may import from its own layer and those below. A prefix
 #: names a package or module; the longest matching prefix decides.
 LAYERS = (
+    ("micro.common",),                                            # validation, errors, files
     ("micro",),                                                   # particle scale
-    ("homogenize._kernels", "homogenize._assembly", "homogenize._stats", "homogenize._green",
-     "homogenize._effective_media", "homogenize._budget"),        # kernels, element maths,
-                                                                  # the memory model
+    ("homogenize.voxels",),                                       # the grid, element maths,
+                                                                  # kernels, the memory model
     ("homogenize.solvers",),                                      # the solver layer
-    ("homogenize.mesh",),                                         # grids
-    ("homogenize.cell", "homogenize.cut", "homogenize._conforming", "homogenize._cell_output",
-     "homogenize.relax", "homogenize.resolution"),                # cell problems
-    ("homogenize._evaluate", "homogenize._study", "homogenize.tables"),   # batch tables
+    ("homogenize.cell",),                                         # cell problems
+    ("homogenize.tables",),                                       # batch tables
     ("homogenize",),                                              # the package's public face
     ("homogenize.macro",),                                        # specimen, devices
     ("homogenize.experiments",),                                  # measured data
@@ -146,6 +144,15 @@ def _circles(nodes, edges):
     return circles
 
 
+def test_the_base_imports_no_project_module(graph):
+    """micro.common is the neutral base: validation, errors and files import nothing above."""
+    mods, edges = graph
+    base = [m for m in mods if m == "micro.common" or m.startswith("micro.common.")]
+    assert len(base) >= 5
+    assert sorted(f"{a} -> {b}" for a in base for b in edges.get(a, ())
+                  if not (b == "micro.common" or b.startswith("micro.common."))) == []
+
+
 def test_no_circle_of_imports(graph):
     mods, edges = graph
     assert _circles(mods, edges) == []
@@ -154,16 +161,16 @@ def test_no_circle_of_imports(graph):
 def test_the_checks_catch_a_violation():
     # a micro module importing the CLI runs against the flow; a -> b -> c -> a is a circle,
     # found next to a module outside it
-    edges = {"micro.dipoles": {"homogenize.cli.macro"}, "homogenize.cell": {"micro.rve"}}
-    assert _against(edges) == ["micro.dipoles -> homogenize.cli.macro (layer 0 imports layer "
-                               f"{_layer('homogenize.cli.macro')})"]
+    edges = {"micro.dipoles": {"homogenize.cli.cmd_macro"}, "homogenize.cell.problem": {"micro.rve"}}
+    assert _against(edges) == ["micro.dipoles -> homogenize.cli.cmd_macro (layer 1 imports layer "
+                               f"{_layer('homogenize.cli.cmd_macro')})"]
     ring = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert _circles(["d", "a", "b", "c"], ring) == [["a", "b", "c"]]
     assert _circles(["a", "b"], {"a": {"b"}}) == []
 
 
 def test_one_memory_model():
-    """homogenize._budget is the only place that reads the machine's memory and the only one
+    """homogenize.voxels._budget is the only place that reads the machine's memory and the only one
     that defines a cell solve's memory estimate (issue 33: one model, one threshold); it sits in
     the lowest layer of homogenize, so that the solvers and the mesh can use it."""
     import re
@@ -176,6 +183,24 @@ def test_one_memory_model():
                 and re.search(r"^def \w*cell\w*bytes\(|^def \w*memory_estimate\w*\(|"
                               r"^def estimate_memory\w*\(", text, re.M):
             estimates.append(mod)
-    assert readers == ["homogenize._budget"]
-    assert estimates == ["homogenize._budget"]
-    assert _layer("homogenize._budget") == 1
+    assert readers == ["homogenize.voxels._budget"]
+    assert estimates == ["homogenize.voxels._budget"]
+    assert _layer("homogenize.voxels._budget") == _layer("homogenize.voxels") == 2
+
+
+def test_one_periodic_box():
+    """micro.box.PeriodicBox owns the periodic geometry (issue 33: one owner per concern): it
+    is the only module that builds a periodic KD-tree (``boxsize=``), and no module defines a
+    minimum-image function of its own; the others ask a box. Non-periodic trees (homogenize.macro) are not periodic
+    geometry, and the numba kernels repeat the minimum image inline (they cannot call it)."""
+    import re
+    trees, images = [], []
+    for mod, path in _modules().items():
+        text = path.read_text(encoding="utf-8")
+        if "boxsize" in text:
+            trees.append(mod)
+        if re.search(r"^def \w*minimum_image\w*\(", text, re.M):
+            images.append(mod)
+    assert trees == ["micro.box"]
+    assert images == []
+    assert _layer("micro.box") == _layer("micro.rve")      # below every caller

@@ -57,7 +57,7 @@ import scipy.sparse as sp
 
 from micro.common.validate import ConvergenceError, InputError, check_range
 from micro.materials import FE, PDMS, ElasticMaterial, elastic
-from micro.rve import minimum_image
+from micro.box import PeriodicBox
 
 from homogenize.voxels import _assembly as asm
 from homogenize.solvers import AMGOptions, grid_node_coordinates, rigid_body_modes, smoothed_aggregation
@@ -414,8 +414,9 @@ def _particles_phi(x, centres, radii):
     x (..., 3) [box]; centres (N, 3), radii (N,) [box]."""
     phi = np.full(x.shape[:-1], np.inf)
     owner = np.full(x.shape[:-1], -1, dtype=np.int64)
+    unit = PeriodicBox(1.0)
     for i in range(radii.size):
-        p = np.linalg.norm(minimum_image(x - centres[i], 1.0), axis=-1) - radii[i]
+        p = np.linalg.norm(unit.minimum_image(x - centres[i]), axis=-1) - radii[i]
         closer = p < phi
         phi[closer] = p[closer]
         owner[closer] = i

@@ -51,7 +51,7 @@ from micro.common.progress import progress_bar
 
 from micro.common.validate import ConvergenceError, InputError, Range, check_finite
 from micro.materials import FE, PDMS, POISSON_RANGE, ElasticMaterial, elastic
-from micro.rve import minimum_image
+from micro.box import PeriodicBox
 
 from homogenize.voxels import _assembly as asm
 from homogenize.voxels import _budget
@@ -375,7 +375,7 @@ class _CellSolver:
         c = mesh.centers_m[pids]
         x = nodes * h
         d = x - c
-        d = minimum_image(d, mesh.box_m)           # unwrap around the particle centre
+        d = PeriodicBox(mesh.box_m).minimum_image(d)   # unwrap around the particle centre
         d /= mesh.radii_m[pids][:, None]
         pc = np.array([col_of[p] for p in pids], dtype=np.int64) if pids.size else pids
         base = 6 * pc
@@ -719,7 +719,7 @@ def _force_density(mesh: VoxelMesh, forces_N: np.ndarray) -> tuple[np.ndarray, n
         wn = w / w.sum()
         np.add.at(b, v, wn[:, None] * forces_N[p][None, :] / h ** 3)
         d = centres[v] - mesh.centers_m[p]
-        d = minimum_image(d, L)        # the particle's voxels, unwrapped around its centre
+        d = PeriodicBox(L).minimum_image(d)   # the particle's voxels, unwrapped around its centre
         xbar = mesh.centers_m[p] + wn @ d
         moment += np.outer(xbar - 0.5 * L, forces_N[p])
     f_eff = forces_N.sum(axis=0) / L ** 3

@@ -20,11 +20,11 @@ from __future__ import annotations
 import numpy as np
 import numba as nb
 
-from homogenize._budget import PATCH_BYTES_PER_NODE
-from micro._numba import parallel_and_serial
-from micro.rve import minimum_image
+from homogenize.voxels._budget import PATCH_BYTES_PER_NODE
+from micro.common.jit import parallel_and_serial
+from micro.box import PeriodicBox
 
-from .._kernels import block_acc
+from homogenize.voxels._kernels import block_acc
 
 __all__ = ["ParticlePatches", "patch_nodes", "patch_colours", "patch_factor_bytes",
            "select_patches", "MAX_NODES", "BYTES_PER_NODE"]
@@ -35,7 +35,7 @@ __all__ = ["ParticlePatches", "patch_nodes", "patch_colours", "patch_factor_byte
 #: gains no iterations from its patches: results/cell/README.md)
 MAX_NODES = 1000
 #: the packed factors of all patches together take at most this many bytes per grid node
-#: (smallest patches first; the matrix-free memory estimate of homogenize._budget, which owns
+#: (smallest patches first; the matrix-free memory estimate of homogenize.voxels._budget, which owns
 #: the number, counts it in full)
 BYTES_PER_NODE = PATCH_BYTES_PER_NODE
 #: storage of the factors (the solves compute in float64 either way)
@@ -64,22 +64,18 @@ def patch_colours(centers_vox, reach_vox, n: int) -> np.ndarray:
     pair of nodes that are stencil neighbours: nodes within ``reach`` of their centres, so two
     patches can couple only if their centres are closer than ``reach_a + reach_b + sqrt(3)``
     (periodic distance in voxels) -- every such pair gets different colours (conservative)."""
-    from scipy.spatial import cKDTree
-    c = np.mod(np.asarray(centers_vox, dtype=float), n)
+    box = PeriodicBox(float(n))
+    c = box.wrap(centers_vox)
     reach = np.asarray(reach_vox, dtype=float)
     P = c.shape[0]
     colour = np.full(P, -1, dtype=np.int64)
     if P == 0:
         return colour
-    tree = cKDTree(c, boxsize=float(n))
     cut = 2.0 * float(reach.max()) + np.sqrt(3.0) + 1e-9
-    pairs = tree.query_pairs(cut, output_type="ndarray")
-    if pairs.size:
-        d = minimum_image(c[pairs[:, 0]] - c[pairs[:, 1]], float(n))
-        close = np.linalg.norm(d, axis=1) <= reach[pairs[:, 0]] + reach[pairs[:, 1]] + np.sqrt(3.0) + 1e-9
-        pairs = pairs[close]
+    i, j, dist = box.pairs_within(c, cut)
+    close = dist <= reach[i] + reach[j] + np.sqrt(3.0) + 1e-9
     nbrs = [[] for _ in range(P)]
-    for a, b in pairs:
+    for a, b in zip(i[close], j[close]):
         nbrs[a].append(b)
         nbrs[b].append(a)
     for q in range(P):
