@@ -310,6 +310,15 @@ class _CellSolver:
         self.pin = int(cand[0]) if cand.size else 0
         t0 = time.perf_counter()
         op = mf.MatFreeOperator(field, self.pin)
+        t["amg_setup"] = time.perf_counter() - t0
+        # the deflation space first (its K Z needs the element field), then the hierarchy (the
+        # last user of the field, freed before the patches' factors come)
+        t0 = time.perf_counter()
+        self.Z = self._deflation_space(stiff_mask) if stiff_mask is not None else None
+        self.deflation = self._deflation(
+            mf.stiffness_times_sparse(field, self.Z, pin=self.pin) if self.Z is not None else None)
+        t["deflation_setup"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
         self.M = mf.GeometricVCycle(field, pin=self.pin, pin_scale=op.pin_scale, h=self.h,
                                     amg_options=o.amg, fine_op=op,
                                     assembled_max=o.matfree_assembled_max,
@@ -319,19 +328,17 @@ class _CellSolver:
         self.ml = self.M.ml
         self.matvec = op
         self.K = None
-        t["amg_setup"] = time.perf_counter() - t0
+        t["amg_setup"] += time.perf_counter() - t0
+        if o.preconditioner is None:
+            del field
         if use_patches(self.mesh.n_particles, self.mesh.radii_m / self.h, o):
             # after the hierarchy: its setup's temporaries are gone before the factors come
             t0 = time.perf_counter()
             self.M.patches = ParticlePatches(op, self.mesh.centers_m / self.h,
                                              self.mesh.radii_m / self.h, o.patch_shell_voxels)
             t["patch_setup"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        self.Z = self._deflation_space(stiff_mask) if stiff_mask is not None else None
-        self.deflation = self._deflation(
-            mf.stiffness_times_sparse(field, self.Z, pin=self.pin) if self.Z is not None else None)
-        t["deflation_setup"] = time.perf_counter() - t0
-        self.timings = t
+        self.timings = {k: t[k] for k in ("assembly", "amg_setup", "patch_setup",
+                                          "deflation_setup") if k in t}
         if o.preconditioner is not None:      # an experiment's own preconditioner
             self.M = o.preconditioner(types.SimpleNamespace(
                 vcycle=self.M, operator=op, field=field, pin=self.pin, h=self.h, mesh=self.mesh,
@@ -783,6 +790,7 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     if composite is not None:
         for ld, extra in zip(loads, composite.loads(Es)):
             ld += extra
+        ld = extra = None      # (the loop's names would keep two load vectors through the solve)
     f_eff = np.zeros(3)
     b = moment = None
     if forces_N is not None:
@@ -796,6 +804,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     names = list(cases) + (["magnetic"] if forces_N is not None else [])
     F = np.stack(loads, axis=1)
     del loads
+    if not keep_fields:
+        b = None               # the force density is kept only as a field
     bar = callback = None
     if progress:
         # the bar counts converged load cases; its text shows the CG iteration and the worst

@@ -1,6 +1,6 @@
 """Matrix-free periodic voxel stiffness and a geometric multigrid preconditioner for it.
 
-The stiffness of the periodic Q1 voxel grid (:mod:`homogenize._assembly`) is held as ELEMENT
+The stiffness of the periodic Q1 voxel grid (:mod:`homogenize.voxels._assembly`) is held as ELEMENT
 TYPES: ``etype`` (n^3,) gives every voxel an index into a table ``Ktab`` (T, 24, 24) of element
 matrices (DOF ``3 a + c``, corner ``a = ax + 2 ay + 4 az``). The isotropic phases share one
 matrix each (``lambda K_lam + mu K_mu``); every cut (composite) voxel has its own. The first
@@ -21,7 +21,7 @@ geometric level is assembled as 3x3 BSR and handed to pyamg smoothed aggregation
 Gauss-Seidel (forward before, backward after the coarse correction: a symmetric V-cycle).
 
 Rigid translations: one node is pinned (its row and column replaced by ``scale * I``), the same
-way as the assembled solver in :mod:`homogenize.cell`; the pinned node of each coarser level is
+way as the assembled solver in :mod:`homogenize.cell.problem`; the pinned node of each coarser level is
 the coarse node at the same position (the pin has even coordinates on every level).
 """
 from __future__ import annotations
@@ -30,12 +30,11 @@ import numpy as np
 import numba as nb
 import scipy.sparse as sp
 
-from micro._numba import parallel_and_serial
+from micro.common.jit import parallel_and_serial
 
-from .. import _assembly as asm
-from .. import _kernels as kn
-from . import _patches
-from .._kernels import block_acc
+from homogenize.voxels import _assembly as asm
+from homogenize.voxels import _kernels as kn
+from homogenize.voxels._kernels import block_acc
 
 __all__ = ["ElementField", "element_field", "MatFreeOperator", "coarsen", "GeometricVCycle",
            "child_prolongations", "prolongation_matrix", "typed_bsr"]
@@ -190,10 +189,41 @@ def _restrict(nc, x, xc):
                             xc[q, r, m] += w * x[p, r, m]
 
 
+def _restrict_planes(nc, x, z0, nz, xc, K0, K1):
+    """xc = P^T x (as :func:`_restrict`, the same sums in the same order) for the coarse planes
+    K0 <= K < K1 only, from the fine planes z0, z0 + 1, ..., z0 + nz - 1 (mod 2 nc) held in x
+    ((nz (2 nc)^2, 3, k)); those must include 2 K0 - 1 ... 2 K1 - 1."""
+    n = 2 * nc
+    k = x.shape[2]
+    m = nc * nc
+    for t in nb.prange((K1 - K0) * m):
+        q = K0 * m + t
+        I = q % nc
+        J = (q // nc) % nc
+        K = q // m
+        for r in range(3):
+            for mm in range(k):
+                xc[q, r, mm] = 0.0
+        for dz in range(-1, 2):
+            wz = 1.0 if dz == 0 else 0.5
+            fk = ((2 * K + dz + n) % n - z0 + n) % n
+            for dy in range(-1, 2):
+                wy = 1.0 if dy == 0 else 0.5
+                fj = (2 * J + dy + n) % n
+                for dx in range(-1, 2):
+                    w = wz * wy * (1.0 if dx == 0 else 0.5)
+                    fi = (2 * I + dx + n) % n
+                    p = fi + n * (fj + n * fk)
+                    for r in range(3):
+                        for mm in range(k):
+                            xc[q, r, mm] += w * x[p, r, mm]
+
+
 node_op, node_op_serial = parallel_and_serial(_node_op)
 diag_blocks, _ = parallel_and_serial(_diag_blocks)
 prolong_add, _ = parallel_and_serial(_prolong_add)
 restrict, _ = parallel_and_serial(_restrict)
+restrict_planes, _ = parallel_and_serial(_restrict_planes)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -221,7 +251,7 @@ class ElementField:
 
 def element_field(lam, mu, h: float, composite=None) -> ElementField:
     """Element types of the isotropic fields ``lam``, ``mu`` (n, n, n) [Pa] plus the cut voxels of
-    a :class:`homogenize.cell._Composite` (their matrix: the isotropic base plus the same
+    a :class:`homogenize.cell.problem._Composite` (their matrix: the isotropic base plus the same
     difference the assembled solver adds, so both operators agree to round-off)."""
     n = lam.shape[0]
     inv, shared = asm.voxel_types(lam, mu, h)
@@ -264,7 +294,7 @@ def _node_types(field: ElementField) -> np.ndarray:
 
 
 #: the offsets (-1, 0, 1) of every axis in slot order: with it the assembly kernel
-#: (:func:`homogenize._kernels.typed_stencil_blocks`) writes a node's 27 blocks by slot
+#: (:func:`homogenize.voxels._kernels.typed_stencil_blocks`) writes a node's 27 blocks by slot
 #: s = (dx+1) + 3 (dy+1) + 9 (dz+1) (its sorted BSR order differs at the grid faces)
 _SLOT_ORDER = np.array([[-1, 0, 1]] * 3, dtype=np.int64)
 
@@ -301,7 +331,7 @@ def node_stencils(field: ElementField) -> tuple[np.ndarray, np.ndarray, int]:
 
 class MatFreeOperator:
     """``K u`` of an :class:`ElementField` (pinned node ``pin`` with diagonal ``scale I``; the
-    scale defaults to the mean diagonal entry, as in :class:`homogenize.cell._CellSolver`).
+    scale defaults to the mean diagonal entry, as in :class:`homogenize.cell.problem._CellSolver`).
     Vectors: (3 N, k) arrays, C-contiguous, float64."""
 
     def __init__(self, field: ElementField, pin: int = -1, pin_scale: float | None = None):
@@ -321,6 +351,8 @@ class MatFreeOperator:
         self.pin_scale = self.mean_diag if pin_scale is None else float(pin_scale)
         if self.pin >= 0:
             D[self.pin] = self.pin_scale * np.eye(3)
+        #: the diagonal blocks (N, 3, 3); None once :attr:`dinv` has been formed (the sweeps need
+        #: only the inverses: one array of 72 B per node less)
         self.diag = D
         self._dinv = None
         self._op = node_op if N >= 4096 else node_op_serial
@@ -330,15 +362,17 @@ class MatFreeOperator:
     @property
     def dinv(self) -> np.ndarray:
         if self._dinv is None:
-            from .amg import _block_inverse
+            from homogenize.solvers.amg import _block_inverse
             self._dinv = np.ascontiguousarray(_block_inverse(self.diag))
+            self.diag = None
         return self._dinv
 
     def _run(self, nodes, X, B, out, mode):
         k = X.shape[-1]
         self._op(self.n, nodes, self.stype, self.S, self.pin, self.pin_scale,
                  X.reshape(-1, 3, k), B.reshape(-1, 3, k),
-                 self.dinv if mode >= 2 else self.diag, out.reshape(-1, 3, k), mode)
+                 self.dinv if mode >= 2 or self.diag is None else self.diag,
+                 out.reshape(-1, 3, k), mode)          # (modes 0 and 1 do not read it)
 
     def node_residual(self, nodes, X, B, out) -> None:
         """``out[t] = (B - K X)`` at the grid nodes ``nodes[t]`` (int64), ``out`` of shape
@@ -362,13 +396,48 @@ class MatFreeOperator:
         self._run(self._all, X, B, out, 1)
         return out
 
-    def _scratch(self, k, colours):
-        """Scratch of the largest colour class in ``colours`` for k columns (kept per k)."""
-        rows = max(c.size for c in colours)
-        tmp = self._tmp.get(k)
-        if tmp is None or tmp.shape[0] < rows:
-            tmp = self._tmp[k] = np.empty((rows, 3, k))
-        return tmp
+    def _scratch(self, k, colours=None, rows=None):
+        """Scratch of ``rows`` nodes (default: the largest colour class in ``colours``) for k
+        columns: a view of one flat buffer kept for every k (the block loses columns as they
+        converge)."""
+        rows = max(c.size for c in colours) if rows is None else int(rows)
+        size = rows * 3 * k
+        flat = self._tmp.get("flat")
+        if flat is None or flat.size < size:
+            flat = self._tmp["flat"] = np.empty(size)
+        return flat[:size].reshape(rows, 3, k)
+
+    def restricted_residual(self, X, B, Rc, planes: int | None = None):
+        """``Rc = P^T (B - K X)`` (full weighting, :func:`restrict`) onto the (n/2)^3 grid, the
+        residual taken by slabs of fine planes (``planes`` coarse planes at a time, default
+        n/16) so that no fine residual block is held: the same numbers as restricting
+        :meth:`residual` (each fine node's residual and each coarse sum as there). A slab's last
+        fine plane is the next one's first (kept, not computed again)."""
+        n, k = self.n, X.shape[1]
+        nc = n // 2
+        step = max(2, nc // 8) if planes is None else max(1, int(planes))
+        step = min(step, nc)
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        B = np.ascontiguousarray(B, dtype=np.float64)
+        m = n * n
+        plane = np.arange(m, dtype=np.int64)
+        rc = Rc.reshape(-1, 3, k)
+        buf = self._scratch(k, rows=(2 * step + 1) * m)
+        last = 0
+        for K0 in range(0, nc, step):
+            K1 = min(nc, K0 + step)
+            z0 = (2 * K0 - 1) % n
+            nz = min(2 * (K1 - K0) + 1, n)
+            if K0 == 0 or nz == n:
+                first = 0                               # every plane of the slab computed
+            else:                                       # the previous slab's last plane
+                buf[:m] = buf[last * m:(last + 1) * m]
+                first = 1
+            nodes = (((z0 + np.arange(first, nz, dtype=np.int64)) % n)[:, None] * m
+                     + plane[None, :]).reshape(-1)
+            self.node_residual(nodes, X, B, buf[first * m:nz * m])
+            restrict_planes(nc, buf[:nz * m], z0, nz, rc, K0, K1)
+            last = nz - 1
 
     def gauss_seidel(self, X, B, colours):
         """Block Gauss-Seidel sweeps over the node colour classes ``colours``, in place in X."""
@@ -446,9 +515,12 @@ def typed_bsr(field: ElementField, pin: int = -1, pin_scale: float | None = None
 # geometric coarsening
 # ------------------------------------------------------------------------------------------------
 
-def stiffness_times_sparse(field: ElementField, Z: sp.spmatrix, pin: int = -1) -> sp.csr_matrix:
+def stiffness_times_sparse(field: ElementField, Z: sp.spmatrix, pin: int = -1,
+                           chunk: int = 32768) -> sp.csr_matrix:
     """``K Z`` for a sparse Z (3 N, m) (the deflation space of the stiff particles) without the
-    whole matrix: only the block rows of nodes within one node of Z's support are assembled.
+    whole matrix: only the block rows of nodes within one node of Z's support are assembled,
+    ``chunk`` block rows at a time (each row of the product is its own sum, so the result does
+    not depend on the chunks; at most 27 x 72 B x chunk of rows alive at once).
     With ``pin >= 0`` the pinned row is zero (Z must vanish at the pinned node)."""
     n = field.n
     N = n ** 3
@@ -464,10 +536,18 @@ def stiffness_times_sparse(field: ElementField, Z: sp.spmatrix, pin: int = -1) -
     rows = np.flatnonzero(near.reshape(-1))
     if pin >= 0:
         rows = rows[rows != pin]
-    out = sp.csr_matrix(typed_rows_bsr(field, rows)) @ Z
-    out = out.tocoo()
-    r3 = np.repeat(3 * rows, 3) + np.tile(np.arange(3), rows.size)
-    return sp.csr_matrix((out.data, (r3[out.row], out.col)), shape=(3 * N, Z.shape[1]))
+    parts = []
+    for s in range(0, rows.size, int(chunk)):
+        r = rows[s:s + int(chunk)]
+        out = (sp.csr_matrix(typed_rows_bsr(field, r)) @ Z).tocoo()
+        r3 = np.repeat(3 * r, 3) + np.tile(np.arange(3), r.size)
+        parts.append((out.data, r3[out.row], out.col))
+        del out
+    if not parts:
+        return sp.csr_matrix((3 * N, Z.shape[1]))
+    data, ri, ci = (np.concatenate(a) for a in zip(*parts))
+    del parts
+    return sp.csr_matrix((data, (ri, ci)), shape=(3 * N, Z.shape[1]))
 
 
 def child_prolongations() -> np.ndarray:
@@ -528,7 +608,7 @@ def coarsen(field: ElementField, chunk: int = 4096) -> ElementField:
 
 
 def grid_colours(n: int) -> list[np.ndarray]:
-    from .amg import grid_colours as gc
+    from homogenize.solvers.amg import grid_colours as gc
     return gc(n)
 
 
@@ -584,7 +664,7 @@ class GeometricVCycle:
                  amg_options, assembled_max: int = 64, fine_op: MatFreeOperator | None = None,
                  sweeps: int = 1, coarse: str = "amg", interface_sweeps: int = 0,
                  interface_halo: int = 1, patches=None):
-        from .amg import BlockVCycle, grid_node_coordinates, rigid_body_modes, smoothed_aggregation
+        from homogenize.solvers.amg import BlockVCycle, grid_node_coordinates, rigid_body_modes, smoothed_aggregation
         if coarse not in ("amg", "lu"):
             raise ValueError(f"coarse must be 'amg' or 'lu', got {coarse!r}")
         self.levels = []
@@ -662,11 +742,9 @@ class GeometricVCycle:
         L.op.gauss_seidel_from_zero(X, B, fwd)
         if i == 0 and self.patches is not None:
             self.patches.forward(X, B)
-        R = L.op.residual(X, B)
         ncg = L.n // 2
         Rc = np.empty((3 * ncg ** 3, k))
-        restrict(ncg, R.reshape(-1, 3, k), Rc.reshape(-1, 3, k))
-        del R
+        L.op.restricted_residual(X, B, Rc)      # no fine residual block
         Xc = np.ascontiguousarray(self._cycle(i + 1, Rc))
         del Rc
         prolong_add(ncg, Xc.reshape(-1, 3, k), X.reshape(-1, 3, k))

@@ -23,12 +23,12 @@ import numpy as np
 import pyamg
 import scipy.sparse as sp
 
-from .. import _kernels as kn
-from micro._validate import InputError
+from homogenize.voxels import _kernels as kn
+from micro.common.validate import InputError
 from scipy.linalg import cho_factor, cho_solve
 from scipy.sparse.linalg import splu
 
-from .options import AMGOptions
+from homogenize.solvers.options import AMGOptions
 
 __all__ = ["BSROp", "BlockVCycle", "grid_colours", "greedy_colours", "SA_SMOOTH",
            "smoothed_aggregation", "rigid_body_modes", "grid_node_coordinates"]
@@ -74,7 +74,7 @@ def grid_node_coordinates(n: int, wrap=(0, 0, 0)) -> np.ndarray:
 
     wrap : (x, y, z) node layers where the coordinates jump by one cell (node i gets the
         coordinates of node i - wrap): a rotation mode jumps there, so the layer should cut no
-        stiff particle (:func:`homogenize.cut`'s wrap planes).
+        stiff particle (:func:`homogenize.cell.cut`'s wrap planes).
     """
     k, j, i = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
     x = (np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1) - 0.5 * (n - 1)) / n
@@ -171,6 +171,40 @@ class BSROp:
         return out if X.ndim == 2 else out[:, 0]
 
 
+class TransposedBSROp:
+    """``A^T @ X`` for a :class:`BSROp` A, reading A's blocks transposed (no copy of them: only
+    the pattern of A^T, 8 B per block; the products are those of ``BSROp`` of the explicit
+    transpose, bit for bit)."""
+
+    def __init__(self, A: BSROp):
+        nbr = A.indptr.size - 1
+        ncb = A.shape[1] // A.C
+        rows = np.repeat(np.arange(nbr, dtype=np.int64), np.diff(A.indptr))
+        cols = np.asarray(A.indices, dtype=np.int64)
+        order = np.lexsort((rows, cols))             # by block column, then block row
+        idx = np.int32 if max(nbr, ncb, order.size) < 2 ** 31 else np.int64
+        self.indptr = np.zeros(ncb + 1, dtype=idx)
+        np.cumsum(np.bincount(cols, minlength=ncb), out=self.indptr[1:])
+        self.indices = np.ascontiguousarray(rows[order], dtype=idx)
+        self.perm = np.ascontiguousarray(order, dtype=idx)
+        del rows, cols, order
+        self.data = A.data
+        self.R, self.C = A.C, A.R
+        self.shape = (A.shape[1], A.shape[0])
+        par = self.data.size >= 200_000 and self.indptr.size - 1 >= 8
+        self._mm = kn.bsr_transposed_matmat if par else kn.bsr_transposed_matmat_serial
+
+    def __matmul__(self, X):
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        k = X.shape[1] if X.ndim == 2 else 1
+        Y = np.empty((self.shape[0], k))
+        self._mm(self.indptr, self.indices, self.perm, self.data, X.reshape(-1, self.C, k),
+                 Y.reshape(-1, self.R, k))
+        return Y if X.ndim == 2 else Y[:, 0]
+
+    __call__ = __matmul__
+
+
 def grid_colours(n: int) -> list[np.ndarray]:
     """Node sets of the periodic n^3 grid none of whose members share a voxel.
 
@@ -229,7 +263,8 @@ class _Level:
         if P is not None:
             P = _bsr(P)
             self.P = BSROp(P)
-            self.Rop = BSROp(P.T.tobsr(blocksize=(P.blocksize[1], P.blocksize[0])))
+            # the restriction P^T reads P's blocks transposed (no second copy of them)
+            self.Rop = TransposedBSROp(self.P)
         self._tmp = {}
         self._op = None
 

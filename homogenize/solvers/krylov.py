@@ -7,14 +7,14 @@
   columns (or for groups of them), breakdown-free; the matrix-free cell solver's default.
 
 Blocks are C-contiguous ``(n_dof, k)`` arrays (see :mod:`homogenize.solvers.amg`); the column
-reductions and updates are the numba kernels of :mod:`homogenize._kernels`.
+reductions and updates are the numba kernels of :mod:`homogenize.voxels._kernels`.
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 
-from .. import _kernels as kn
+from homogenize.voxels import _kernels as kn
 
 __all__ = ["Deflation", "block_cg", "coupled_block_cg", "CG_CHUNK", "RANK_TOL"]
 
@@ -181,7 +181,7 @@ def block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None = None,
     return X, hist
 
 
-#: rows per partial sum of the coupled block CG's reductions (homogenize._kernels.gram_parts):
+#: rows per partial sum of the coupled block CG's reductions (homogenize.voxels._kernels.gram_parts):
 #: fixed, so the sums do not depend on the number of threads
 CG_CHUNK = 8192
 #: directions of the block whose A-norm Gram matrix, scaled to unit diagonal, has an eigenvalue
@@ -242,17 +242,23 @@ def coupled_block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None 
     Per iteration: one product ``A P`` and one preconditioner application on the block, and the
     k x k coefficients alpha = (P^T A P)^+ P^T R and beta = -(P^T A P)^+ (A P)^T Z, with
     ``Z = M R`` (projected when deflated). Vectors: X, R, P, A P and Z (A P is kept until beta is
-    formed: one block more than :func:`block_cg` while the preconditioner runs).
+    formed: one block more than :func:`block_cg` while the preconditioner runs); the converged
+    columns of X are kept one by one beside the active block and the (n, k) solution is
+    assembled at the end, once R, P and A P are freed.
 
     groups : None (all columns coupled) or one label per column: columns are coupled only within
         their group (every group is its own block CG; all share the products with A and M).
         One group per column is :func:`block_cg`'s independent recursion.
     """
-    k = F.shape[1]
+    n, k = F.shape
     X, Xa, R, hist, idx, fa, tols = _cg_start(A, F, tol, deflation, x0)
     del F
     if idx.size == 0:
         return X, hist
+    # the converged columns, one (n,) array each, and Xa the active ones: no (n, k) block of all
+    # columns next to the active block while the CG runs (assembled at the end)
+    done_cols = {int(c): X[:, c].copy() for c in range(k) if c not in set(idx.tolist())}
+    del X
     labels = np.zeros(k, dtype=np.int64) if groups is None else np.asarray(groups)
     if labels.shape != (k,):
         raise ValueError(f"groups needs one label per column ({k}), got {labels.shape}")
@@ -272,7 +278,8 @@ def coupled_block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None 
         it += 1
         done = _record_step(hist, idx, _colnorms(R) / fa, tols, k, it, callback)
         if done.any():                  # converged columns leave the block
-            X[:, idx[done]] = Xa[:, done]
+            for j in np.flatnonzero(done):
+                done_cols[int(idx[j])] = Xa[:, j].copy()
             keep = ~done
             idx, fa = idx[keep], fa[keep]
             if idx.size == 0:
@@ -292,6 +299,10 @@ def coupled_block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None 
             P = Pn
             del Pn
         del Z
+    R = P = Q = None                    # (freed before the solution block is assembled)
+    X = np.empty((n, k))
+    for c in list(done_cols):
+        X[:, c] = done_cols.pop(c)
     if idx.size:
         X[:, idx] = Xa
     return X, hist

@@ -17,14 +17,14 @@ import types
 import numpy as np
 import pytest
 
-from homogenize import _assembly as asm
-from homogenize import _budget
+from homogenize.voxels import _assembly as asm
+from homogenize.voxels import _budget
 from homogenize.solvers import _matfree as mf
-from homogenize import cell as C
+from homogenize.cell import problem as C
 from homogenize.solvers import AMGOptions, SolverOptions, grid_colours
 from homogenize.solvers.amg import _Level
-from homogenize.mesh import voxelize
-from micro._validate import InputError
+from homogenize.voxels.mesh import voxelize
+from micro.common.validate import InputError
 
 FULL = bool(os.environ.get("MAPSIM_FULL"))
 
@@ -207,6 +207,48 @@ def test_transfer_kernels_equal_prolongation_matrix():
     assert np.allclose(Pc.sum(axis=2), 1.0)
 
 
+def test_restricted_residual_and_freed_diagonal_are_the_same_numbers():
+    """The V-cycle restricts the residual slab by slab (no fine residual block): bit for bit the
+    restriction of the whole residual, for every slab height; the diagonal blocks are dropped
+    once their inverses exist."""
+    rng = np.random.default_rng(5)
+    for n in (8, 10, 16):
+        ph = rng.random((n, n, n)) < 0.15
+        op = mf.MatFreeOperator(mf.element_field(np.where(ph, 1e11, 1e6),
+                                                 np.where(ph, 8e10, 6e5), 1e-8), pin=0)
+        nc = n // 2
+        for k in (1, 7):
+            X, B = rng.normal(size=(2, 3 * n ** 3, k))
+            ref = np.empty((3 * nc ** 3, k))
+            mf.restrict(nc, op.residual(X, B).reshape(-1, 3, k), ref.reshape(-1, 3, k))
+            for planes in (None, 1, 2, 3, nc):
+                out = np.empty_like(ref)
+                op.restricted_residual(X, B, out, planes)
+                assert np.array_equal(out, ref)
+        D = op.diag.copy()
+        assert np.allclose(np.einsum("pij,pjk->pik", op.dinv, D), np.eye(3), atol=1e-10)
+        assert op.diag is None
+        Y = rng.normal(size=(3 * n ** 3, 2))
+        assert np.array_equal(op @ Y, op @ Y.copy())        # the products no longer need it
+
+
+def test_stiffness_times_sparse_does_not_depend_on_the_chunks():
+    rng = np.random.default_rng(6)
+    n = 8
+    ph = rng.random((n, n, n)) < 0.2
+    field = mf.element_field(np.where(ph, 1e11, 1e6), np.where(ph, 8e10, 6e5), 1e-8)
+    import scipy.sparse as sp
+    Z = sp.random(3 * n ** 3, 12, density=0.05, random_state=7, format="csr")
+    Z = sp.csr_matrix(Z.multiply(np.arange(3 * n ** 3)[:, None] >= 3))   # zero at the pin
+    ref = mf.stiffness_times_sparse(field, Z, pin=0, chunk=10 ** 9)
+    for chunk in (1, 7, 100):
+        out = mf.stiffness_times_sparse(field, Z, pin=0, chunk=chunk)
+        assert np.array_equal(out.indptr, ref.indptr) and np.array_equal(out.indices, ref.indices)
+        assert np.array_equal(out.data, ref.data)
+    K = sp.diags((np.arange(3 * n ** 3) >= 3).astype(float)) @ mf.typed_bsr(field).tocsr()
+    assert np.allclose(ref.toarray(), (K @ Z).toarray(), rtol=1e-12, atol=1e-12 * abs(K).max())
+
+
 @pytest.mark.parametrize("method", ["composite", "centre"])
 def test_galerkin_coarse_operator_elementwise(method):
     n = 12
@@ -349,7 +391,7 @@ def test_interface_sweeps_cut_iterations():
     against none on the 32^3 bench RVE: fewer CG iterations in every load case that needs more
     than a handful, the same C_eff to the solver tolerance (results/cell/multigrid_robustness.json
     holds the bigger RVEs)."""
-    from homogenize.bench.cell import bench_rve
+    from homogenize.bench.bench_cell import bench_rve
     opts = SolverOptions(patch_shell_voxels=None)       # the sweeps alone
     rve = bench_rve(32)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
@@ -372,7 +414,7 @@ def test_coupled_block_cg_cuts_iterations():
     and leaves the magnetic column's recursion alone (its single-column iterations); "coupled"
     puts the magnetic column in the block too (fewer for it as well on this RVE). The same C_eff
     and magnetic stress to the solver tolerance in every mode."""
-    from homogenize.bench.cell import bench_rve
+    from homogenize.bench.bench_cell import bench_rve
     assert SolverOptions().block_cg == "strains"
     # the block CG alone: particle patches (the default since session 14) cut the iterations of
     # every mode to where the modes' differences are within one or two iterations
