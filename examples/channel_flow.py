@@ -52,7 +52,7 @@ PRESSURE_SWEEP = {dp: (r.flow_rate_m3_s, r.rigid_flow_rate_m3_s) for dp, r in (
 if __name__ == "__main__":
     from pathlib import Path
 
-    from micro._io import manifest, write_json
+    from micro.common.files import manifest, write_json
 
     out = Path(__file__).resolve().parents[1] / "results" / "channel_flow"
     ul_min = 6e10

@@ -23,7 +23,7 @@ diguet = diagnoses["diguet2010_magnetostriction"].as_dict()
 rtv615 = diagnoses["rtv615_tensile"].as_dict()
 
 if __name__ == "__main__":
-    from micro._io import manifest, write_json
+    from micro.common.files import manifest, write_json
     out = HERE.parent / "results" / "diagnose"
     for name, d in diagnoses.items():
         disc = out / "discussions" / f"{name}.md"

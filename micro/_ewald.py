@@ -23,7 +23,7 @@ import math
 import numpy as np
 import scipy.fft
 
-from . import _kernels as K
+from micro import _kernels as K
 
 _INV4PI = 1.0 / (4.0 * math.pi)
 

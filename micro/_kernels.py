@@ -10,7 +10,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ._numba import parallel_and_serial
+from micro.common.jit import parallel_and_serial
 
 # ---------------------------------------------------------------------------------------------
 # Placement (cell lists, overlap tests) -- owned by particles.py

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ._io import atomic_path
-from ._validate import InputError
-from .rve import RVE
+from micro.common.files import atomic_path
+from micro.common.validate import InputError
+from micro.rve import RVE
 
 __all__ = ["rve_mesh", "rve_scene", "export_mesh", "save_picture"]
 

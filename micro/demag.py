@@ -35,7 +35,7 @@ import math
 import numpy as np
 from scipy.special import elliprd, expn, j1
 
-from micro._validate import check_positive
+from micro.common.validate import check_positive
 
 __all__ = ["prism_demag_factors", "cylinder_demag_factors", "spheroid_demag_factors",
            "ellipsoid_demag_factors"]

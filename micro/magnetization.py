@@ -51,9 +51,9 @@ import numpy as np
 from scipy.constants import k as _KB
 from scipy.constants import mu_0 as MU0
 
-from ._validate import (ConvergenceError, InputError, check_choice, check_finite, check_positive,
+from micro.common.validate import (ConvergenceError, InputError, check_choice, check_finite, check_positive,
                         check_range)
-from .materials import FE, FE3O4, Constituent
+from micro.materials import FE, FE3O4, Constituent
 
 __all__ = ["MagnetizationLaw", "SaturatedLaw", "LinearLaw", "FrohlichKennellyLaw", "LangevinLaw",
            "SoftFKLaw", "ApproachLaw", "StonerWohlfarthLaw", "RegimeLaw",

@@ -27,7 +27,7 @@ Point dipoles of the same spheres (polarizabilities ``4 pi a^3 beta``,
 polarizabilities of :func:`point_dipole_polarizabilities`; the correction
 (:func:`near_field_correction_N`) is the exact pair force minus the point-dipole pair force
 in the same field, which vanishes at large separation (as ``r^-9`` against the ``r^-4`` of
-the dipole force for equal spheres). This is what :func:`homogenize.relax.relax` adds to its
+the dipole force for equal spheres). This is what :func:`homogenize.cell.relax.relax` adds to its
 periodic self-consistent point-dipole forces with ``near_field=True``.
 
 Nonlinear (saturating) laws: the spheres are treated as linear with their CHORD (secant)
@@ -59,7 +59,7 @@ from scipy.constants import mu_0 as MU0
 from scipy.linalg import lu_factor, lu_solve
 from scipy.special import gammaln
 
-from ._validate import InputError, check_finite, check_range
+from micro.common.validate import InputError, check_finite, check_range
 
 __all__ = ["pair_polarizabilities", "point_dipole_polarizabilities", "pair_force_N",
            "point_dipole_pair_force_N", "near_field_correction_N", "chord_permeability",

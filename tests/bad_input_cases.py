@@ -160,9 +160,9 @@ def build_fixtures(d: Path) -> Path:
     """Write every input the cases read into ``d`` (once per session): an RVE and broken
     copies of it, the studies, a finished table with its parts, experiments, a directory."""
     from micro.particles import generate_rve
-    from homogenize._evaluate import get_evaluator
-    from homogenize._study import parse_study
-    from homogenize.tables import _part_path, _write_part, parts_dir_for, run_batch
+    from homogenize.tables._evaluate import get_evaluator
+    from homogenize.tables._study import parse_study
+    from homogenize.tables.batch import _part_path, _write_part, parts_dir_for, run_batch
 
     d.mkdir(parents=True, exist_ok=True)
     rve = generate_rve(0.05, 30, 1)
@@ -295,7 +295,9 @@ CASES = [
     C("homogenize", "rve.h5", "--matrix-nu", "0.5", "--json", "h.json", words=("--matrix-nu",)),
     C("homogenize", "rve.h5", "--tol", "0.1", "--json", "h.json", words=("--tol", "0.01")),
     C("homogenize", "rve.h5", "--B", "nan", "--json", "h.json", words=("--B", "T")),
-    C("homogenize", "rve.h5", "--B", "1,2", "--json", "h.json", words=("--B", "3")),
+    C("homogenize", "rve.h5", "--B", "1,2", "--json", "h.json", words=("--B", "--B-direction")),
+    C("homogenize", "rve.h5", "--B", "0.1", "--B-direction", "0", "0", "0", "--json", "h.json",
+      words=("--B-direction", "zero")),
     C("homogenize", "rve.h5", "--gradB", "1", "--json", "h.json", words=("--gradB", "--B")),
     C("homogenize", "nope.h5", "--json", "h.json", words=("nope.h5", "does not exist")),
     C("homogenize", "overlap.h5", "--json", "h.json", words=("overlap",)),

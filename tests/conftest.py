@@ -37,3 +37,25 @@ def inprocess_client():
     """``with inprocess_client(n) as client:`` a Dask client on an in-process cluster of ``n``
     single-thread workers (the batch tests' cluster)."""
     return _inprocess_client
+
+
+def _synthetic_table(path: Path, study_text: str) -> Path:
+    """A finished table of the synthetic evaluator (known means and deviations), made
+    in-process: every part written directly, then aggregated by run_batch (no Dask)."""
+    from homogenize.tables._evaluate import get_evaluator
+    from homogenize.tables._study import parse_study
+    from homogenize.tables.batch import _part_path, _write_part, parts_dir_for, run_batch
+    study = parse_study(study_text, str(path.with_suffix(".toml")))
+    ev = get_evaluator("synthetic")
+    parts = parts_dir_for(path)
+    for task in study.tasks():
+        k = task.key(ev.id)
+        _write_part(_part_path(parts, task, k), task, k, ev(task))
+    run_batch(study, path, progress=False)
+    return path
+
+
+@pytest.fixture(scope="session")
+def synthetic_table():
+    """``synthetic_table(path, study_text)``: a finished synthetic-evaluator table at ``path``."""
+    return _synthetic_table

@@ -22,11 +22,11 @@ import micro  # noqa: E402,F401
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bad_input_cases as B  # noqa: E402
 
-from homogenize._evaluate import SyntheticEvaluator  # noqa: E402
-from homogenize._study import parse_study  # noqa: E402
-from homogenize.tables import parts_dir_for, read_table, run_batch  # noqa: E402
-from micro._numba_cache import choose_cache_dir  # noqa: E402
-from micro._validate import InputError  # noqa: E402
+from homogenize.tables._evaluate import SyntheticEvaluator  # noqa: E402
+from homogenize.tables._study import parse_study  # noqa: E402
+from homogenize.tables.batch import parts_dir_for, read_table, run_batch  # noqa: E402
+from micro.common.numba_cache import choose_cache_dir  # noqa: E402
+from micro.common.validate import InputError  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -169,7 +169,7 @@ def test_numba_cache_fallback_only_when_needed(tmp_path):
 # --------------------------------------------------------------------------- atomic writes
 def test_stale_temporaries_of_a_name_are_removed_by_its_next_write(tmp_path):
     import time
-    from micro._io import STALE_TEMP_SECONDS, atomic_write_text
+    from micro.common.files import STALE_TEMP_SECONDS, atomic_write_text
     old = tmp_path / ".a.json.abcd1234.tmp"          # a writer killed an hour ago
     live = tmp_path / ".a.json.efgh5678.tmp"         # a writer busy right now
     other = tmp_path / ".b.json.abcd1234.tmp"        # another file's: not ours to judge

@@ -11,9 +11,9 @@ import h5py
 import numpy as np
 import pytest
 
-from micro._io import (NotRegularFile, atomic_write_text, is_regular_file, open_regular,
+from micro.common.files import (NotRegularFile, atomic_write_text, is_regular_file, open_regular,
                        protected_inputs)
-from micro._validate import InputError, check_header, check_slender
+from micro.common.validate import InputError, check_header, check_slender
 
 # the packages first: with tests/ on sys.path and the editable install's finder behind it,
 # tests/homogenize (a directory without __init__.py) would become a namespace package
@@ -170,7 +170,7 @@ def test_diagnose_keeps_the_discussion_file(tmp_path, monkeypatch):
 
 # --------------------------------------------------------------------------- read back
 def test_check_part():
-    from homogenize.tables import check_part
+    from homogenize.tables.batch import check_part
     good = {"f_eff_N_m3": np.ones(3), "phi_eff": np.array(0.1), "__seed__": 5}
     assert check_part(dict(good), "k", np.array("k"), 5)["phi_eff"] == 0.1
     for bad, match in (({**good, "phi_eff": np.array(np.nan)}, "not finite"),
@@ -186,7 +186,7 @@ def test_check_part():
 
 
 def test_read_table_refuses_edited_tables(tmp_path):
-    from homogenize.tables import read_table
+    from homogenize.tables.batch import read_table
     src = Path(__file__).resolve().parent / "data" / "table_format1.h5"
     read_table(src)
     for attr, value, match in (("confidence", 2.0, "confidence = 2 is not in"),

@@ -45,7 +45,7 @@ MU0_TEXT = re.compile(r"4(\.0)?\s*\*\s*(np\.|math\.)?pi\s*\*\s*1(\.0)?e-0?7|"
 
 #: (file, value): how many such literals are legitimate there, and why
 ALLOWED = {
-    ("homogenize/cli/cell.py", 0.45): (1, "the largest volume fraction --phi accepts, not PDMS"),
+    ("homogenize/cli/cmd_cell.py", 0.45): (1, "the largest volume fraction --phi accepts, not PDMS"),
     ("homogenize/experiments/report.py", 0.45): (1, "figure height per row [in]"),
     ("homogenize/studies/paper.py", 0.45): (3, "Poisson's ratios swept by the locking and "
                                                "element studies (0.3, 0.45, 0.49), not PDMS"),

@@ -14,16 +14,7 @@ PROJECT = ("homogenize", "micro", "mapsim")
 SCRIPTS = sorted((ROOT / "results").rglob("*.py"))
 #: script -> the private uses still tolerated there (without line numbers), and why. Keep short:
 #: an entry no longer needed fails the test, so that it is removed.
-PENDING = {
-    "results/reliability/fault_tolerance.py": (
-        {"from homogenize._study import load_study",
-         "from homogenize.tables import _dask_client, run_batch",
-         "from micro._io import atomic_write_text, write_json"},
-        "issue 38's fault-injection harness (its own helper's work in progress): load_study and "
-        "the result-file helpers are public as homogenize.load_study and micro.write_json / "
-        "micro.atomic_write_text; the batch's local Dask cluster (tables._dask_client) has no "
-        "public name yet"),
-}
+PENDING: dict = {}   # script -> (tolerated private uses, why): none today
 
 
 def _private(name: str) -> bool:
@@ -67,16 +58,16 @@ def violations(source: str) -> list[str]:
 
 
 def test_the_checker_catches_private_use():
-    bad = ("from homogenize.bench.cell import _rve\n"
-           "import homogenize._assembly as asm\n"
+    bad = ("from homogenize.bench.bench_cell import _rve\n"
+           "import homogenize.voxels._assembly as asm\n"
            "from homogenize import _kernels as kn\n"
-           "from micro._io import write_json\n"
+           "from micro._ewald import ewald_sum\n"
            "from unittest import mock\n"
-           "import homogenize.cell as cell\n"
+           "import homogenize.cell.problem as cell\n"
            "s = cell._CellSolver\n"
-           "with mock.patch('homogenize.cell.X', 1):\n    pass\n")
+           "with mock.patch('homogenize.cell.problem.X', 1):\n    pass\n")
     assert len(violations(bad)) == 7
-    good = ("import resumable\nfrom homogenize.bench.cell import bench_rve\n"
+    good = ("import resumable\nfrom homogenize.bench.bench_cell import bench_rve\n"
             "class P:\n    def _build(self):\n        self._x = 1\n"
             "    def run(self):\n        self._build()\n        return self._x\n"
             "print(P.__doc__, __file__)\n")
@@ -102,8 +93,10 @@ def test_results_script_uses_the_public_api_only(path):
 def test_public_names_are_listed_in_all():
     import homogenize
     import micro
-    from homogenize import cell, cut, relax
-    from homogenize.bench import cell as bench_cell
+    from homogenize.cell import problem as cell
+    from homogenize.cell import cut
+    from homogenize.cell import relax
+    from homogenize.bench import bench_cell
     from homogenize.solvers import krylov, matfree
     for mod, names in ((micro, ["atomic_write_text", "write_json", "round_floats", "data_digest",
                                 "save_png", "RESULT_DIGITS", "ConvergenceError"]),
@@ -124,7 +117,7 @@ def test_public_names_are_listed_in_all():
 
 
 def test_bench_rve_is_the_bench_family():
-    from homogenize.bench.cell import bench_rve
+    from homogenize.bench.bench_cell import bench_rve
     a, b = bench_rve(32), bench_rve(32)
     assert a.n == max(8, int(round(0.035 * (32 / 2.5) ** 3 / (4.0 / 3.0 * np.pi) / 1.4)))
     np.testing.assert_array_equal(a.centers_m, b.centers_m)
@@ -148,9 +141,9 @@ def test_krylov_steps_by_public_names():
 def test_cell_solver_matches_homogenize_mesh_and_its_cycle():
     """The public ``cycle(0, B)`` of the solver's V-cycle is its ``M @ B``, the operator's
     ``node_residual`` over all nodes its ``residual``; ``cell_solver`` solves."""
-    from homogenize.bench.cell import bench_rve
-    from homogenize.cell import cell_solver
-    from homogenize.mesh import voxelize
+    from homogenize.bench.bench_cell import bench_rve
+    from homogenize.cell.problem import cell_solver
+    from homogenize.voxels.mesh import voxelize
     from homogenize.solvers import SolverOptions
     n = 16
     mesh = voxelize(bench_rve(n), n, method="composite")
@@ -170,7 +163,7 @@ def test_cell_solver_matches_homogenize_mesh_and_its_cycle():
 
 
 def test_pair_contact_forces_is_the_relaxation_penalty():
-    from homogenize import relax
+    from homogenize.cell import relax
     from micro.materials import PDMS, elastic
     a = np.array([1e-6, 1e-6])
     x = np.array([[5e-6, 5e-6, 5e-6], [7.05e-6, 5e-6, 5e-6]])     # gap 0.05 um < 0.1 um

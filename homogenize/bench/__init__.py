@@ -12,13 +12,15 @@ from __future__ import annotations
 import sys
 import time
 
-from homogenize.bench import cell, dipoles, macro, particles, relax, specimen, tables
+from homogenize.bench import (bench_cell, bench_dipoles, bench_macro, bench_particles,
+                              bench_relax, bench_specimen, bench_tables)
 
 __all__ = ["PROVIDERS", "run"]
 
 #: Providers by name, in the order they run.
-PROVIDERS = {"particles": particles, "dipoles": dipoles, "cell": cell, "macro": macro,
-             "tables": tables, "relax": relax, "specimen": specimen}
+PROVIDERS = {"particles": bench_particles, "dipoles": bench_dipoles, "cell": bench_cell,
+             "macro": bench_macro, "tables": bench_tables, "relax": bench_relax,
+             "specimen": bench_specimen}
 
 
 def run(quick: bool = False, only: str | None = None) -> list[dict]:

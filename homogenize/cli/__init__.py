@@ -22,17 +22,19 @@ import os
 import sys
 from pathlib import Path
 
-from micro._io import protected_inputs
-from micro._validate import EXIT_CONVERGENCE, EXIT_INPUT, ConvergenceError, InputError
+from micro.common.files import protected_inputs
+from micro.common.validate import EXIT_CONVERGENCE, EXIT_INPUT, ConvergenceError, InputError
 
-from homogenize.cli import bench, cell, experiments, macro, relax, rve, specimen, tables
+from homogenize.cli import (cmd_bench, cmd_cell, cmd_experiments, cmd_macro, cmd_relax,
+                            cmd_rve, cmd_specimen, cmd_tables)
 from homogenize.cli._common import (Formatter, Parser, check_option_needs, check_output_dir,
                                     check_outputs)
 
 __all__ = ["main", "build_parser"]
 
 # Command groups, in the order their commands appear in --help.
-_GROUPS = (macro, specimen, rve, cell, relax, tables, experiments, bench)
+_GROUPS = (cmd_macro, cmd_specimen, cmd_rve, cmd_cell, cmd_relax, cmd_tables, cmd_experiments,
+           cmd_bench)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -10,8 +10,8 @@ import numpy as np
 from homogenize.macro.effective import magnetization_from_table
 from homogenize.macro.follower_fem import FollowerFEM, follower_fem_at_gap
 from homogenize.macro.magnets import PermanentMagnet
-from homogenize.macro.pullin import pullin_sweep, place_magnet
-from homogenize.tables.batch import read_table
+from homogenize.macro.pullin import interval_ends, pullin_sweep, place_magnet
+from homogenize.tables.batch import modulus_from_table, read_table
 from micro.common.files import atomic_path, manifest, write_json
 from micro.common.validate import InputError
 from micro.materials import ElasticMaterial
@@ -71,13 +71,26 @@ def _magnet_at(args, strip, gap):
                         lateral_offset_m=y - 0.5 * strip.width_m)
 
 
-def _laws(args, phi, M_of_H):
-    """The mean law, and with --table the ends of its confidence interval."""
+def _ends(args, phi, mat, M_of_H):
+    """``(ends, what)``: the (modulus, law) pairs of the mean and, with --table, of the two ends
+    of the interval (:func:`homogenize.macro.pullin.interval_ends`: the ends of the table's
+    M_eff interval and, with --E-from-table, of its E_eff interval widened by the
+    discretization error), and the words that name what the interval carries."""
     if not args.table:
-        return {"mean": M_of_H}
+        return interval_ends(mat.E_Pa, M_of_H), None
     t = read_table(args.table)
     at = parse_at(args.table_at)
-    return {b: magnetization_from_table(t, phi, bound=b, **at) for b in ("mean", "low", "high")}
+    bounds = {b: magnetization_from_table(t, phi, bound=b, **at) for b in ("low", "high")}
+    E_est, E = None, mat.E_Pa
+    if getattr(args, "E_from_table", False):
+        mech = {k: v for k, v in at.items() if k not in ("B_T", "gradB_T_per_m")}
+        E_est = modulus_from_table(t, phi, **mech)
+        if E_est is None:
+            raise InputError(f"--E-from-table: {args.table} has no E_eff (the study ran without "
+                             f"fem = true)")
+        E = E_est.mean
+    what = "table's M_eff" + (" and E_eff" if E_est is not None else "") + " intervals"
+    return interval_ends(E, M_of_H, E_est, bounds), what
 
 
 def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
@@ -89,11 +102,10 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
     gaps = (np.array([args.gap_m]) if args.gap_m is not None
             else parse_gap_sweep(args.gap_sweep_m))
     magnet = _magnet_at(args, strip, float(gaps[0]))
-    laws = _laws(args, phi, M_of_H)
+    ends, what = _ends(args, phi, mat, M_of_H)
     results = {}
-    for bound, law in laws.items():
-        results[bound] = pullin_sweep(strip, ElasticMaterial(mat.E_Pa, mat.nu,
-                                                             mat.density_kg_m3),
+    for bound, (E, law) in ends.items():
+        results[bound] = pullin_sweep(strip, ElasticMaterial(E, mat.nu, mat.density_kg_m3),
                                       magnet, law, gap_sweep_m=gaps, round_trip=gaps.size > 1,
                                       demag_factor=N, gravity_m_s2=args.gravity_m_s2)
     r = results["mean"]
@@ -105,13 +117,14 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
     print(f"magnet: {args.magnet} {tuple(args.magnet_size)} m, B_r {args.remanence_T:g} T, axis "
           f"at x = {magnet.position_m[0]:.4g} m, y = {magnet.position_m[1]:.4g} m; M_eff(H) from "
           f"{law_name}, phi = {phi:g}; strip demagnetizing factor N = {N:.4f}; field on the "
-          f"DEFORMED strip (follower elastica, {r.n_segments} segments)")
+          f"DEFORMED strip (follower elastica, {r.n_segments} segments); E = "
+          f"{ends['mean'][0]:.6g} Pa")
 
     def iv(key):
         if key not in lo_hi:
             return ""
         a, b = lo_hi[key]
-        return f" [{a:.4g}, {b:.4g}] (table's M_eff interval)"
+        return f" [{a:.4g}, {b:.4g}] ({what})"
     snap = "snaps to the magnet" if r.snap else "touches the magnet without a snap"
     print(f"pull-in gap {r.pull_in_gap_m:.4g} m{iv('pull_in_gap_m')} (tip deflection there "
           f"{r.pull_in_tip_deflection_m:.4g} m): closing the gap below it the strip {snap}")
@@ -138,7 +151,10 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
         "axis_x_m": magnet.position_m[0], "axis_y_m": magnet.position_m[1]},
         "magnetization": law_name, "phi": phi, "demag_factor": N,
         "pullin": r.to_dict(),
-        "interval": {k: v for k, v in lo_hi.items()} or None,
+        "E_Pa": ends["mean"][0],
+        "interval": {k: v for k, v in lo_hi.items()} or None, "interval_from": what,
+        "interval_ends": {b: {"E_Pa": E, "M_eff": "low" if b == "low" else "high"}
+                          for b, (E, _) in ends.items() if b != "mean"} or None,
         "manifest": manifest(config_of(args), None)}
     if args.json:
         write_json(args.json, json_ready(out))
@@ -158,18 +174,35 @@ def follower_fem_gap(args, strip, mat, M_of_H, phi, law_name, N) -> int:
                          "--follower-fem")
     g = float(args.gap_m)
     magnet = _magnet_at(args, strip, g)
-    model = FollowerFEM(strip, ElasticMaterial(mat.E_Pa, mat.nu, mat.density_kg_m3), magnet,
-                        M_of_H, nz=args.nz if args.nz is not None else 2, order=args.order,
-                        demag_factor=N, gravity_m_s2=args.gravity_m_s2)
-    r = follower_fem_at_gap(model, g)
+    ends, what = _ends(args, phi, mat, M_of_H)
+    runs, models = {}, {}
+    for bound, (E, law) in ends.items():
+        models[bound] = FollowerFEM(strip, ElasticMaterial(E, mat.nu, mat.density_kg_m3), magnet,
+                                    law, nz=args.nz if args.nz is not None else 2,
+                                    order=args.order, demag_factor=N,
+                                    gravity_m_s2=args.gravity_m_s2)
+        runs[bound] = follower_fem_at_gap(models[bound], g)
+    r, model = runs["mean"], models["mean"]
     print(f"magnet: {args.magnet} {tuple(args.magnet_size)} m, B_r {args.remanence_T:g} T, axis "
           f"at x = {magnet.position_m[0]:.4g} m, y = {magnet.position_m[1]:.4g} m; M_eff(H) from "
           f"{law_name}, phi = {phi:g}; strip demagnetizing factor N = {N:.4f}; field on the "
           f"DEFORMED body (follower FEM: 3D neo-Hookean, P{r.order}, {r.divisions} hexahedra of "
           f"6 tetrahedra{' on the half width' if model.half else ''}, {r.n_dof} dofs), "
           f"continued from the gap {r.far_gap_m:.4g} m")
+    interval = None
+    if len(runs) > 1:
+        ends_ok = [runs[b] for b in ("low", "high")]
+        # an end without equilibrium at this gap has snapped: the interval is open there
+        interval = {"tip_deflection_m": [x.tip_deflection_m if x.converged else None
+                                         for x in ends_ok],
+                    "snapped": [not x.converged for x in ends_ok], "from": what}
     if r.converged:
-        print(f"gap {g:.4g} m: tip deflection {r.tip_deflection_m:.6g} m")
+        iv = ""
+        if interval is not None:
+            lo, hi = interval["tip_deflection_m"]
+            iv = (f" [{lo:.6g}, " + (f"{hi:.6g}]" if hi is not None else "snapped]")
+                  + f" ({what})") if lo is not None else f" (the end of the {what} snaps)"
+        print(f"gap {g:.4g} m: tip deflection {r.tip_deflection_m:.6g} m{iv}")
     else:
         lo, hi = r.pull_in_bracket_m
         print(f"gap {g:.4g} m: below the FEM's pull-in bracket [{lo:.5g}, {hi:.5g}] m (no "
@@ -183,7 +216,9 @@ def follower_fem_gap(args, strip, mat, M_of_H, phi, law_name, N) -> int:
                 "remanence_T": args.remanence_T, "axis_x_m": magnet.position_m[0],
                 "axis_y_m": magnet.position_m[1]},
             "magnetization": law_name, "phi": phi, "demag_factor": N,
-            "follower_fem": r.to_dict(), "manifest": manifest(config_of(args), None)}))
+            "E_Pa": ends["mean"][0], "follower_fem": r.to_dict(), "interval": interval,
+            "interval_ends": {b: x.to_dict() for b, x in runs.items() if b != "mean"} or None,
+            "manifest": manifest(config_of(args), None)}))
     return 0
 
 

@@ -13,7 +13,7 @@ Adapters (the physics lives elsewhere in the project; nothing is re-implemented)
 
 * beams -- ``homogenize.macro.closed_form`` (Euler-Bernoulli compliance, elastica table),
 * magnetization laws -- ``micro.magnetization.get_law``,
-* filler stiffening -- the voxel-FEM table of ``homogenize.cell`` (module ``tables``),
+* filler stiffening -- the voxel-FEM table of ``homogenize.cell.problem`` (module ``tables``),
 * core-shell moments -- ``micro.particles``.
 
 An extension whose precomputed table is missing raises :class:`Unavailable`; the diagnosis
@@ -32,11 +32,11 @@ from scipy.constants import mu_0
 
 from micro import dipoles, magnetization, particles
 
-from homogenize import cell as cellmod
-from homogenize.experiments.tables import Unavailable, filler_stiffness_ratio
+from homogenize.cell import problem as cellmod
+from homogenize.experiments.rve_tables import Unavailable, filler_stiffness_ratio
 from homogenize.macro import closed_form
-from micro._io import atomic_write_text
-from micro._validate import InputError
+from micro.common.files import atomic_write_text
+from micro.common.validate import InputError
 from micro.materials import FE, PDMS
 from scipy.interpolate import CubicSpline
 from scipy.constants import k as kB
@@ -379,7 +379,7 @@ def local_field_factor(phi):
 
 
 # ------------------------------------------------------------------------------------------
-# filler stiffening: adapter onto homogenize.cell closed forms
+# filler stiffening: adapter onto homogenize.cell.problem closed forms
 
 #: Iron particles (the FEM helper's defaults for ``homogenize_rve``).
 PARTICLE_E_PA, PARTICLE_NU = FE.E_Pa, FE.nu
@@ -395,7 +395,7 @@ def stiffening_ratio(phi, nu_matrix: float = PDMS.nu, E_matrix_Pa: float = PDMS.
 
 
 def mori_tanaka_stiffening_ratio(phi, nu_matrix: float, E_matrix_Pa: float = PDMS.E_Pa):
-    """The Mori-Tanaka estimate of ``homogenize.cell`` for the same particles (the
+    """The Mori-Tanaka estimate of ``homogenize.cell.problem`` for the same particles (the
     Hashin-Shtrikman bound on the matrix side): a cross-check of the FEM table only."""
     cell = cellmod
     Km, Gm = cell.bulk_shear(E_matrix_Pa, nu_matrix)

@@ -23,14 +23,14 @@ dipolar_interaction             local field of randomly dispersed interacting di
                                 with the PREDICTED specimen-shape (Maxwell) stress ``k_shape``
                                 of the cylinder and the RVE stress ``k_rve`` of random dipoles
                                 (virial table from ``micro.dipoles`` times the share the stiff
-                                particles pass on to the matrix, ``homogenize.cell``);
+                                particles pass on to the matrix, ``homogenize.cell.problem``);
                                 ``kappa_extra`` (fitted) is the stress this affine dipole
                                 picture does not explain
 oxide_shell                     Fe core + Fe3O4 shell per particle (``micro.particles.CoreShell``
                                 calibrated to the powder's sigma_s at its nominal radius):
                                 smaller particles carry less moment (``shell_m``)
 filler_stiffening               effective modulus of iron spheres in the matrix: the voxel-FEM
-                                homogenization (``homogenize.cell``) of random RVEs, tabulated
+                                homogenization (``homogenize.cell.problem``) of random RVEs, tabulated
                                 against phi (none)
 geometric_nonlinearity          elastica instead of Euler-Bernoulli, from
                                 ``homogenize.macro.closed_form`` (none)
@@ -46,7 +46,7 @@ demagnetization                 internal field ``H_int = H_a - N M`` with N the 
                                 factor of the cylinder's aspect ratio (none)
 microstructure_evolution        magnetostriction, on top of ``dipolar_interaction``: the
                                 particles move in the matrix under their forces (two-way
-                                coupled RVE, ``homogenize.relax``). Form ``coupled_rve``: the
+                                coupled RVE, ``homogenize.cell.relax``). Form ``coupled_rve``: the
                                 relaxed-minus-affine strain of the coupled RVE, read from a
                                 relax table made by ``mapsim batch`` (``evaluator = "relax"``,
                                 ``data/relax_*.h5`` with provenance) at the specimen's phi and
@@ -63,9 +63,9 @@ import numpy as np
 
 from micro.materials import PDMS, SEED
 
-from . import _physics as P
-from .io import Experiment
-from homogenize.experiments.tables import (Unavailable, microstructure_stress_coefficient,
+from homogenize.experiments import _physics as P
+from homogenize.experiments.io import Experiment
+from homogenize.experiments.rve_tables import (Unavailable, microstructure_stress_coefficient,
                                            restructuring_table)
 
 __all__ = ["CAUSES", "DESCRIPTIONS", "VARIANTS", "REQUIRES", "ModelSpec", "Param", "parameters",

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 from micro.materials import FE
 
-from .io import Matrix, Particles, write_experiment
+from homogenize.experiments.io import Matrix, Particles, write_experiment
 
 __all__ = ["read_diguet", "read_rtv615", "write_diguet", "write_rtv615", "DIGUET_PHI"]
 

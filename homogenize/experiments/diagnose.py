@@ -39,14 +39,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, stats
 
-from .causes import (CAUSES, REQUIRES, VARIANTS, ModelSpec, Param, applicable,
+from homogenize.experiments.causes import (CAUSES, REQUIRES, VARIANTS, ModelSpec, Param, applicable,
                      coupled_rve_available, forms, parameters, predict)
-from .io import Experiment
+from homogenize.experiments.io import Experiment
 from homogenize.experiments.causes import composite_magnetization_A_per_m, predicted_stress_coefficients
 from dataclasses import replace as _replace
 from dataclasses import replace
 from homogenize.experiments.causes import default_params
-from micro._progress import progress_bar
+from micro.common.progress import progress_bar
 
 __all__ = ["Diagnosis", "FitResult", "diagnose", "make_folds", "fit", "cross_validate",
            "covariates", "MIN_GAIN", "ALPHA"]
@@ -374,9 +374,9 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
         "coarse" | "normal", or None: not done
     """
     if specimen_mesh is not None:
-        from .specimen_account import MESHES
+        from homogenize.experiments.specimen_account import MESHES
         if specimen_mesh not in MESHES:
-            from micro._validate import InputError
+            from micro.common.validate import InputError
             raise InputError(f"specimen_mesh must be one of {sorted(MESHES)} or None, got "
                              f"{specimen_mesh!r}")
     folds = make_folds(exp, max_folds=max_folds)
@@ -498,7 +498,7 @@ def diagnose(exp: Experiment, *, min_gain: float = MIN_GAIN, alpha: float = ALPH
         if exp.kind == "magnetostriction" else None
     sp = None
     if exp.kind == "magnetostriction" and specimen_mesh is not None:
-        from .specimen_account import specimen_account
+        from homogenize.experiments.specimen_account import specimen_account
         say = (lambda text: print(text, file=sys.stderr)) if progress else None
         sp = specimen_account(exp, final_cv_pred=current.cv_pred, mesh=specimen_mesh,
                               progress=say)
@@ -522,10 +522,10 @@ def microstructure_account(exp: Experiment, folds, baseline: Candidate,
     ok, why = coupled_rve_available(exp)
     if not ok:
         return {"available": False, "why": why}
-    from homogenize._stats import t_half_width
-    from .causes import predicted_stress_coefficients, composite_magnetization_A_per_m
-    from .tables import restructuring_table
-    from . import _physics as P
+    from homogenize.tables._stats import t_half_width
+    from homogenize.experiments.causes import predicted_stress_coefficients, composite_magnetization_A_per_m
+    from homogenize.experiments.rve_tables import restructuring_table
+    from homogenize.experiments import _physics as P
     # the final model's magnetization (law, shell, demagnetization, hysteresis), no stress
     mag = ModelSpec(exp.kind, tuple(c for c in final.spec.causes
                                     if c not in ("dipolar_interaction", "microstructure_evolution")),

@@ -1,7 +1,7 @@
 """Measured experiments: one TOML file plus one CSV file (see ``examples/data/EXPERIMENT_FORMAT.md`` in the project).
 
 :func:`load_experiment` reads and validates both files completely before returning; any
-problem raises :class:`micro._validate.InputError` with ONE message naming the file, the row
+problem raises :class:`micro.common.validate.InputError` with ONE message naming the file, the row
 (1-based line number in the file, the header being row 1) and the column. Nothing is converted
 silently: units are SI as the spec says, and a value outside its physical range is refused.
 """
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._validate import InputError, check_regular_file
-from micro._io import atomic_write_text
+from micro.common.validate import InputError, check_regular_file
+from micro.common.files import atomic_write_text
 from micro.materials import GRAVITY_M_S2, PDMS, SEED
 
 __all__ = ["KINDS", "REQUIRED", "OPTIONAL", "MEASURED", "Matrix", "Particles", "Setup",

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._io import atomic_path, atomic_write_text
+from micro.common.files import atomic_path, atomic_write_text
 
-from .causes import DESCRIPTIONS
-from .diagnose import Diagnosis, covariates, residual_correlations
+from homogenize.experiments.causes import DESCRIPTIONS
+from homogenize.experiments.diagnose import Diagnosis, covariates, residual_correlations
 
 __all__ = ["write_report", "UNITS", "X_AXIS"]
 

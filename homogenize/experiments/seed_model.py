@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from micro.materials import SEED
 
-from .io import Experiment
+from homogenize.experiments.io import Experiment
 
 __all__ = ["seed_body_force_N_m3", "seed_predict", "seed_parameter"]
 

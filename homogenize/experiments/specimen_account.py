@@ -12,14 +12,14 @@ material's magnetic stress:
 * ``continuum`` -- no microstructural stress (Lefevre, Danas & Lopez-Pamies 2017; Stewart &
   Anand 2025);
 * ``affine`` -- plus the stress of the particles' interactions at fixed positions
-  (:func:`homogenize.experiments.tables.affine_kappa`: dipole virial x the cell FEM's share);
+  (:func:`homogenize.experiments.rve_tables.affine_kappa`: dipole virial x the cell FEM's share);
 * ``relaxed`` -- the affine stress plus what the coupled RVE (particles that move,
-  :mod:`homogenize.relax`) adds, from a relax table at the experiment's phi and MATRIX modulus
+  :mod:`homogenize.cell.relax`) adds, from a relax table at the experiment's phi and MATRIX modulus
   (:func:`relaxed_kappa`); offered only when such a table exists.
 
 Independent inputs (none taken from the magnetostriction curve): the TOML's matrix modulus
 ``[matrix] E_Pa`` and ``nu``, times the project's filler stiffening (cell FEM,
-:func:`homogenize.experiments.tables.filler_stiffness_ratio`, with its standard error); the
+:func:`homogenize.experiments.rve_tables.filler_stiffness_ratio`, with its standard error); the
 composite's ``M(H_in)`` from self-consistent dipoles in random periodic RVEs of the TOML's
 particles (:func:`composite_law`; the physical default law of :mod:`micro.magnetization`).
 
@@ -48,13 +48,13 @@ from scipy.constants import mu_0 as MU0
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
 from homogenize.macro.specimen import Specimen, solve_specimen
-from micro._validate import ConvergenceError, InputError
+from micro.common.validate import ConvergenceError, InputError
 from micro.dipoles import solve as solve_dipoles
 from micro.magnetization import DEFAULT_LAW
 from micro.particles import CoreShell, Monodisperse, generate_rve
 
-from .io import Experiment
-from .tables import (Unavailable, affine_kappa, filler_stiffness_ratio, restructuring_table,
+from homogenize.experiments.io import Experiment
+from homogenize.experiments.rve_tables import (Unavailable, affine_kappa, filler_stiffness_ratio, restructuring_table,
                      stiffness_table)
 
 __all__ = ["MESHES", "MODELS", "composite_law", "relaxed_kappa", "loo_fitted_kappa",
@@ -127,7 +127,7 @@ def relaxed_kappa(phi: float, Ms_particle_A_per_m: float, restructuring):
     r = restructuring
     if r.M_relaxed_A_per_m is None:
         raise InputError("the relax table's M_eff is missing; read it with "
-                         "homogenize.experiments.tables.restructuring_table")
+                         "homogenize.experiments.rve_tables.restructuring_table")
     # x = mu0 M^2 / E_par of the relaxed RVE, so d_kappa = -d_eps / x
     with np.errstate(divide="ignore", invalid="ignore"):
         dk = np.where(r.x_relaxed > 0, -r.d_eps_rve / r.x_relaxed, 0.0).mean(axis=1)

@@ -14,13 +14,13 @@ import time
 
 import numpy as np
 
-from micro._io import atomic_path, atomic_write_text, manifest, write_json
+from micro.common.files import atomic_path, atomic_write_text, manifest, write_json
 
-from .causes import CAUSES, applicable
-from .diagnose import diagnose
-from .synthetic import generate, study_cases
+from homogenize.experiments.causes import CAUSES, applicable
+from homogenize.experiments.diagnose import diagnose
+from homogenize.experiments.synthetic import generate, study_cases
 from pathlib import Path
-from micro._progress import progress_bar
+from micro.common.progress import progress_bar
 
 __all__ = ["run_study", "summarize"]
 

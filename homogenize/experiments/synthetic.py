@@ -52,7 +52,7 @@ from scipy.constants import mu_0
 
 from micro.materials import FE, FE3O4, GRAVITY_M_S2, PDMS, SEED
 
-from .io import Experiment, Matrix, Particles, Setup, _ro
+from homogenize.experiments.io import Experiment, Matrix, Particles, Setup, _ro
 from homogenize.experiments.io import write_experiment
 
 __all__ = ["SyntheticCase", "generate", "CASES", "study_cases", "write_case"]

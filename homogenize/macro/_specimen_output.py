@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from homogenize._cell_output import _finish_xml, _text
-from micro._io import atomic_path
+from homogenize.cell._output import _finish_xml, _text
+from micro.common.files import atomic_path
 
 __all__ = ["write_specimen_vtu", "specimen_vtu_arrays", "specimen_vtu_arrays_3d",
            "plot_specimen_strains", "SPECIMEN_VTU_UNITS"]

@@ -20,7 +20,7 @@ import numpy as np
 from homogenize.macro import closed_form as cf
 from homogenize.macro.fem import Material, box_mesh, linear_solve, neo_hookean_solve, \
     probe_displacement
-from micro._validate import InputError, check_choice, check_positive, check_slender
+from micro.common.validate import InputError, check_choice, check_positive, check_slender
 from micro.materials import PDMS
 
 __all__ = ["Strip", "CantileverResult", "MODELS", "beam_divisions", "solve_cantilever",

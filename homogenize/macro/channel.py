@@ -32,7 +32,7 @@ from skfem.models.elasticity import linear_elasticity
 
 from homogenize.macro.fem import (FEMSolution, Material, _solve_free, box_mesh, probe_displacement,
                                   vector_basis)
-from micro._validate import check_choice, check_finite, check_positive, check_slender
+from micro.common.validate import check_choice, check_finite, check_positive, check_slender
 
 __all__ = ["ChannelGeometry", "ChannelResult", "solve_channel"]
 

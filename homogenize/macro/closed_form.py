@@ -41,7 +41,7 @@ from scipy.integrate import solve_bvp, solve_ivp
 from scipy.interpolate import CubicSpline
 from scipy.optimize import brentq
 
-from micro._validate import InputError, check_finite, check_positive, check_range
+from micro.common.validate import InputError, check_finite, check_positive, check_range
 from micro.materials import PDMS
 
 __all__ = [

@@ -31,7 +31,7 @@ import numpy as np
 
 from homogenize.macro.cantilever import Strip, beam_divisions, solve_cantilever
 from homogenize.macro.fem import Material
-from micro._validate import InputError, check_positive
+from micro.common.validate import InputError, check_positive
 
 __all__ = ["ConvergedTip", "converged_tip", "default_divisions", "observed_rate", "MEASURED_RATE",
            "DEFAULT_NZ", "DEFAULT_ASPECT"]

@@ -1,7 +1,7 @@
 """Macro solvers fed by a batch table: the effective material with its intervals.
 
 The table gives the body force and (with FEM results) the modulus as estimates with confidence
-intervals (:mod:`homogenize.tables`); the functions here carry those intervals through the
+intervals (:mod:`homogenize.tables.batch`); the functions here carry those intervals through the
 macro models.
 """
 from __future__ import annotations
@@ -10,16 +10,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from micro._validate import check_choice
-from micro._validate import InputError
+from micro.common.validate import check_choice
+from micro.common.validate import InputError
 from micro.materials import FE, PDMS, SEED, ElasticMaterial, mixture_density_kg_m3
 from scipy.constants import mu_0 as MU0
 
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.closed_form import eb_tip_deflection_m, elastica_tip_deflection
 from homogenize.macro.magnets import linear_magnetization, tabulated_magnetization
-from homogenize._stats import widen_in_quadrature
-from homogenize.tables import (Estimate, Table, body_force_from_table, interpolate,
+from homogenize.tables._stats import widen_in_quadrature
+from homogenize.tables.batch import (Estimate, Table, body_force_from_table, interpolate,
                                modulus_from_table, read_table)
 
 __all__ = ["TipDeflection", "tip_deflection_from_table", "EffectiveMaterial",

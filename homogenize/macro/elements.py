@@ -72,7 +72,7 @@ from homogenize.macro.cantilever import Strip
 from homogenize.macro.exporters import ExportSpec, parse_ccx_dat, write_deck
 from homogenize.macro.fem import FEMSolution, Material, box_mesh, load_vector, \
     probe_displacement
-from micro._validate import InputError, check_choice, check_range
+from micro.common.validate import InputError, check_choice, check_range
 
 __all__ = ["ELEMENTS", "CCX_ELEMENTS", "HOURGLASS", "ElementType", "StripTip", "solve_strip",
            "ccx_tip", "ccx_available"]

@@ -85,7 +85,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from micro._validate import InputError, check_choice, check_positive, check_range
+from micro.common.validate import InputError, check_choice, check_positive, check_range
 
 __all__ = ["ExportSpec", "DIRECTIONS", "to_elmer", "to_abaqus", "abaqus_model", "abaqus_step",
            "parse_elmer", "parse_abaqus", "export_text", "Deck", "DeckMesh", "deck_mesh",
@@ -692,7 +692,7 @@ def _elmer_sif(kind: str, spec: ExportSpec, mesh: DeckMesh, mesh_dir: str, stem:
 
 def _write_elmer_mesh(directory, mesh: DeckMesh) -> list:
     from pathlib import Path
-    from micro._io import atomic_path
+    from micro.common.files import atomic_path
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     nb = sum(len(f) for f, _ in mesh.boundaries.values())
@@ -754,7 +754,7 @@ def write_deck(kind: str, solver: str, spec: ExportSpec, geometry, out_path, *,
     node of set ``NTIP``), ``nlgeom`` and the estimate, and the per-element loads.
     """
     from pathlib import Path
-    from micro._io import atomic_path
+    from micro.common.files import atomic_path
     check_choice("solver", solver, DECK_SOLVERS)
     check_choice("kind", kind, DECK_KINDS)
     check_choice("nlgeom", nlgeom, NLGEOM_MODES)

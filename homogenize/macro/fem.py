@@ -24,7 +24,7 @@ from skfem.models.elasticity import linear_elasticity
 
 from micro.materials import ElasticMaterial
 
-from micro._validate import InputError, check_choice, check_finite, check_positive
+from micro.common.validate import InputError, check_choice, check_finite, check_positive
 
 from homogenize import solvers
 from skfem import BilinearForm

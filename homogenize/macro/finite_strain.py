@@ -60,7 +60,7 @@ from scipy.spatial import Delaunay
 from skfem import CellBasis, ElementTetP1, ElementTetP2, ElementTriP1, ElementTriP2, \
     FacetBasis, MeshTet, MeshTri
 
-from micro._validate import ConvergenceError, InputError, check_choice, check_finite, \
+from micro.common.validate import ConvergenceError, InputError, check_choice, check_finite, \
     check_positive, check_range
 from micro.materials import ElasticMaterial
 

@@ -43,7 +43,7 @@ from skfem.helpers import dot, grad
 
 from homogenize.macro.channel import ChannelGeometry, solve_channel
 from homogenize.macro.fem import Material
-from micro._validate import InputError, check_finite, check_positive
+from micro.common.validate import InputError, check_finite, check_positive
 
 __all__ = ["Liquid", "BLOOD_PLASMA", "rectangular_duct_conductance_m4_Pa_s",
            "section_conductance_m4_Pa_s", "CeilingModel", "ChannelFlowResult",
@@ -464,7 +464,7 @@ def flow_with_interval(ceiling: CeilingModel, length_m: float, body_force, **ope
     ceiling : CeilingModel
     length_m : float -- channel length [m]
     body_force : Estimate-like (``mean``, ``ci_low``, ``ci_high`` [N/m^3], optional
-        ``confidence``), e.g. :func:`homogenize.tables.body_force_from_table`'s result, or a
+        ``confidence``), e.g. :func:`homogenize.tables.batch.body_force_from_table`'s result, or a
         (low, mean, high) tuple [N/m^3]
     **operating : flow_rate_m3_s or pressure_drop_Pa, and the other keywords of
         :func:`solve_channel_flow`
@@ -533,7 +533,7 @@ def field_for_target_gap(ceiling: CeilingModel, length_m: float, target_gap_m: f
     liquid : Liquid
     body_force_range_N_m3 : (lo, hi) -- admissible body forces [N/m^3] (without a field map)
     body_force_of_field : callable(field) -> body force [N/m^3], optional -- e.g. from a batch
-        table (:func:`homogenize.tables.body_force_from_table`) or the seed formula; the field
+        table (:func:`homogenize.tables.batch.body_force_from_table`) or the seed formula; the field
         is then searched in ``field_range`` (in ``field_unit``: B in T, a gradient in T/m, ...)
     field_range : (lo, hi) -- range of the control value; required with body_force_of_field
     field_unit : str -- unit of the control value, for messages and the result

@@ -55,7 +55,7 @@ from homogenize.macro.fem import (FEMSolution, _NeoHookeanAssembler, box_mesh,
                                   probe_displacement, vector_basis)
 from homogenize.macro.magnets import PermanentMagnet
 from homogenize.macro.pullin import magnet_below, magnet_body_force
-from micro._validate import InputError, check_choice, check_positive, check_range
+from micro.common.validate import InputError, check_choice, check_positive, check_range
 from micro.materials import ElasticMaterial
 
 __all__ = ["FollowerFEM", "FollowerFEMResult", "follower_fem_at_gap", "FD_STEP_REL"]

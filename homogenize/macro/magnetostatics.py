@@ -101,7 +101,7 @@ from skfem import (Basis, BilinearForm, ElementTetP2, ElementTriP2, LinearForm, 
 from skfem.helpers import dot, grad
 
 from homogenize.solvers import AMGOptions, smoothed_aggregation
-from micro._validate import ConvergenceError, InputError, check_choice, check_finite, \
+from micro.common.validate import ConvergenceError, InputError, check_choice, check_finite, \
     check_positive
 
 __all__ = ["ConvergenceError", "LinearLaw", "FroehlichKennellyLaw", "LangevinLaw", "TanhLaw",

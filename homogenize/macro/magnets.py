@@ -42,7 +42,7 @@ from scipy.spatial.transform import Rotation
 
 from homogenize.macro.cantilever import Strip
 from homogenize.macro.closed_form import BodyForceProfile
-from micro._validate import InputError, check_choice, check_finite, check_positive, check_range
+from micro.common.validate import InputError, check_choice, check_finite, check_positive, check_range
 
 __all__ = ["PermanentMagnet", "Coil", "StripBodyForce", "sample_field", "body_force_along_strip",
            "linear_magnetization", "tabulated_magnetization"]

@@ -159,7 +159,7 @@ __all__ = ["BranchTrace", "LimitPoint", "EventPoint", "PathFollowingError", "tra
            "place_magnet", "magnet_below", "magnet_body_force", "MagnetElastica", "PullInResult", "pullin_sweep",
            "one_mode_pullin", "OneModeResult", "FD_HESSIAN_REL", "REALISTIC_CASE",
            "LyingBranch", "ContactRelease", "solve_lying", "relax_on_face", "deep_contact_start",
-           "lying_contact_branch", "contact_release", "LYING_MIN_GAP_REL"]
+           "lying_contact_branch", "contact_release", "LYING_MIN_GAP_REL", "interval_ends"]
 
 #: the smallest gap the strip lying on the face is started from, relative to the thickness:
 #: at a zero gap the whole strip lies flat on the face (every node in contact, a degenerate
@@ -1532,14 +1532,21 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
         if u_start is not None:
             if frac > 0:
                 contact_end_gap = g_start
-            contact = trace_branch(
-                model.system_contact, u_start, g_start, direction=1.0, p_max=g_far,
-                r_scale=rs_contact,
-                events=[("release", lambda u, p: u[-1]),
-                        ("other_contact", lambda u, p: model.other_clearance_m(u[:-1], p))],
-                stability=lambda u, p, J: (u[-1] >= -1e-9 * ls
-                                           and model.stable_contact(u, p, J)),
-                stop_at_fold=True, max_steps=400, **{**common, "u_scale": us})
+            try:
+                contact = trace_branch(
+                    model.system_contact, u_start, g_start, direction=1.0, p_max=g_far,
+                    r_scale=rs_contact,
+                    events=[("release", lambda u, p: u[-1]),
+                            ("other_contact", lambda u, p: model.other_clearance_m(u[:-1], p))],
+                    stability=lambda u, p, J: (u[-1] >= -1e-9 * ls
+                                               and model.stable_contact(u, p, J)),
+                    stop_at_fold=True, max_steps=400, **{**common, "u_scale": us})
+            except PathFollowingError:
+                # the tip-only contact branch cannot be followed (e.g. an event at a kink of
+                # the contact state): the strip lying on the face below takes over from the
+                # smallest gap (contact_release)
+                contact, contact_end_gap = None, g_start
+        if u_start is not None and contact is not None:
             if contact.event is not None and contact.event.name in ("release", "fold") \
                     and not release_by:
                 release_by = ("contact force zero" if contact.event.name == "release"
@@ -1550,7 +1557,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
             contact = dataclasses.replace(contact, u=contact.u[::-1], p=contact.p[::-1],
                                           dp_ds=-contact.dp_ds[::-1],
                                           stable=contact.stable[::-1])
-        else:
+        elif u_start is None:
             contact_end_gap = g_lost
 
     # the strip lying on the face: where the tip-only contact above does not reach the
@@ -1756,6 +1763,30 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                         n_segments=model.N, n_cross=model.n_cross,
                         demag_factor=model.demag, follower=model.follower,
                         contact_jumps_m=tuple(lying.jumps_m) if lying is not None else ())
+
+
+def interval_ends(E_Pa, M_of_H, E_estimate=None, M_bounds=None) -> dict:
+    """The (modulus [Pa], magnetization law) pairs of a pull-in computation and of the two ends
+    of its interval: ``{"mean": (E, M), "low": ..., "high": ...}``.
+
+    The magnet's pull grows with the composite's magnetization and the strip's resistance with
+    its modulus, so the pull-in gap (and the deflection at a gap) is smallest for the weakest
+    magnetization on the stiffest strip and largest for the strongest on the softest:
+    ``"low" = (E high, M low)``, ``"high" = (E low, M high)``. ``E_estimate``: a table's
+    :class:`homogenize.tables.Estimate` of E_eff (its interval widened by the discretization
+    error, ``total_low`` / ``total_high``), or None for a modulus without interval;
+    ``M_bounds``: ``{"low": law, "high": law}`` from the ends of the table's M_eff interval, or
+    None. Only the mean when neither has an interval."""
+    if E_estimate is None and not M_bounds:
+        return {"mean": (float(E_Pa), M_of_H)}
+    E_lo = E_hi = float(E_Pa)
+    if E_estimate is not None:
+        E_lo, E_hi = float(E_estimate.total_low), float(E_estimate.total_high)
+        if not 0.0 < E_lo <= E_hi:
+            raise InputError(f"the modulus interval [{E_lo:.4g}, {E_hi:.4g}] Pa is not positive")
+    M_lo = (M_bounds or {}).get("low", M_of_H)
+    M_hi = (M_bounds or {}).get("high", M_of_H)
+    return {"mean": (float(E_Pa), M_of_H), "low": (E_hi, M_lo), "high": (E_lo, M_hi)}
 
 
 def place_magnet_xy(magnet, gap_m):

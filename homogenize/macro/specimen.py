@@ -39,7 +39,7 @@ Models (``model=``), so that three descriptions can be compared on the same spec
   (J. Mech. Phys. Solids 194, 105934, 2025) assume;
 * ``"affine"`` -- plus ``sigma_mag`` of randomly dispersed particles moving affinely with the
   matrix, ``kappa(phi, m)`` from the project's cell FEM
-  (:func:`homogenize.experiments.tables.affine_kappa`, reduced magnetization
+  (:func:`homogenize.experiments.rve_tables.affine_kappa`, reduced magnetization
   ``m = |M| / (phi Ms)``);
 * ``"relaxed"`` -- plus ``sigma_mag`` of RVEs whose particles restructure in the field; its
   ``kappa(|M|)`` comes from relax tables and is passed in by the caller (``kappa=``).
@@ -62,7 +62,7 @@ solves). The field mesh's body part IS the mechanics mesh, so it moves with the 
 starts Newton from the previous one (``solve_3d(initial=...)``). Accuracy against the
 axisymmetric solve of the same cylinder (tests, bench): strains within 0.2-0.8 % at n_mesh 6
 and 2-7 % at 4 in the linear regime, within 0.2-1.2 % at n_mesh 6 at 1.2 T (2 % strain);
-cost of the 13-step benchmark in :mod:`homogenize.bench.specimen` (n_mesh 6: 83 s CPU,
+cost of the 13-step benchmark in :mod:`homogenize.bench.bench_specimen` (n_mesh 6: 83 s CPU,
 0.47 GB). Not covered in 3D: spheres and spheroids (axisymmetric only). VTU output: the octant
 mirrored to the whole body (:func:`homogenize.macro._specimen_output.write_specimen_vtu`).
 
@@ -96,7 +96,7 @@ from skfem import MeshTet, MeshTri
 
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
-from micro._validate import ConvergenceError, InputError, check_choice, check_positive
+from micro.common.validate import ConvergenceError, InputError, check_choice, check_positive
 
 __all__ = ["MODELS", "SHAPES", "SHAPES_3D", "GEOMETRIES", "SUPPORTS", "Specimen",
            "SpecimenStep", "SpecimenResult", "SupportedStep", "solve_specimen",
@@ -662,7 +662,7 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
     model : "continuum" | "affine" | "relaxed" (module docstring)
     kappa : callable ``kappa(|M| [A/m]) -> [-]`` (or a number) -- the microstructural stress
         coefficient; required by "affine" (e.g.
-        :func:`homogenize.experiments.tables.affine_kappa`) and "relaxed"
+        :func:`homogenize.experiments.rve_tables.affine_kappa`) and "relaxed"
     tol : relative change of the change of length between two staggered iterations at which
         a field step is converged [-]
     max_stagger : staggered iterations per step before :class:`ConvergenceError`

@@ -14,12 +14,12 @@ transfers (:func:`restrict`, :func:`prolong_add`, :func:`prolongation_matrix`,
 The implementation (numba kernels) is in the private ``_matfree`` and ``_patches``; this module
 only names what may be used from outside them.
 """
-from ._matfree import (ElementField, GeometricVCycle, MatFreeOperator, child_prolongations,
+from homogenize.solvers._matfree import (ElementField, GeometricVCycle, MatFreeOperator, child_prolongations,
                        coarsen, element_field, grid_colours,
                        node_stencils, prolong_add, prolongation_matrix, restrict,
                        stiffness_times_sparse, typed_bsr, typed_rows_bsr)
-from .._assembly import CORNERS
-from ._patches import ParticlePatches, patch_colours, patch_nodes, select_patches
+from homogenize.voxels._assembly import CORNERS
+from homogenize.solvers._patches import ParticlePatches, patch_colours, patch_nodes, select_patches
 
 __all__ = ["ElementField", "element_field", "coarsen", "MatFreeOperator", "GeometricVCycle",
            "typed_bsr", "typed_rows_bsr", "stiffness_times_sparse", "node_stencils",

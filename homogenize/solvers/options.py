@@ -4,7 +4,7 @@ PETSc has one), never module globals changed from outside.
 * :class:`AMGOptions` -- one pyamg smoothed-aggregation setup (:func:`homogenize.solvers.amg.
   smoothed_aggregation`). Its defaults are the cell FEM's: the other solvers (cut voxels,
   conforming meshes, macro FEM) hold their own instance with their own values.
-* :class:`SolverOptions` -- everything the periodic cell solver (:mod:`homogenize.cell`) can be
+* :class:`SolverOptions` -- everything the periodic cell solver (:mod:`homogenize.cell.problem`) can be
   tuned by: the AMG, the matrix-free geometric multigrid, the particle patches, the block CG.
 
 Derive a variant with :meth:`SolverOptions.replace` (``SolverOptions().replace(block_cg=
@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 __all__ = ["AMGOptions", "SolverOptions", "BLOCK_CG_MODES", "MATFREE_COARSE_SOLVERS"]
 
@@ -106,7 +106,7 @@ class AMGOptions:
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """Tuning of the periodic cell solver (:func:`homogenize.cell.homogenize_mesh`,
+    """Tuning of the periodic cell solver (:func:`homogenize.cell.problem.homogenize_mesh`,
     ``options=``). The defaults are the measured choices cited per field; the results'
     ``settings`` record what was used.
 
@@ -146,7 +146,7 @@ class SolverOptions:
     patch_shell_voxels : float >= 0 or None -- matrix-free solver: particle patches
         (homogenize.solvers._patches): the fine nodes within r + this many voxels of each particle's
         centre solved exactly in the fine level of the V-cycle (None: never), built when
-        :func:`homogenize.cell.use_patches` says so. A 1-voxel shell took 188 s but 6.1 GB at
+        :func:`homogenize.cell.problem.use_patches` says so. A 1-voxel shell took 188 s but 6.1 GB at
         128^3 (18 / 35 iterations), half a voxel 213-219 s and 5.8 GB (35 / 36)
     patch_min_particles : int >= 1, patch_small_radius_voxels : float >= 0 -- the patches are
         built for RVEs of at least this many particles, or whose particles' mean radius is below

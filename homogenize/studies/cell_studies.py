@@ -10,14 +10,14 @@ import time
 from types import SimpleNamespace
 
 import numpy as np
-from micro._progress import progress_bar
+from micro.common.progress import progress_bar
 
-from homogenize._effective_media import (bulk_shear, eshelby_dilute, guth_gold,
+from homogenize.cell._effective_media import (bulk_shear, eshelby_dilute, guth_gold,
                                          hashin_shtrikman_bounds, mori_tanaka, young_poisson)
-from homogenize.cell import Material, homogenize_mesh, homogenize_rve, isotropic_projection
-from homogenize.cut import homogenize_cut
-from homogenize.mesh import voxelize
-from micro._io import atomic_path
+from homogenize.cell.problem import Material, homogenize_mesh, homogenize_rve, isotropic_projection
+from homogenize.cell.cut import homogenize_cut
+from homogenize.voxels.mesh import voxelize
+from micro.common.files import atomic_path
 from micro.materials import FE, PDMS
 
 __all__ = ["phi_study", "plot_phi_study", "dilute_convergence_study", "plot_dilute_convergence",
@@ -90,8 +90,8 @@ def dilute_convergence_study(voxels=(8, 16, 24, 32, 48, 64), phi: float = 0.01, 
     the self-convergence rate is reported too: ``polyfit(log h, log |c_n - c_finest|)`` over the
     grids with at least 6 voxels per diameter.
 
-    ``method``: a voxelization of :func:`homogenize.mesh.voxelize`, or ``"cut"``: the Nitsche
-    cut voxels of :func:`homogenize.cut.homogenize_cut` (two displacement fields per cut voxel,
+    ``method``: a voxelization of :func:`homogenize.voxels.mesh.voxelize`, or ``"cut"``: the Nitsche
+    cut voxels of :func:`homogenize.cell.cut.homogenize_cut` (two displacement fields per cut voxel,
     volume-matched sphere; second order, see its docstring).
     """
     mat, par = Material(matrix_E_Pa, matrix_nu), Material(particle_E_Pa, particle_nu)
@@ -219,7 +219,7 @@ def composite_accuracy_study(phi: float, n_particles: int, seed: int = 7,
     surfaces (the faceted order-1 spheres lose ~10 % of their volume at practical mesh sizes).
     ``p2_solver``: "cg" (default: deflated block CG, memory like the matrix) or "direct" (sparse
     LU, ~1e5 DOF at most here)."""
-    from homogenize._conforming import homogenize_conforming
+    from homogenize.cell._conforming import homogenize_conforming
     rve = inside_spheres(phi, n_particles, seed)
     Em = PDMS.E_Pa
     out = {"phi": phi, "n_particles": n_particles, "seed": seed,

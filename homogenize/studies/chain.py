@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._io import (json_ready, atomic_write_text, data_digest, manifest, round_floats, save_png,
+from micro.common.files import (json_ready, atomic_write_text, data_digest, manifest, round_floats, save_png,
                        write_json)
-from micro._validate import ConvergenceError, InputError, check_positive
+from micro.common.validate import ConvergenceError, InputError, check_positive
 
 from micro.demag import prism_demag_factors
 from micro.magnetization import DEFAULT_LAW, get_law
@@ -30,14 +30,14 @@ from micro.materials import SEED as _SEED
 from micro.materials import ElasticMaterial
 from scipy.constants import mu_0 as MU0
 
-from homogenize._stats import widen_in_quadrature
-from homogenize._study import load_study
+from homogenize.tables._stats import widen_in_quadrature
+from homogenize.tables._study import load_study
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.closed_form import eb_tip_deflection_m, elastica_tip_deflection
 from homogenize.macro.effective import magnetization_from_table
 from homogenize.macro.magnets import PermanentMagnet, body_force_along_strip
 from homogenize.macro.pullin import place_magnet, pullin_sweep
-from homogenize.tables import (body_force_from_table, interpolate, modulus_from_table,
+from homogenize.tables.batch import (body_force_from_table, interpolate, modulus_from_table,
                                read_table, run_batch)
 
 __all__ = ["run_chain", "seed_strip", "DEFAULT_STUDY", "SEED"]

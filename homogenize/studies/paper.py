@@ -23,16 +23,16 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import OptimizeWarning, curve_fit, root_scalar
-from micro._progress import progress_bar
+from micro.common.progress import progress_bar
 
 from homogenize.macro import closed_form as cf
 from homogenize.macro import elements as el
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.channel import ChannelGeometry, solve_channel
 from homogenize.macro.fem import Material
-from micro._io import (atomic_write_text, data_digest, manifest, round_floats, save_png,
+from micro.common.files import (atomic_write_text, data_digest, manifest, round_floats, save_png,
                        write_json)
-from micro._validate import InputError, check_positive, check_range
+from micro.common.validate import InputError, check_positive, check_range
 from micro.materials import GRAVITY_M_S2, SEED, SeedParameters
 
 __all__ = ["SeedParameters", "SEED", "seed_body_force", "run_paper", "write_paper",
@@ -1069,7 +1069,7 @@ def write_paper(out_dir, json_path=None, *, quick=False, quiet=False, width_m=5e
     ``quick``: small meshes and sweeps (tests, ~30 s); ``ccx``: CalculiX executable for rows of
     CalculiX's own elements in the element study (None, the default and ``mapsim paper``: none,
     so that the files do not depend on an optional tool; see :func:`write_calculix_peer`).
-    Floats are rounded to :data:`micro._io.RESULT_DIGITS` significant digits; a figure whose
+    Floats are rounded to :data:`micro.common.files.RESULT_DIGITS` significant digits; a figure whose
     rounded numbers did not change is not redrawn.
     """
     check_strip(width_m, thickness_m)            # before anything is written

@@ -14,13 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._io import atomic_path, manifest, write_json
-from micro._validate import InputError
+from micro.common.files import atomic_path, manifest, write_json
+from micro.common.validate import InputError
 
-from homogenize._stats import fit_power_law, realizations_needed
-from homogenize._study import Study, load_study
-from homogenize.tables import _dask_client, read_table, run_batch
-from micro._io import atomic_write_text
+from homogenize.tables._stats import fit_power_law, realizations_needed
+from homogenize.tables._study import Study, load_study
+from homogenize.tables.batch import dask_client, read_table, run_batch
+from micro.common.files import atomic_write_text
 import textwrap
 from scipy import stats
 
@@ -58,7 +58,7 @@ def check_quantity(quantity: str, component: str | None) -> str:
     """The full name of ``quantity`` (a name or unique prefix of a table quantity), refusing
     an unknown one or a ``component`` its shape does not have (x, y, z or norm for vectors,
     xx..zz for tensors), before anything is computed."""
-    from homogenize._evaluate import QUANTITIES
+    from homogenize.tables._evaluate import QUANTITIES
     hits = [q for q in QUANTITIES if q == quantity or q.startswith(f"{quantity}_")]
     if quantity in QUANTITIES:
         hits = [quantity]
@@ -100,7 +100,7 @@ def rve_size_study(study, out_dir, *, evaluator=None, workers=None, scheduler=No
     tables = {}
     with contextlib.ExitStack() as stack:
         cl = client if client is not None else stack.enter_context(
-            _dask_client(scheduler, workers, processes))    # one cluster for all sizes
+            dask_client(scheduler, workers, processes))    # one cluster for all sizes
         for n in spec.n_particles:
             sub = study.replace(n_particles=n, realizations=spec.realizations)
             path = out_dir / f"rve_size_n{n}.h5"

@@ -2,7 +2,7 @@
 (homogenize.solvers.SolverOptions.block_cg): the numbers behind results/cell/block_cg_modes.json
 and the "Coupled block CG" section of results/cell/README.md.
 
-Bench RVEs (homogenize.bench.cell.bench_rve: the seed paper's size distribution at 3.5 vol%), 6 unit
+Bench RVEs (homogenize.bench.bench_cell.bench_rve: the seed paper's size distribution at 3.5 vol%), 6 unit
 strains + random particle forces, the default tolerances (strains 1e-6, magnetic column
 magnetic_tol = 1e-3), solver="matrix-free", each case in its OWN process (so that its peak RSS is
 its own), the three modes of one RVE one after the other:
@@ -35,8 +35,8 @@ def one(rve_voxels: int, voxels: int, mode: str) -> dict:
     """One case, in this process."""
     import numpy as np
 
-    import homogenize.cell as cell
-    from homogenize.bench.cell import bench_rve
+    import homogenize.cell.problem as cell
+    from homogenize.bench.bench_cell import bench_rve
     from homogenize.solvers import SolverOptions
     rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15

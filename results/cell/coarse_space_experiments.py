@@ -2,7 +2,7 @@
 behind results/cell/coarse_space_experiments.json and the section "Coarse-space experiments" of
 results/cell/README.md.
 
-RVE family and load as `mapsim bench` and multigrid_robustness.py (homogenize.bench.cell.bench_rve,
+RVE family and load as `mapsim bench` and multigrid_robustness.py (homogenize.bench.bench_cell.bench_rve,
 6 unit strains + random particle forces, tol 1e-6); mostly the case "100 particles of 1.25 voxels
 mean radius at 32^3" (rve_voxels 64, voxels 32), where solver="matrix-free" needs 45 / 82
 (strain / magnetic) iterations and solver="fast" 20 / 30.
@@ -52,10 +52,10 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 import homogenize.solvers.matfree as mf
-import homogenize.cell as cell
+import homogenize.cell.problem as cell
 from homogenize.solvers import (BlockVCycle, SolverOptions, grid_node_coordinates,
                                 rigid_body_modes, smoothed_aggregation)
-from homogenize.bench.cell import bench_rve
+from homogenize.bench.bench_cell import bench_rve
 from micro.materials import PDMS
 
 import resumable

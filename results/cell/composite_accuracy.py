@@ -4,7 +4,7 @@ results/cell/composite_accuracy.{json,png} and the P2 table of results/cell/READ
 Six Fe spheres in PDMS (homogenize.studies.cell_studies.inside_spheres(phi, 6, 7)) at phi 0.05 and
 0.2: curved (isoparametric) P2 meshes solved by the deflated block CG
 (homogenize.homogenize_conforming(..., geometry_order=2, solver="cg")), and composite
-voxels refined to 64^3 / 96^3 (homogenize.cell.homogenize_rve, matrix-free solver). Each result is
+voxels refined to 64^3 / 96^3 (homogenize.cell.problem.homogenize_rve, matrix-free solver). Each result is
 merged into the JSON (an entry with the same mesh or voxel count is replaced), the comparison
 against the finest curved P2 is recomputed, and the figure is redrawn from the JSON.
 
@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from homogenize import homogenize_conforming
-from homogenize.cell import homogenize_rve, isotropic_projection
+from homogenize.cell.problem import homogenize_rve, isotropic_projection
 from homogenize.studies.cell_studies import inside_spheres, plot_composite_accuracy
 from micro.materials import FE, PDMS
 

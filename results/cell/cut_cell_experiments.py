@@ -2,16 +2,16 @@
 first order at Fe/PDMS contrast, and a discretization of the same voxel grid that is second order.
 
 The Nitsche cut voxels, their geometry (Kuhn splitting, quadrature, volume matching) and the
-cut-voxel cell solver now live in mapsim (homogenize.cut, imported here); the ridge XFEM, the
+cut-voxel cell solver now live in mapsim (homogenize.cell.cut, imported here); the ridge XFEM, the
 experiments and their analysis stay in this script. All use the project's periodic Q1 voxel
-grid (homogenize.cell: node i + n (j + n k), SRI element in the voxels that no interface
+grid (homogenize.cell.problem: node i + n (j + n k), SRI element in the voxels that no interface
 cuts) and a nodal level set phi (< 0: iron, > 0: PDMS). A voxel is CUT when its corner values
 change sign; its 6 Kuhn tetrahedra (all along the main diagonal, so the faces match between
 voxels) are split exactly by the plane of the linear interpolant of phi, which gives the
 discrete interface (planar facets, O(h^2) from the sphere).
 
 Methods compared:
-- "composite": the project's default, Reuss voxels at the exact cut fraction (homogenize.cell).
+- "composite": the project's default, Reuss voxels at the exact cut fraction (homogenize.cell.problem).
 - "xfem-ridge": Q1 + the ridge enrichment of Moes, Cloirec, Cartraud & Remacle (2003),
   psi = sum_a N_a |phi_a| - |phi_h|, 3 extra unknowns per node of a cut voxel.
 - "nitsche": two Q1 copies in every cut voxel, one per phase, integrated over that phase's part
@@ -27,11 +27,11 @@ Methods compared:
   nominal radius loses 11 % of the volume at 4.3 voxels per diameter and 2.7 % at 8.6, which
   hides part of the error: rows with volume_matched false in the JSON). This script computes
   C from the energy formula linear in the solution, as when its JSON was made
-  (homogenize.cut's public functions use the variational one).
+  (homogenize.cell.cut's public functions use the variational one).
 
 Experiments:
 1. Tilted periodic Fe/PDMS laminate, normal (1, 1, 1)/sqrt 3, Fe fraction 0.5, against the exact
-   rank-one laminate (homogenize.cell.laminate_voigt): the relative error of the energy of
+   rank-one laminate (homogenize.cell.problem.laminate_voigt): the relative error of the energy of
    C_eff along each eigenvector of the exact one (3 soft modes, 3 stiff).
 2. One dilute Fe sphere per periodic PDMS cell (phi 0.01, the cell of dilute_rate.py): the shear
    coefficient c = (G / G_m - 1) / phi against that study's curved-P2 limit 2.3408 +- 0.0056, at
@@ -54,11 +54,11 @@ from pathlib import Path
 
 import numpy as np
 
-from homogenize import cut
-from homogenize.cell import homogenize_mesh, isotropic_voigt, laminate_voigt, voigt_to_tensor
-from homogenize.cut import (cut_pieces, isotropic_element_matrices, nitsche_matrices, nodal_phi,
+from homogenize.cell import cut
+from homogenize.cell.problem import homogenize_mesh, isotropic_voigt, laminate_voigt, voigt_to_tensor
+from homogenize.cell.cut import (cut_pieces, isotropic_element_matrices, nitsche_matrices, nodal_phi,
                             side_integrals, sphere_fn)
-from homogenize.mesh import VoxelMesh
+from homogenize.voxels.mesh import VoxelMesh
 from micro.materials import FE, PDMS, elastic
 
 HERE = Path(__file__).resolve().parent
@@ -75,7 +75,7 @@ LAMINATE_SHIFT = 0.3    # [voxels along m . (i, j, k)]: keeps every node off the
 
 # ------------------------------------------------------------------------------------------------
 # the cut-voxel cell problem: the Nitsche cut voxels, their geometry and the cell solver live in
-# homogenize.cut; the ridge-enriched XFEM stays here (it locks at Fe/PDMS contrast)
+# homogenize.cell.cut; the ridge-enriched XFEM stays here (it locks at Fe/PDMS contrast)
 # ------------------------------------------------------------------------------------------------
 
 
@@ -105,8 +105,8 @@ def xfem_ridge_matrices(phi_c, h, lames, Es):
 def cell_problem(phi_fn, n, method, cases=(3, 4, 5), particle=FE_EL, matrix=PDMS_EL,
                  tol=1e-10, safety=2.0):
     """C_eff entries (len(cases) x len(cases), Voigt, Pa) of the periodic cell [0, 1)^3 with the
-    particle where phi_fn < 0, ``method`` "nitsche" (homogenize.cut.nitsche_matrices) or
-    "xfem-ridge", solved by homogenize.cut's cut-voxel cell problem; also the discrete particle
+    particle where phi_fn < 0, ``method`` "nitsche" (homogenize.cell.cut.nitsche_matrices) or
+    "xfem-ridge", solved by homogenize.cell.cut's cut-voxel cell problem; also the discrete particle
     volume fraction, CG iterations and, for "nitsche", the penalty range alpha h / E_matrix."""
     h = 1.0 / n
     lames = (particle.lame_Pa, matrix.lame_Pa)
@@ -119,7 +119,7 @@ def cell_problem(phi_fn, n, method, cases=(3, 4, 5), particle=FE_EL, matrix=PDMS
             return (*xfem_ridge_matrices(pc, h, lames, Es), None)
     else:
         raise ValueError(method)
-    # energy "linear": the C formula this study's JSON was made with (homogenize.cut's public
+    # energy "linear": the C formula this study's JSON was made with (homogenize.cell.cut's public
     # functions use the variational one, whose error is quadratic in the CG error)
     C, phi_h, its, _, _, alpha = cut.cut_cell_problem(
         phi, nodes, n, lames, list(cases), tol, cut_matrices, two_copies=method == "nitsche",

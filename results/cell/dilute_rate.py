@@ -13,7 +13,7 @@ array's shear modulus C44 = C55 = C66 (mean of the three diagonal shear entries,
    the fitted one. A conforming displacement FEM overestimates the diagonal C entries, so the
    finest P2 value is also an upper bound on the exact one (up to its curved-geometry volume
    error, ~5e-6).
-2. Composite voxels (homogenize.mesh.voxelize(method="composite") + homogenize.cell.homogenize_mesh,
+2. Composite voxels (homogenize.voxels.mesh.voxelize(method="composite") + homogenize.cell.problem.homogenize_mesh,
    the g23/g13/g12 load cases) at several resolutions, each at the same random sphere-centre
    offsets against the grid (uniform in one voxel, fixed seed): per resolution the mean error
    against the P2 limit (systematic part), its spread over offsets and shear components (the
@@ -49,8 +49,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from homogenize.cell import Material, homogenize_mesh
-from homogenize.mesh import voxelize
+from homogenize.cell.problem import Material, homogenize_mesh
+from homogenize.voxels.mesh import voxelize
 from micro.materials import FE, PDMS
 
 HERE = Path(__file__).resolve().parent

@@ -20,7 +20,7 @@ rows: every column to 1e-6, 100 particles of 1.25 voxels at 32^3). Variants of t
   coupled among themselves, the strains as in "strains"; the solutions summed.
 
 Iterations are deterministic (max over the strains / the magnetic column); seconds are those of
-the machine at the time (each case in its own process). RVEs: homogenize.bench.cell.bench_rve with
+the machine at the time (each case in its own process). RVEs: homogenize.bench.bench_cell.bench_rve with
 (rve_voxels, voxels) = (64, 32): 100 particles of 1.25 voxels mean radius at 32^3, (128, 64): 801
 at 64^3, (128, 128): the 128^3 bench RVE (~10-14 min per case: only with --full).
 
@@ -169,8 +169,8 @@ def _scaled_block_cg(A, M, F, **kw):
 def one(variant: str, rve_voxels: int, voxels: int) -> dict:
     import numpy as np
 
-    import homogenize.cell as cell
-    from homogenize.bench.cell import bench_rve
+    import homogenize.cell.problem as cell
+    from homogenize.bench.bench_cell import bench_rve
     from homogenize.solvers import SolverOptions, coupled_block_cg
     rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15

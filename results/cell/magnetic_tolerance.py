@@ -1,6 +1,6 @@
 """How loosely the magnetic column of the cell problem may be solved: the numbers behind
 results/cell/magnetic_tolerance.json and the "Magnetic column tolerance" section of
-results/cell/README.md (homogenize.cell.magnetic_tol).
+results/cell/README.md (homogenize.cell.problem.magnetic_tol).
 
 The elastic magnetic stress is variational in the six unit-strain solutions w_a and the
 magnetic one w_m, -(f_a . w_m + b . w_a - w_a . K w_m) / V, so its error is the energy product
@@ -13,7 +13,7 @@ and the wall time, for magnetic tolerances 1e-6 (every column alike, the solver 
 settings["stress_mag_linear_error_rel"], which the solver reports (relative to the largest
 component of the total magnetic stress, like "stress_error_rel").
 
-RVEs: the bench family (homogenize.bench.cell.bench_rve: seed-paper sizes at 3.5 vol%, mean radius
+RVEs: the bench family (homogenize.bench.bench_cell.bench_rve: seed-paper sizes at 3.5 vol%, mean radius
 ~2.5 voxels) at 32^3 and 64^3, solver="matrix-free"; loads: the dipole forces of the seed
 paper's field (micro.dipoles.solve at 0.1 T, 1.78 T/m gradient, Froehlich-Kennelly Fe) with
 their virial stress, and random particle forces (the bench's load).
@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from homogenize.bench.cell import bench_rve
-from homogenize.cell import homogenize_rve, tensor_to_voigt
+from homogenize.bench.bench_cell import bench_rve
+from homogenize.cell.problem import homogenize_rve, tensor_to_voigt
 from homogenize.solvers import SolverOptions
 from micro.dipoles import solve
 

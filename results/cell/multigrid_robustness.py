@@ -2,10 +2,10 @@
 default: the numbers behind results/cell/multigrid_robustness.json and the "multigrid
 robustness" section of results/cell/README.md.
 
-Same RVE family and load as `mapsim bench` (homogenize.bench.cell.bench_rve: the seed paper's size
+Same RVE family and load as `mapsim bench` (homogenize.bench.bench_cell.bench_rve: the seed paper's size
 distribution at 3.5 vol%, particle count chosen for a mean radius of 2.5 voxels at `rve_voxels`;
 6 unit strains + random particle forces, tol 1e-6 for every column: the magnetic one too, as
-when the JSON was made, although since session 10 it stops at homogenize.cell.magnetic_tol by
+when the JSON was made, although since session 10 it stops at homogenize.cell.problem.magnetic_tol by
 default), solved on `voxels` per edge:
 
 * fixed resolution (rve_voxels == voxels, mean radius 2.5 voxels), growing particle count;
@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-import homogenize.cell as cell
+import homogenize.cell.problem as cell
 from homogenize.solvers import SolverOptions
-from homogenize.bench.cell import bench_rve
+from homogenize.bench.bench_cell import bench_rve
 
 import resumable
 

@@ -17,7 +17,7 @@ For each RVE:
 - the same with the patches (delta = 1 voxel) at 1e-6, 1e-8 and 1e-10;
 - a reference (default solver, tol 1e-10) for the errors of E_eff and of the magnetic stress
   (the largest component's error over the largest reference component).
-The magnetic column stops at homogenize.cell.magnetic_tol(tol) = sqrt(tol) throughout. Iterations
+The magnetic column stops at homogenize.cell.problem.magnetic_tol(tol) = sqrt(tol) throughout. Iterations
 are deterministic. Seconds are NOT comparable: the patch loop here is Python, one numba call per
 patch.
 
@@ -25,7 +25,7 @@ A `geometry` row per RVE gives the patch sizes (nodes) and the memory of the den
 (3 nodes)^2 x 8 B per patch. The (128, 128) row is geometry only: the 128^3 bench RVE, which
 this script does not solve.
 
-RVEs: homogenize.bench.cell.bench_rve(rve_voxels) on `voxels`^3, random particle forces:
+RVEs: homogenize.bench.bench_cell.bench_rve(rve_voxels) on `voxels`^3, random particle forces:
 (64, 32): 100 particles of 1.25 voxels mean radius; (128, 64): 801 of 1.25 voxels (the hard
 case of multigrid_robustness); (64, 64): the 64^3 bench RVE, 100 particles of ~2.5 voxels.
 
@@ -165,7 +165,7 @@ def options(patched: PatchedCycle | None = None):
 
 
 def geometry_row(rve_voxels: int, voxels: int) -> dict:
-    from homogenize.bench.cell import bench_rve
+    from homogenize.bench.bench_cell import bench_rve
     rve = bench_rve(rve_voxels, 1)
     sizes = np.array([p.size for p in patch_nodes(rve, voxels, DELTA)])
     return {"variant": "geometry", "rve_voxels": rve_voxels, "voxels": voxels,
@@ -176,8 +176,8 @@ def geometry_row(rve_voxels: int, voxels: int) -> dict:
 
 
 def run_rve(rve_voxels: int, voxels: int) -> list:
-    import homogenize.cell as cell
-    from homogenize.bench.cell import bench_rve
+    import homogenize.cell.problem as cell
+    from homogenize.bench.bench_cell import bench_rve
     rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     rows = [geometry_row(rve_voxels, voxels)]
@@ -208,8 +208,8 @@ def run_patches_only(rve_voxels: int, voxels: int, tol: float, delta: float = DE
     default solve is in results/bench/cell.json (70-94 / 190 iterations at tol 1e-6)."""
     import resource
 
-    import homogenize.cell as cell
-    from homogenize.bench.cell import bench_rve
+    import homogenize.cell.problem as cell
+    from homogenize.bench.bench_cell import bench_rve
     rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     patched = PatchedCycle(rve, delta)
@@ -232,9 +232,9 @@ def run_patches_only(rve_voxels: int, voxels: int, tol: float, delta: float = DE
 def check_symmetry(rve_voxels: int = 64, voxels: int = 32) -> dict:
     """x^T M y against y^T M x for the patched V-cycle M on random x, y (the cycle must stay a
     symmetric preconditioner for CG), next to the same for the plain V-cycle."""
-    import homogenize.cell as cell
-    from homogenize.bench.cell import bench_rve
-    from homogenize.mesh import voxelize
+    import homogenize.cell.problem as cell
+    from homogenize.bench.bench_cell import bench_rve
+    from homogenize.voxels.mesh import voxelize
     from micro.materials import FE, PDMS, elastic
     rve = bench_rve(rve_voxels, 1)
     mesh = voxelize(rve, voxels, method="composite")

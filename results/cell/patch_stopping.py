@@ -4,7 +4,7 @@
 With particle patches (homogenize.solvers.matfree.ParticlePatches) the relative residual ||r|| / ||f|| stops the CG
 while the error is still large (session 13: 5-6 iterations, E_eff 2e-5 off at tol 1e-6). This
 study records, per CG iteration and load column, on the real cell problem of
-homogenize.cell.homogenize_rve (6 strains + the magnetic column, "strains" block CG, no column
+homogenize.cell.problem.homogenize_rve (6 strains + the magnetic column, "strains" block CG, no column
 leaves the block):
 - ``residual``: ||r|| / ||f|| (today's stopping quantity);
 - ``natural``: sqrt(r^T M r / f^T M f), M the preconditioner (the energy norm of the error as the
@@ -15,7 +15,7 @@ leaves the block):
   / V), since the fluctuation energy f^T x is below V C_aa.
 for the default matrix-free solver and for the patches (shell MATFREE_PATCH_SHELL_STUDY voxels).
 
-RVEs: homogenize.bench.cell.bench_rve(rve_voxels) on `voxels`^3, random particle forces: (64, 32): 100
+RVEs: homogenize.bench.bench_cell.bench_rve(rve_voxels) on `voxels`^3, random particle forces: (64, 32): 100
 particles of 1.25 voxels mean radius; (128, 64): 801 of 1.25 voxels (the hard case); (64, 64):
 the 64^3 bench RVE, 100 particles of ~2.5 voxels.
 
@@ -36,8 +36,8 @@ ITERATIONS = {"default": 60, "patches": 35}
 
 
 def run(rve_voxels: int, voxels: int, variant: str) -> dict:
-    import homogenize.cell as cell
-    from homogenize.bench.cell import bench_rve
+    import homogenize.cell.problem as cell
+    from homogenize.bench.bench_cell import bench_rve
     from homogenize.solvers import SolverOptions, coupled_block_cg
     rve = bench_rve(rve_voxels, 1)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15

@@ -1,7 +1,7 @@
 """Where one CG iteration of solver="matrix-free" spends its time: the numbers behind "Session 8"
 in results/cell/README.md (section "Matrix-free solver: what was tried ...").
 
-The bench RVE of `mapsim bench` (homogenize.bench.cell.bench_rve) at 64^3 (100 particles, mean radius
+The bench RVE of `mapsim bench` (homogenize.bench.bench_cell.bench_rve) at 64^3 (100 particles, mean radius
 ~2.5 voxels, composite voxels), the solver built exactly as homogenize_mesh builds it; for
 k = 1..8 right-hand sides (random, fixed seed) the median of 5 timings of: the fine-level product
 K u, one 8-colour block Gauss-Seidel sweep on the fine level, one sweep over the interface nodes
@@ -25,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from homogenize import cell
-from homogenize.bench.cell import bench_rve
+from homogenize.cell import problem as cell
+from homogenize.bench.bench_cell import bench_rve
 from homogenize.solvers import SolverOptions
-from homogenize.mesh import voxelize
+from homogenize.voxels.mesh import voxelize
 from micro.materials import FE, PDMS, elastic
 
 HERE = Path(__file__).resolve().parent

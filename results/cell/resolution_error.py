@@ -1,4 +1,4 @@
-"""Does the tables' discretization-error estimate cover the error? (homogenize.resolution)
+"""Does the tables' discretization-error estimate cover the error? (homogenize.tables.resolution)
 
 The batch tables estimate the discretization error of every cell-FEM quantity from the same RVEs
 on two grids, n and n_c = coarse_voxels(n) ~ 2/3 n (first order, with a floor of 2.2 % of the
@@ -34,8 +34,8 @@ import numpy as np
 
 from micro import materials
 from micro.particles import LogNormal, generate_rve
-from homogenize.cell import homogenize_rve
-from homogenize.resolution import (coarse_voxels, discretization_error, voxels_per_radius)
+from homogenize.cell.problem import homogenize_rve
+from homogenize.tables.resolution import (coarse_voxels, discretization_error, voxels_per_radius)
 
 HERE = Path(__file__).resolve().parent
 

@@ -1,4 +1,4 @@
-"""Coupled RVE at the conditions of Diguet et al. 2010 (homogenize.relax), without kappa_extra.
+"""Coupled RVE at the conditions of Diguet et al. 2010 (homogenize.cell.relax), without kappa_extra.
 
 Writes results/relax/diguet2010.{json,png} and a manifest. The measured data and the
 parameter-free shape stress k_shape come from the diagnosis in
@@ -26,9 +26,9 @@ from scipy.constants import mu_0 as MU0
 from micro import RVE, Monodisperse, generate_rve
 from micro.dipoles import solve
 from micro.materials import ElasticMaterial
-from homogenize.cell import homogenize_mesh
-from homogenize.mesh import voxelize
-from homogenize.relax import relax
+from homogenize.cell.problem import homogenize_mesh
+from homogenize.voxels.mesh import voxelize
+from homogenize.cell.relax import relax
 
 K_SHAPE = 0.1741            # predicted shape stress / (mu0 M^2), diagnosis report
 N_DEMAG = 0.362             # axial demagnetizing factor of the L/D = 0.80 cylinder (report)

@@ -11,7 +11,7 @@ from scipy.constants import mu_0 as MU0
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from diguet2010 import MATRIX, N_DEMAG, diguet_rve  # noqa: E402
 from micro.dipoles import solve  # noqa: E402
-from homogenize import relax as R  # noqa: E402
+from homogenize.cell import relax as R  # noqa: E402
 
 if __name__ == "__main__":
     seed = int(sys.argv[1]) if len(sys.argv) > 1 else 1

@@ -24,7 +24,7 @@ import numpy as np
 
 from micro import RVE
 from micro.materials import ElasticMaterial
-from homogenize.relax import (fem_displaceability, green_displaceability,
+from homogenize.cell.relax import (fem_displaceability, green_displaceability,
                               rigid_sphere_displaceability)
 
 HERE = os.path.dirname(os.path.abspath(__file__))

@@ -16,7 +16,7 @@ from pathlib import Path
 from micro import ConvergenceError
 from micro.materials import ElasticMaterial
 from micro.particles import Monodisperse, generate_rve
-from homogenize.relax import relax
+from homogenize.cell.relax import relax
 
 HERE = Path(__file__).resolve().parent
 

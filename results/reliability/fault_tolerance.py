@@ -228,8 +228,7 @@ def worker_killed(study_file: Path, out: Path, ref: Path, n_total: int,
     local cluster as ``mapsim batch``: 2 worker processes with nannies, loopback)."""
     from distributed.diagnostics.plugin import SchedulerPlugin
 
-    from homogenize._study import load_study
-    from homogenize.tables import _dask_client, run_batch
+    from homogenize.tables import dask_client, load_study, run_batch
 
     class Starts(SchedulerPlugin):
         """Counts how often the scheduler sends each task to a worker."""
@@ -252,7 +251,7 @@ def worker_killed(study_file: Path, out: Path, ref: Path, n_total: int,
     def getpid():
         return os.getpid()
 
-    with _dask_client(None, WORKERS, True) as client:
+    with dask_client(None, WORKERS, True) as client:
         starts = Starts()
         client.cluster.scheduler.add_plugin(starts)
 
@@ -502,8 +501,8 @@ def disk_full_injected(study_file: Path, out: Path, ref: Path, n_total: int,
                        at: float = 0.4) -> dict:
     """Fallback without a mount: ``OSError(ENOSPC)`` raised inside the part write after some
     bytes went to disk (in-process batch on a local cluster of 2 worker processes)."""
-    import homogenize.tables as tables
-    from homogenize._study import load_study
+    import homogenize.tables.batch as tables
+    from homogenize.tables import load_study
     study = load_study(study_file)
     real = tables.np.savez
     budget = {"n": int(at * n_total)}
@@ -754,7 +753,7 @@ def main(argv=None) -> int:
     if args.workdir:
         Path(args.workdir, "fault_tolerance.json").write_text(json.dumps(res, indent=1))
     if args.write or not (args.quick or args.workdir):
-        from micro._io import atomic_write_text, write_json
+        from micro import atomic_write_text, write_json
         res = json.loads(json.dumps(res).replace(res["workdir"], "WORKDIR"))
         write_json(JSON, res)
         atomic_write_text(MD, markdown(res))

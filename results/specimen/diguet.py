@@ -12,7 +12,7 @@ falling branch). Every input below comes from a source independent of that curve
   "matrice de silicone de faible module de Young (E0 = 0,14 MPa)"); no uncertainty is given
   there. Poisson's ratio 0.499 (silicone rubber, assumed nearly incompressible);
 * the filler's stiffening E/E0 at phi: the project's cell FEM of rigid spheres
-  (:func:`homogenize.experiments.tables.filler_stiffness_ratio`, matrix nu = 0.45);
+  (:func:`homogenize.experiments.rve_tables.filler_stiffness_ratio`, matrix nu = 0.45);
 * the iron's saturation mu0 Ms = 2.14 T (same thesis abstract); particles 2 um spheres with the
   project's intrinsic law of multi-domain iron ("regime": M = 3 H behind the sphere's own
   demagnetization up to saturation, :mod:`micro.magnetization`);
@@ -20,7 +20,7 @@ falling branch). Every input below comes from a source independent of that curve
   self-consistent dipoles (:func:`micro.dipoles.solve`, metallic boundary: the internal field),
   three realizations, tabulated as a :class:`homogenize.macro.magnetostatics.TableLaw`;
 * the microstructural stress coefficient kappa(phi, m) of the affine model: the project's dipole
-  virial times the cell FEM's share (:func:`homogenize.experiments.tables.affine_kappa`);
+  virial times the cell FEM's share (:func:`homogenize.experiments.rve_tables.affine_kappa`);
 * the relaxed model's change of kappa: the coupled RVE (particles that move in the matrix of
   modulus E0) from ``homogenize/experiments/data/relax_diguet2010_E0.h5``
   (:func:`homogenize.experiments.specimen_account.relaxed_kappa`).
@@ -49,7 +49,7 @@ import numpy as np
 from scipy.constants import mu_0 as MU0
 
 from homogenize.experiments.specimen_account import relaxed_kappa
-from homogenize.experiments.tables import (Unavailable, affine_kappa, filler_stiffness_ratio,
+from homogenize.experiments.rve_tables import (Unavailable, affine_kappa, filler_stiffness_ratio,
                                            restructuring_table,
                                            stiffness_table)
 from homogenize.macro import finite_strain as fs

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from homogenize import _assembly as A
+from homogenize.voxels import _assembly as A
 from homogenize.bench.reference import skfem_reference
 from homogenize.solvers import grid_node_coordinates, rigid_body_modes
 

@@ -7,10 +7,10 @@ import h5py
 import numpy as np
 import pytest
 
-from homogenize._evaluate import SyntheticEvaluator, synthetic_truth
-from homogenize._stats import summarize
-from homogenize._study import parse_study
-from homogenize.tables import (BatchError, parts_dir_for, read_table, run_batch)
+from homogenize.tables._evaluate import SyntheticEvaluator, synthetic_truth
+from homogenize.tables._stats import summarize
+from homogenize.tables._study import parse_study
+from homogenize.tables.batch import (BatchError, parts_dir_for, read_table, run_batch)
 
 STUDY = """
 [study]
@@ -186,7 +186,7 @@ def test_rewrite_keeps_a_table_equal_to_round_off_and_replaces_a_changed_one(stu
     """A rerun on another CPU changes the last digits of the results: the table already there is
     kept byte for byte (so a committed table is not rewritten); a change beyond
     TABLE_ROUNDOFF_RTOL (1e-8) writes the new table."""
-    from homogenize.tables import (TABLE_ROUNDOFF_RTOL, _part_path, _write_part, aggregate,
+    from homogenize.tables.batch import (TABLE_ROUNDOFF_RTOL, _part_path, _write_part, aggregate,
                                    write_table)
     evaluator = SyntheticEvaluator()
     parts = tmp_path / "parts"

@@ -17,11 +17,11 @@ import h5py
 import numpy as np
 import pytest
 
-import homogenize.tables as tables
-from homogenize._evaluate import SyntheticEvaluator
-from homogenize._study import parse_study
+import homogenize.tables.batch as tables
+from homogenize.tables._evaluate import SyntheticEvaluator
+from homogenize.tables._study import parse_study
 from homogenize.cli import main
-from homogenize.tables import (BatchError, StorageError, parts_dir_for, run_batch)
+from homogenize.tables.batch import (BatchError, StorageError, parts_dir_for, run_batch)
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "results" / "reliability" / "fault_tolerance.py"
@@ -192,7 +192,7 @@ def test_local_cluster_reschedules_a_killed_task_a_bounded_number_of_times():
     """The retry policy for dead workers is mapsim's, not the user's Dask configuration."""
     import dask
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}), \
-            tables._dask_client(None, 1, False) as cl:
+            tables.dask_client(None, 1, False) as cl:
         assert cl.cluster.scheduler.allowed_failures == tables.ALLOWED_WORKER_DEATHS
 
 

@@ -7,12 +7,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from homogenize import _assembly as asm
-from homogenize.cell import (Material, bulk_shear, hashin_shtrikman_bounds, homogenize_mesh,
+from homogenize.voxels import _assembly as asm
+from homogenize.cell.problem import (Material, bulk_shear, hashin_shtrikman_bounds, homogenize_mesh,
                              homogenize_rve)
-from homogenize._budget import check_cheapest_cell_memory as check_memory
-from homogenize.mesh import sphere_voxel_fractions, voxelize
-from micro._validate import InputError
+from homogenize.voxels._budget import check_cheapest_cell_memory as check_memory
+from homogenize.voxels.mesh import sphere_voxel_fractions, voxelize
+from micro.common.validate import InputError
 from micro.materials import FE, PDMS, elastic
 
 FE_EL, PDMS_EL = elastic(FE), elastic(PDMS)
@@ -197,8 +197,8 @@ def test_bad_input_refused_before_work():
                            "the single-sphere P2 check in test_cell_stiffness.py")
 def test_composite_agrees_with_conforming_p2_on_the_same_particles():
     pytest.importorskip("gmsh")
-    from homogenize._conforming import homogenize_conforming
-    from homogenize.cell import isotropic_projection
+    from homogenize.cell._conforming import homogenize_conforming
+    from homogenize.cell.problem import isotropic_projection
     from homogenize.studies.cell_studies import inside_spheres
     rve = inside_spheres(0.1, 3, 11)
     conf = homogenize_conforming(1.0, rve.centers_m / rve.box_m, rve.radii_m / rve.box_m, 0.3,
@@ -220,8 +220,8 @@ def test_curved_p2_mesh_keeps_the_sphere_volume_and_is_exact_for_a_homogeneous_c
     sphere's to O(h^4) (faceted order 1 loses ~10 %), and with equal phases C_eff is the
     matrix's isotropic C exactly (isoparametric elements reproduce linear fields)."""
     pytest.importorskip("gmsh")
-    from homogenize._conforming import homogenize_conforming
-    from homogenize._effective_media import lame
+    from homogenize.cell._conforming import homogenize_conforming
+    from homogenize.cell._effective_media import lame
     c, r = [[0.5, 0.5, 0.5]], [0.3]
     exact = 4.0 / 3.0 * np.pi * 0.3 ** 3
     flat = homogenize_conforming(1.0, c, r, 0.3, curvature_elements=12, geometry_order=1)
@@ -247,7 +247,7 @@ def test_p2_block_cg_equals_the_direct_solve():
     """solver="cg" (deflated block CG, smoothed aggregation) gives the sparse-LU C_eff of the
     same curved P2 mesh (two Fe spheres, contrast 1e5, one of them off the cell centre)."""
     pytest.importorskip("gmsh")
-    from homogenize._conforming import homogenize_conforming
+    from homogenize.cell._conforming import homogenize_conforming
     c, r = [[0.3, 0.35, 0.4], [0.7, 0.65, 0.6]], [0.18, 0.15]
     direct = homogenize_conforming(1.0, c, r, 0.3, curvature_elements=12, geometry_order=2)
     cg = homogenize_conforming(1.0, c, r, 0.3, curvature_elements=12, geometry_order=2,

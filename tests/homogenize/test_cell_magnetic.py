@@ -4,10 +4,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from homogenize import _assembly as A
-from homogenize.cell import Material, homogenize_mesh, homogenize_rve
-from homogenize.mesh import voxelize
-from micro._validate import InputError
+from homogenize.voxels import _assembly as A
+from homogenize.cell.problem import Material, homogenize_mesh, homogenize_rve
+from homogenize.voxels.mesh import voxelize
+from micro.common.validate import InputError
 
 L = 1.0
 C2 = np.array([[0.3, 0.35, 0.4], [0.62, 0.55, 0.66]])
@@ -81,7 +81,7 @@ def test_virial_from_dipoles_replaces_the_moment():
     assert np.allclose(r.stress_mag_moment_Pa, 0.5 * (vir + vir.T))
     assert np.allclose(r.stress_mag_Pa, r.stress_mag_moment_Pa + r.stress_mag_elastic_Pa)
     # free magnetostrictive strain: C_eff strain_mag = -stress_mag
-    from homogenize.cell import tensor_to_voigt
+    from homogenize.cell.problem import tensor_to_voigt
     assert np.allclose(r.C_eff_Pa @ tensor_to_voigt(r.strain_mag, engineering=True),
                        -tensor_to_voigt(r.stress_mag_Pa), rtol=1e-10, atol=1e-12)
 

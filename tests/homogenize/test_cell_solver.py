@@ -10,7 +10,7 @@ import scipy.sparse as sp
 from homogenize.solvers import (AMGOptions, BlockVCycle, Deflation, block_cg, coupled_block_cg,
                                 grid_colours, grid_node_coordinates, rigid_body_modes,
                                 smoothed_aggregation)
-from homogenize.cell import homogenize_rve, magnetic_tol
+from homogenize.cell.problem import homogenize_rve, magnetic_tol
 
 L = 1e-6
 
@@ -146,7 +146,7 @@ def test_coupled_block_cg_with_deflation_solves_the_system():
 
 def test_block_vcycle_is_symmetric_positive_definite():
     """CG needs a symmetric preconditioner: forward colours before, backward after."""
-    from homogenize import _assembly as asm
+    from homogenize.voxels import _assembly as asm
     n = 6
     rng = np.random.default_rng(2)
     ph = rng.random((n, n, n)) < 0.2
@@ -224,8 +224,8 @@ def test_magnetic_column_at_the_strain_tolerance_where_its_field_or_strains_are_
     assert np.abs(loose.C_eff_Pa - kept.C_eff_Pa).max() <= 1e-6 * np.abs(kept.C_eff_Pa).max()
     s = np.abs(kept.stress_mag_Pa).max()
     assert 0 < np.abs(loose.stress_mag_Pa - kept.stress_mag_Pa).max() < 1e-7 * s
-    from homogenize.mesh import voxelize
-    from homogenize.cell import homogenize_mesh
+    from homogenize.voxels.mesh import voxelize
+    from homogenize.cell.problem import homogenize_mesh
     part = homogenize_mesh(voxelize(rve, 12), forces_N=forces, cases=("e11", "g12"))
     assert part.settings["tol_magnetic"] == 1e-6 and part.residuals["magnetic"] <= 1e-6
 

@@ -4,9 +4,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from homogenize.cell import (bulk_shear, hashin_shtrikman_bounds, homogenize_rve,
+from homogenize.cell.problem import (bulk_shear, hashin_shtrikman_bounds, homogenize_rve,
                              isotropic_stiffness_voigt, mori_tanaka)
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 L = 1e-6
 
@@ -130,7 +130,7 @@ def test_bad_material_data():
 
 def test_voxel_agrees_with_conforming_p2_tet_mesh():
     pytest.importorskip("gmsh")
-    from homogenize._conforming import homogenize_conforming
+    from homogenize.cell._conforming import homogenize_conforming
     phi = 0.1
     a = (3 * phi / (4 * np.pi)) ** (1 / 3)
     conf = homogenize_conforming(1.0, [[0.5, 0.5, 0.5]], [a], 0.2, particle=(20e6, 0.29))

@@ -1,4 +1,4 @@
-"""`mapsim relax`: the CLI over homogenize.relax (physics tested in test_relax.py)."""
+"""`mapsim relax`: the CLI over homogenize.cell.relax (physics tested in test_relax.py)."""
 import json
 
 import numpy as np

@@ -6,7 +6,7 @@ from scipy.constants import mu_0
 import pytest
 
 from homogenize.cli import main
-from homogenize.tables import parts_dir_for, read_table
+from homogenize.tables.batch import parts_dir_for, read_table
 
 
 
@@ -150,7 +150,7 @@ def test_rve_size_recovers_kanit_exponent(scheduler, tmp_path, capsys):
 
 def test_default_study_file_is_valid():
     from homogenize.studies.chain import DEFAULT_STUDY
-    from homogenize._study import load_study
+    from homogenize.tables._study import load_study
     s = load_study(DEFAULT_STUDY)
     assert s.evaluator == "rve" and dict(s.axes)["phi"] == (0.0175, 0.035)
     assert dict(s.axes)["gradB_T_per_m"] == (1.78,)
@@ -178,7 +178,7 @@ def test_chain_reduced_real_rves(scheduler, tmp_path):
     t_tab = read_table(out / "table.h5")
     for c in res["curves"]:
         for g in c["grid"]:
-            # chain.json holds 6 significant digits (micro._io.RESULT_DIGITS): each value is
+            # chain.json holds 6 significant digits (micro.common.files.RESULT_DIGITS): each value is
             # within 5e-7 (relative) of the computed one, a ratio of two within 1e-6
             # EB deflection is 4 mm x f / 43.79 kN/m^3 (linear, geometry-independent) ...
             assert np.isclose(g["deflection_eb_m"], 4e-3 * g["f_eff_N_m3"] / 43.79e3, rtol=2e-6)
@@ -216,7 +216,7 @@ def test_chain_reduced_real_rves(scheduler, tmp_path):
 def test_beam_with_table_propagates_interval(table, tmp_path, capsys):
     """`mapsim beam --table`: the force and its interval come from the table; with
     Euler-Bernoulli the deflection is 3 f L^4 / (2 E t^2) at the mean and at both ends."""
-    from homogenize.tables import body_force_from_table
+    from homogenize.tables.batch import body_force_from_table
     js = tmp_path / "beam.json"
     L, t = 0.02, 1e-3
     rc = main(["beam", "--table", str(table), "--phi", "0.035", "--B", "0.1", "--gradB", "3.56",
@@ -248,7 +248,7 @@ def test_fem_quantities_in_table_and_beam_E_from_table(scheduler, tmp_path, caps
     """With fem = true the table holds E_eff, nu_eff, stress_mag and strain_mag (synthetic
     values here: the FEM itself is tested by its own module); `beam --E-from-table` uses E_eff
     and widens the interval by its relative half-width in quadrature."""
-    from homogenize.tables import body_force_from_table, modulus_from_table
+    from homogenize.tables.batch import body_force_from_table, modulus_from_table
     p = tmp_path / "fem.toml"
     p.write_text('[study]\nseed = 8\nrealizations = 5\nevaluator = "synthetic"\nfem = true\n'
                  '[grid]\nphi = 0.035\nB_T = [0.05, 0.3]\ngradB_T_per_m = 1.78\n')
@@ -277,7 +277,7 @@ def test_fem_quantities_in_table_and_beam_E_from_table(scheduler, tmp_path, caps
 
 def test_export_from_table(table, tmp_path, capsys):
     from homogenize.macro.exporters import parse_abaqus
-    from homogenize.tables import body_force_from_table
+    from homogenize.tables.batch import body_force_from_table
     f = body_force_from_table(table, 0.035, 0.3, 1.78, arrangement="chains")
     for bound, value in (("mean", f.mean), ("low", f.ci_low), ("high", f.ci_high)):
         out = tmp_path / f"{bound}.inp"
@@ -320,9 +320,9 @@ def test_ctrl_c_on_the_command_then_rerun_resumes(scheduler, tmp_path):
     import sys
     import time
 
-    from homogenize._evaluate import SyntheticEvaluator
-    from homogenize._study import load_study
-    from homogenize.tables import run_batch
+    from homogenize.tables._evaluate import SyntheticEvaluator
+    from homogenize.tables._study import load_study
+    from homogenize.tables.batch import run_batch
     p = tmp_path / "s.toml"
     p.write_text('[study]\nseed = 4\nrealizations = 6\nevaluator = "synthetic"\n'
                  '[grid]\nphi = 0.035\nB_T = [0.01, 0.1, 0.5]\ngradB_T_per_m = 1.78\n'
@@ -398,9 +398,9 @@ def test_specimen_with_the_table_law(table, tmp_path, capsys):
 def test_batch_summary_prints_every_quantity_with_its_interval(tmp_path, capsys):
     """The batch summary: mean and interval of every quantity, E_eff too (issue 36; it
     printed f_eff_z only). Parts made in-process: the batch finds them all and needs no Dask."""
-    from homogenize._evaluate import get_evaluator
-    from homogenize._study import parse_study
-    from homogenize.tables import _part_path, _write_part
+    from homogenize.tables._evaluate import get_evaluator
+    from homogenize.tables._study import parse_study
+    from homogenize.tables.batch import _part_path, _write_part
     text = STUDY.split("[rve_size]")[0].replace('evaluator = "synthetic"',
                                                 'evaluator = "synthetic"\nfem = true')
     (tmp_path / "s.toml").write_text(text)

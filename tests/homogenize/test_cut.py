@@ -1,4 +1,4 @@
-"""Nitsche cut voxels (homogenize.cut) against exact values, limits, bounds, an independent
+"""Nitsche cut voxels (homogenize.cell.cut) against exact values, limits, bounds, an independent
 discretization and invariances; the numbers quoted were measured on this machine."""
 from math import factorial
 from types import SimpleNamespace
@@ -6,10 +6,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from homogenize import _assembly as asm
-from homogenize._effective_media import eshelby_dilute, hashin_shtrikman_bounds
-from homogenize.cell import homogenize_rve, isotropic_projection
-from homogenize.cut import (_match_volume, discrete_volume, homogenize_cut, homogenize_level_set,
+from homogenize.voxels import _assembly as asm
+from homogenize.cell._effective_media import eshelby_dilute, hashin_shtrikman_bounds
+from homogenize.cell.problem import homogenize_rve, isotropic_projection
+from homogenize.cell.cut import (_match_volume, discrete_volume, homogenize_cut, homogenize_level_set,
                             split_tet, tet_negative_volume, tet_rule, tri_rule)
 from micro import InputError
 from micro.materials import FE, PDMS, ElasticMaterial, elastic
@@ -310,8 +310,8 @@ def test_bad_level_set_is_refused():
 def test_memory_estimate_refuses_before_work(monkeypatch):
     """A grid whose estimate (memory_estimate_bytes: measured 1.75 GB at 48^3, 3.63 GB at 64^3)
     exceeds the machine's share is refused with the estimate in the message, before any work."""
-    from homogenize import _budget
-    from homogenize.cut import memory_estimate_bytes
+    from homogenize.voxels import _budget
+    from homogenize.cell.cut import memory_estimate_bytes
     assert 1.75e9 < memory_estimate_bytes(48) < 1.3 * 1.75e9       # an upper bound, not loose
     assert 3.63e9 < memory_estimate_bytes(64) < 1.3 * 3.63e9
     monkeypatch.setattr(_budget, "machine_memory_bytes", lambda: 2 ** 30)

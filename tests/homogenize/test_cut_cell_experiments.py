@@ -1,7 +1,7 @@
 """Cut-cell experiments (results/cell/cut_cell_experiments.py; results/cell/README.md): composite
 voxels are first order on a tilted Fe/PDMS laminate, the Nitsche cut voxels reproduce it exactly
 and converge at second order on the dilute sphere. The Nitsche cut voxels themselves (geometry,
-volume matching, solver) are in homogenize.cut and tested in test_cut.py; this file checks the
+volume matching, solver) are in homogenize.cell.cut and tested in test_cut.py; this file checks the
 script's experiments through them."""
 from pathlib import Path
 

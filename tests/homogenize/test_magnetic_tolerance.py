@@ -1,4 +1,4 @@
-"""The magnetic column's own tolerance (homogenize.cell.magnetic_tol; study script
+"""The magnetic column's own tolerance (homogenize.cell.problem.magnetic_tol; study script
 results/cell/magnetic_tolerance.py): the variational magnetic stress's error is the product of
 the strain and magnetic solution errors, so the column may stop at sqrt(tol)."""
 import json
@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from micro._validate import InputError
-from homogenize.cell import homogenize_rve
+from micro.common.validate import InputError
+from homogenize.cell.problem import homogenize_rve
 
 SCRIPT = Path(__file__).resolve().parents[2] / "results" / "cell" / "magnetic_tolerance.py"
 

@@ -4,8 +4,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from homogenize.mesh import voxelize
-from micro._validate import InputError
+from homogenize.voxels.mesh import voxelize
+from micro.common.validate import InputError
 
 
 def _rve(centres, radii, L=1.0):

@@ -16,7 +16,7 @@ import pytest
 
 from homogenize.solvers import _matfree as mf
 from homogenize.solvers import _patches as pt
-from homogenize import cell as C
+from homogenize.cell import problem as C
 from homogenize.solvers import AMGOptions, SolverOptions
 
 from .test_matfree import _assembled, _fields, _geometry, _pin, check_spd_and_convergent
@@ -168,7 +168,7 @@ def test_patches_cut_iterations_on_small_particles():
     to SolverOptions.patch_tol_factor x tol) the patches need fewer iterations in every column, the
     magnetic one most, and their C_eff and magnetic stress are no further from a tight reference
     than the default's (within 2x: the two stopping points differ by chance)."""
-    from homogenize.bench.cell import bench_rve
+    from homogenize.bench.bench_cell import bench_rve
     rve = bench_rve(64)
     forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
     ref = C.homogenize_rve(rve, 32, solver="matrix-free", forces_N=forces, tol=1e-11,
@@ -194,7 +194,7 @@ def test_patches_cut_iterations_on_small_particles():
 
 
 def test_patch_rule():
-    """Patches for many particles or small ones (homogenize.cell.use_patches), none for the
+    """Patches for many particles or small ones (homogenize.cell.problem.use_patches), none for the
     64^3 bench RVE's 100 particles of ~2.5 voxels (where they cost more than they save), none
     without particles or with patch_shell_voxels = None."""
     assert not C.use_patches(100, np.full(100, 2.5))

@@ -1,4 +1,4 @@
-"""Coupled magneto-mechanics of the RVE (homogenize/relax.py, homogenize/_green.py)."""
+"""Coupled magneto-mechanics of the RVE (homogenize/cell/relax.py, homogenize/cell/_green.py)."""
 import math
 import os
 
@@ -8,12 +8,12 @@ import pytest
 from micro import RVE, ConvergenceError, InputError
 from micro.dipoles import solve
 from micro.materials import ElasticMaterial
-from homogenize._green import (free_displaceability, periodic_displaceability,
+from homogenize.cell._green import (free_displaceability, periodic_displaceability,
                                rigid_sphere_displaceability)
-from homogenize.relax import (equilibrium, fem_displaceability, green_displaceability,
+from homogenize.cell.relax import (equilibrium, fem_displaceability, green_displaceability,
                               magnetostriction_curve,
                               magnetic_coenergy_J, microstructure, relax)
-from homogenize import relax as R
+from homogenize.cell import relax as R
 
 FULL = bool(os.environ.get("MAPSIM_FULL"))
 A = 25e-9                                  # sphere radius [m]
@@ -218,7 +218,7 @@ def small_sweep():
 
 
 def test_free_boundary_zero_mean_stress(small_sweep):
-    from homogenize.cell import tensor_to_voigt
+    from homogenize.cell.problem import tensor_to_voigt
     _, r = small_sweep
     for s in r.steps:
         C = np.asarray(s["C_eff_Pa"])
@@ -262,7 +262,7 @@ def test_strain_boundary_mean_stress_against_free_case():
     free magnetostriction back, sigma = -C_eff : strain_free (same relaxed particles, since the
     fluctuations are solved at zero mean strain in both cases); prescribing strain_free itself
     gives zero mean stress; at zero field nothing moves and the mean stress is C_eff : E."""
-    from homogenize.cell import tensor_to_voigt, voigt_to_tensor
+    from homogenize.cell.problem import tensor_to_voigt, voigt_to_tensor
     rve = pair(2, 20e-9, 200e-9)
     kw = dict(law="linear", matrix=SOFT, voxels=12)
     free = relax(rve, [0.0, 0.1], **kw).steps

@@ -8,11 +8,11 @@ import h5py
 import numpy as np
 import pytest
 
-from homogenize import _evaluate
-from homogenize._study import parse_study
-from homogenize.relax import relax
-from homogenize.tables import read_table, run_batch
-from micro._validate import InputError
+from homogenize.tables import _evaluate
+from homogenize.tables._study import parse_study
+from homogenize.cell.relax import relax
+from homogenize.tables.batch import read_table, run_batch
+from micro.common.validate import InputError
 from micro.materials import ElasticMaterial
 from micro.particles import Monodisperse, generate_rve
 
@@ -90,7 +90,7 @@ def test_intervals_and_quantities_against_B(tables):
     assert np.all(t.component_values("E_eff_parallel_Pa") > 0.5e6)
     # the discretization error of every cell-FEM quantity (two grids: VOX and its coarse grid),
     # never below 2.2 % of the filler's part: E_matrix from the grid axis matrix_E_Pa
-    from homogenize.resolution import FILLER_BIAS_REL
+    from homogenize.tables.resolution import FILLER_BIAS_REL
     assert set(t.disc_err) == set(_evaluate.RELAX_FEM_QUANTITIES)
     E = t.component_values("E_eff_parallel_Pa").mean(axis=1)
     assert np.all(t.disc_err["E_eff_parallel_Pa"] >= FILLER_BIAS_REL * np.abs(E - 0.5e6)
@@ -168,7 +168,7 @@ def test_packaged_example_study_parses():
     from pathlib import Path
     import homogenize
     p = Path(homogenize.__file__).parent / "studies" / "relax_example.toml"
-    from homogenize._study import load_study
+    from homogenize.tables._study import load_study
     s = load_study(p)
     assert s.evaluator == "relax" and s.fem
     # one RVE per realization and matrix modulus, shared by the field steps

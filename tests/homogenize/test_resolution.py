@@ -1,4 +1,4 @@
-"""The discretization error of the cell FEM's table quantities (homogenize.resolution): the
+"""The discretization error of the cell FEM's table quantities (homogenize.tables.resolution): the
 two-grid estimate is exact for an exactly first-order error, the floor holds where the grids
 agree, the tables carry it next to the statistical interval and the interpolation and the
 macro consumers propagate it."""
@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from homogenize import resolution as res
-from homogenize._evaluate import SYNTHETIC_DISC_REL, synthetic_truth
-from homogenize._study import parse_study
-from homogenize.tables import interpolate, modulus_from_table, read_table, run_batch
-from micro._validate import InputError
+from homogenize.tables import resolution as res
+from homogenize.tables._evaluate import SYNTHETIC_DISC_REL, synthetic_truth
+from homogenize.tables._study import parse_study
+from homogenize.tables.batch import interpolate, modulus_from_table, read_table, run_batch
+from micro.common.validate import InputError
 
 
 @pytest.mark.parametrize("n, nc", [(6, 4), (8, 6), (12, 8), (16, 10), (24, 16), (32, 22),
@@ -201,7 +201,7 @@ def test_batch_warns_per_grid_population_below_three_voxels_per_radius():
     """The box of N particles of mean volume <V> at phi is (N <V> / phi)^(1/3): at 12 voxels
     the tutorial's 8 particles at phi 0.05 get 1.2 voxels per radius (a warning per phi that
     falls short), at 24 only phi 0.05 (2.5; phi 0.4: 4.9 voxels per radius)."""
-    from homogenize._evaluate import resolution_warnings
+    from homogenize.tables._evaluate import resolution_warnings
     text = ('[study]\nseed = 1\nrealizations = 2\nn_particles = 8\nfem = true\nvoxels = 12\n'
             'particle_material = "carbonyl-iron"\n'
             '[grid]\nphi = [0.05, 0.4]\nB_T = 0.1\ngradB_T_per_m = 1.0\n')

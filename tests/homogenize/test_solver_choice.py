@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from micro import InputError, Monodisperse, generate_rve
-from homogenize.cell import (AUTO_MAX_PHI, SOLVERS, CellConfig, _choose_solver,
+from homogenize.cell.problem import (AUTO_MAX_PHI, SOLVERS, CellConfig, _choose_solver,
                              homogenize_mesh, homogenize_rve)
-from homogenize.mesh import voxelize
+from homogenize.voxels.mesh import voxelize
 from homogenize.solvers import block_cg, coupled_block_cg
 
 

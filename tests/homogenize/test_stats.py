@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from homogenize._evaluate import SyntheticEvaluator, synthetic_truth
-from homogenize._stats import (fit_power_law, realizations_needed, summarize,
+from homogenize.tables._evaluate import SyntheticEvaluator, synthetic_truth
+from homogenize.tables._stats import (fit_power_law, realizations_needed, summarize,
                                welch_permutation)
-from homogenize._study import parse_study
-from homogenize.tables import Table, body_force_from_table, interpolate
-from micro._validate import InputError
+from homogenize.tables._study import parse_study
+from homogenize.tables.batch import Table, body_force_from_table, interpolate
+from micro.common.validate import InputError
 
 STUDY = """
 [study]

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from homogenize._study import AXIS_ORDER, load_study, parse_study
-from micro._validate import InputError
+from homogenize.tables._study import AXIS_ORDER, load_study, parse_study
+from micro.common.validate import InputError
 
 GOOD = """
 [study]
@@ -177,7 +177,7 @@ def test_seed_paper_preset_changes_nothing():
 
 
 def test_bounds_follow_a_micron_mean_radius_in_a_study():
-    from homogenize._evaluate import _rve_kwargs
+    from homogenize.tables._evaluate import _rve_kwargs
     s = _rve_study(grid="mean_radius_m = 1e-6")         # failed before: bounds [10, 50] nm
     d = _rve_kwargs({**s.rve, "mean_radius_m": 1e-6})["distribution"]
     assert (d.r_min_m, d.r_max_m) == pytest.approx((0.4e-6, 2e-6), rel=1e-15)

@@ -8,10 +8,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from homogenize._cell_output import (VTK_COMPONENT_NAMES, VTK_TENSOR_ORDER, all_cases,
+from homogenize.cell._output import (VTK_COMPONENT_NAMES, VTK_TENSOR_ORDER, all_cases,
                                      local_fields, write_pvd, write_vtu)
-from homogenize.cell import CASES, homogenize_rve
-from micro._validate import InputError
+from homogenize.cell.problem import CASES, homogenize_rve
+from micro.common.validate import InputError
 
 meshio = pytest.importorskip("meshio")
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from homogenize._study import parse_study
-from homogenize.tables import interpolate, read_table, run_batch
+from homogenize.tables._study import parse_study
+from homogenize.tables.batch import interpolate, read_table, run_batch
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("h5netcdf")

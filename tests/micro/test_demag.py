@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.constants import mu_0 as MU0
 
-from micro._validate import InputError
+from micro.common.validate import InputError
 from micro.demag import (cylinder_demag_factors, ellipsoid_demag_factors, prism_demag_factors,
                          spheroid_demag_factors)
 

@@ -1,10 +1,10 @@
-"""Committed-result helpers of micro._io: rounding to meaningful digits, data digests, HDF5
+"""Committed-result helpers of micro.common.files: rounding to meaningful digits, data digests, HDF5
 agreement to round-off."""
 import h5py
 import numpy as np
 import pytest
 
-from micro._io import RESULT_DIGITS, data_digest, hdf5_agree, round_floats, write_json
+from micro.common.files import RESULT_DIGITS, data_digest, hdf5_agree, round_floats, write_json
 
 
 def test_round_floats_keeps_structure_and_rounds_to_significant_digits():

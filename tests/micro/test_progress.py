@@ -1,7 +1,7 @@
 """The one progress indicator (issue 36): a tqdm bar on a terminal, plain lines elsewhere."""
 import io
 
-from micro._progress import Progress, is_terminal, progress_bar
+from micro.common.progress import Progress, is_terminal, progress_bar
 
 
 class _Tty(io.StringIO):

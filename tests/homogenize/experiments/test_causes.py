@@ -129,7 +129,7 @@ def test_oxide_shell_is_neutral_at_the_nominal_radius():
 def test_magnetostriction_magnetic_stress():
     """Saturated particles: strain = (k_shape(a) - k_rve(phi, 1) + kappa_extra) mu0 M^2 / E,
     the shape stress from the cylinder's demagnetizing factor and k_rve from the RVE table."""
-    from homogenize.experiments import tables as T
+    from homogenize.experiments import rve_tables as T
     exp = generate(("dipolar_interaction",), "magnetostriction", seed=2).experiment
     spec = ModelSpec("magnetostriction", ("dipolar_interaction",))
     c = exp.columns

@@ -7,7 +7,7 @@ import pytest
 from homogenize.experiments import convert
 from homogenize.experiments.io import (KINDS, REQUIRED, Matrix, load_experiment,
                                        write_experiment)
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 ROOT = Path(__file__).resolve().parents[3]
 DATA = ROOT / "examples" / "data"

@@ -39,7 +39,7 @@ def test_demag_against_magpylib_volume_average(aspect):
 
 
 def test_demag_rejects_bad_aspect():
-    from micro._validate import InputError
+    from micro.common.validate import InputError
     with pytest.raises(InputError, match="aspect_ratio"):
         P.cylinder_demag_factor(0.0)
 
@@ -139,7 +139,7 @@ def test_composite_density():
     assert P.composite_density_kg_m3(0.261, 1050, 7870) == pytest.approx(2830, rel=1e-3)
 
 
-# --- filler stiffening through homogenize.cell -------------------------------------------------
+# --- filler stiffening through homogenize.cell.problem -------------------------------------------------
 
 def test_mori_tanaka_cross_check_dilute_einstein_limit():
     """Rigid spheres in an incompressible matrix: E_eff / E_m = 1 + 2.5 phi + O(phi^2)
@@ -152,6 +152,6 @@ def test_mori_tanaka_cross_check_dilute_einstein_limit():
 
 
 def test_stiffening_adapter_is_the_fem_table():
-    from homogenize.experiments import tables as T
+    from homogenize.experiments import rve_tables as T
     phi = np.linspace(0.0, 0.3, 7)
     np.testing.assert_array_equal(P.stiffening_ratio(phi, 0.45, 2e6), T.filler_stiffness_ratio(phi))

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from homogenize.experiments import tables as T
+from homogenize.experiments import rve_tables as T
 from homogenize.experiments import _physics as P
 
 
@@ -31,7 +31,7 @@ def test_stiffness_table_within_hashin_shtrikman_bounds():
     """Every RVE, at its own voxel volume fraction, lies between the HS bounds (the lower bound
     is Mori-Tanaka for stiff spheres); a random isotropic RVE must. The isotropic projection of
     a slightly anisotropic C_eff (A^U < 0.3 here) stays inside the bounds as well."""
-    from homogenize.cell import bulk_shear, hashin_shtrikman_bounds
+    from homogenize.cell.problem import bulk_shear, hashin_shtrikman_bounds
     Km, Gm = bulk_shear(T.MATRIX_E_PA, T.MATRIX_NU)
     Kp, Gp = bulk_shear(T.PARTICLE_E_PA, T.PARTICLE_NU)
     rows = _rows(T.stiffness_table_path())
@@ -57,7 +57,7 @@ def test_stiffness_table_dilute_limit_is_eshelby():
     was +18 .. +52 %): within 10 % of Eshelby from 2.7 voxels' radius on, and self-converged
     (spread of the slope over 2.7-6.7 voxels' radius below 4 %)."""
     import json
-    from homogenize.cell import bulk_shear, eshelby_dilute, young_poisson
+    from homogenize.cell.problem import bulk_shear, eshelby_dilute, young_poisson
     Km, Gm = bulk_shear(T.MATRIX_E_PA, T.MATRIX_NU)
     Kp, Gp = bulk_shear(T.PARTICLE_E_PA, T.PARTICLE_NU)
     t = T.stiffness_table()
@@ -146,12 +146,12 @@ def test_shape_stress_of_a_cylinder():
 
 
 def test_cell_stress_share_of_stiff_particles():
-    """homogenize.cell's stress_mag = mean elastic stress + virial: rigid particles carry part
+    """homogenize.cell.problem's stress_mag = mean elastic stress + virial: rigid particles carry part
     of the pair forces themselves, so the matrix gets a share in (0, 1) of the virial's
     deviatoric stress (one RVE of 8 particles is noisy: each share within (0.3, 1), the
     phi >= 0.2 means within (0.6, 1)); the exact dilute node is (0, 1). The stored columns
     are consistent, and every cell's E_eff lies within the HS bounds."""
-    from homogenize.cell import bulk_shear, hashin_shtrikman_bounds
+    from homogenize.cell.problem import bulk_shear, hashin_shtrikman_bounds
     rows = _rows(T.cell_stress_path())
     Km, Gm = bulk_shear(T.MATRIX_E_PA, 0.49)
     Kp, Gp = bulk_shear(T.PARTICLE_E_PA, T.PARTICLE_NU)

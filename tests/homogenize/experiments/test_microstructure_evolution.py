@@ -11,7 +11,7 @@ from homogenize.experiments import causes as C
 from homogenize.experiments.diagnose import diagnose
 from homogenize.experiments.io import load_experiment
 from homogenize.experiments.synthetic import generate
-from homogenize.experiments.tables import Unavailable, relax_tables, restructuring_table
+from homogenize.experiments.rve_tables import Unavailable, relax_tables, restructuring_table
 
 ROOT = Path(__file__).resolve().parents[3]
 DIGUET = ROOT / "examples" / "data" / "diguet2010_magnetostriction.toml"
@@ -26,7 +26,7 @@ def test_vocabulary_format_document_and_help():
     doc = (ROOT / "examples" / "data" / "EXPERIMENT_FORMAT.md").read_text()
     row = [line for line in doc.splitlines() if line.startswith(f"| `{ME}`")]
     assert len(row) == 1 and "faster than M^2" in row[0]
-    from homogenize.cli.experiments import _DIAGNOSE_DOC
+    from homogenize.cli.cmd_experiments import _DIAGNOSE_DOC
     assert ME in _DIAGNOSE_DOC and "EXPERIMENT_FORMAT.md" in _DIAGNOSE_DOC
 
 

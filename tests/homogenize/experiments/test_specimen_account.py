@@ -8,8 +8,8 @@ from scipy.constants import mu_0 as MU0
 from homogenize.experiments import load_experiment
 from homogenize.experiments.specimen_account import (composite_law, loo_fitted_kappa,
                                                      relaxed_kappa, specimen_account)
-from homogenize.experiments.tables import Restructuring, affine_kappa
-from micro._validate import InputError
+from homogenize.experiments.rve_tables import Restructuring, affine_kappa
+from micro.common.validate import InputError
 
 ROOT = Path(__file__).resolve().parents[3]
 DIGUET = ROOT / "examples" / "data" / "diguet2010_magnetostriction.toml"

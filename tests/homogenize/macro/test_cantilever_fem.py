@@ -6,7 +6,7 @@ import pytest
 
 from homogenize.macro.cantilever import Strip, solve_cantilever, tip_deflection_m
 from homogenize.macro.fem import Material
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 MAT = Material(2e6, 0.45, 1210.0)
 SLENDER = Strip(1.0, 0.05, 0.05)   # L/t = 20, square section

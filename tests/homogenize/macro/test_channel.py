@@ -4,7 +4,7 @@ import pytest
 from homogenize.macro.channel import ChannelGeometry, solve_channel
 from homogenize.macro.closed_form import plate_clamped_strip_deflection_m
 from homogenize.macro.fem import Material
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 MAT = Material(2e6, 0.45, 1210.0)
 F = 4e4

@@ -10,7 +10,7 @@ from homogenize.cli import main
 from homogenize.macro.channel import ChannelGeometry
 from homogenize.macro.fem import Material
 from homogenize.macro.flow import CeilingModel, closure, solve_channel_flow
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 GEO = ChannelGeometry(5e-3, 50e-6, 0.5e-3, 10e-3)
 MAT = Material(2e6, 0.45, 1030.0)

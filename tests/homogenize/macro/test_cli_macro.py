@@ -95,23 +95,9 @@ gradB_T_per_m = 1.78
 """
 
 
-def _synthetic_table(path):
-    """A finished table of the synthetic evaluator, made in-process (no Dask)."""
-    from homogenize._evaluate import get_evaluator
-    from homogenize._study import parse_study
-    from homogenize.tables import _part_path, _write_part, parts_dir_for, run_batch
-    study = parse_study(_SYNTH, str(path.with_suffix(".toml")))
-    ev = get_evaluator("synthetic")
-    parts = parts_dir_for(path)
-    for t in study.tasks():
-        k = t.key(ev.id)
-        _write_part(_part_path(parts, t, k), t, k, ev(t))
-    run_batch(study, path, progress=False)
-    return path
-
-
-def test_channel_prints_what_was_asked_with_the_field_interval(tmp_path, capsys):
-    table = _synthetic_table(tmp_path / "t.h5")
+def test_channel_prints_what_was_asked_with_the_field_interval(tmp_path, capsys,
+                                                                synthetic_table):
+    table = synthetic_table(tmp_path / "t.h5", _SYNTH)
     out = tmp_path / "ch.json"
     assert main(["channel", "--flow-rate-m3-s", "1.6667e-10", "--target-gap-m", "30e-6",
                  "--table", str(table), "--phi", "0.05", "--gradB", "30", "--nc", "1",

@@ -83,3 +83,41 @@ def test_gap_needs_a_permanent_magnet(tmp_path, capsys):
     assert main(STRIP + ["--E-Pa", "2e6", "--magnet", "coil", "--magnet-size", "5e-3", "1e-2",
                          "--current-A", "1", "--turns", "100", "--gap-m", "0.01"]) == 2
     assert "permanent magnet" in capsys.readouterr().err
+
+
+_SYNTH_FEM = """
+[study]
+name = "syn-fem"
+seed = 7
+realizations = 4
+n_particles = 20
+evaluator = "synthetic"
+fem = true
+voxels = 8
+[grid]
+phi = [0.02, 0.05]
+B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
+gradB_T_per_m = 1.78
+"""
+
+
+def test_table_intervals_reach_the_pull_in_gap(tmp_path, capsys, synthetic_table):
+    """With --table the pull-in gap carries the table's M_eff interval, and with --E-from-table
+    its E_eff interval too (issue 35: intervals through every magnet case): the ends are
+    (E high, M low) and (E low, M high), the mean lies between them, and the
+    E_eff interval's ends are the table's, widened by its discretization error."""
+    from homogenize.tables import modulus_from_table, read_table
+    table = synthetic_table(tmp_path / "t.h5", _SYNTH_FEM)
+    E = modulus_from_table(read_table(table), 0.05)
+    assert E is not None and E.total_low < E.mean < E.total_high
+    sweep = ["--table", str(table), "--phi", "0.05", "--gap-sweep-m", "0.016:0.004:7"]
+    j1 = tmp_path / "e.json"
+    assert main(STRIP + MAGNET + sweep + ["--E-from-table", "--json", str(j1)]) == 0, \
+        capsys.readouterr().err
+    assert "M_eff and E_eff intervals" in capsys.readouterr().out
+    both = json.loads(j1.read_text())
+    assert both["E_Pa"] == pytest.approx(E.mean, rel=1e-12)
+    assert both["interval_ends"]["low"]["E_Pa"] == pytest.approx(E.total_high, rel=1e-12)
+    assert both["interval_ends"]["high"]["E_Pa"] == pytest.approx(E.total_low, rel=1e-12)
+    lo, hi = both["interval"]["pull_in_gap_m"]
+    assert lo < both["pullin"]["pull_in_gap_m"] < hi

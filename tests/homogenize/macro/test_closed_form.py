@@ -4,7 +4,7 @@ import pytest
 from scipy.integrate import cumulative_trapezoid, quad
 
 from homogenize.macro import closed_form as cf
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 GEO = dict(length_m=0.02, width_m=5e-3, thickness_m=1e-3, E_Pa=2e6)
 

@@ -9,7 +9,7 @@ from homogenize.macro.convergence import (MEASURED_RATE, converged_tip, default_
                                           observed_rate)
 from homogenize.macro.fem import Material
 from micro.materials import SEED
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 MAT = Material(SEED.E_Pa, SEED.nu, SEED.pdms_density_kg_m3)
 STRIP = Strip(19.369e-3, 5e-3, 1e-3)        # the seed strip

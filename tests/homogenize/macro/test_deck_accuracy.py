@@ -23,7 +23,7 @@ from homogenize.macro.exporters import (DECK_ELEMENT, NLGEOM_FRACTION, ExportSpe
                                         parse_ccx_dat, write_deck)
 from homogenize.macro.fem import Material, box_mesh, linear_solve, probe_displacement
 from homogenize.macro.magnets import PermanentMagnet, body_force_along_strip
-from micro._validate import InputError
+from micro.common.validate import InputError
 from micro.demag import prism_demag_factors
 from micro.materials import SEED
 

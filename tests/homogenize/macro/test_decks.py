@@ -15,7 +15,7 @@ from homogenize.macro.exporters import (ELMER_KEYWORDS, ExportSpec, abaqus_model
                                         parse_sif, read_elmer_mesh, to_abaqus, write_deck)
 from homogenize.macro.fem import Material
 from micro.materials import GRAVITY_M_S2, PDMS, SEED
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 STRIP = Strip(19.369e-3, 5e-3, 1e-3)           # the seed strip
 MAT = Material(SEED.E_Pa, SEED.nu, SEED.pdms_density_kg_m3)

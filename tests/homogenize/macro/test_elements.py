@@ -10,7 +10,7 @@ from homogenize.macro import closed_form as cf
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.elements import CCX_ELEMENTS, ELEMENTS, ccx_tip, solve_strip
 from homogenize.macro.fem import Material
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 E = 2.0e6
 F = 1.0e3            # body force [N/m^3]; linear problems, the value only scales the tip

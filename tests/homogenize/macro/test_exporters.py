@@ -4,7 +4,7 @@ import pytest
 
 from homogenize.macro.exporters import (DIRECTIONS, ExportSpec, parse_abaqus, parse_elmer,
                                         to_abaqus, to_elmer)
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 
 @pytest.mark.parametrize("direction", list(DIRECTIONS))

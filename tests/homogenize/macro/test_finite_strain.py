@@ -681,6 +681,6 @@ def test_solve_3d_warm_start_reaches_the_same_state():
     warm = fs.solve_3d(body, solid, loads(2.2e3), initial=near)
     np.testing.assert_allclose(warm.u_m, cold.u_m, rtol=0, atol=1e-8 * np.abs(cold.u_m).max())
     assert warm.newton_iterations < cold.newton_iterations
-    from micro._validate import InputError
+    from micro.common.validate import InputError
     with pytest.raises(InputError, match="initial"):
         fs.solve_3d(fs.cylinder_body_3d(1e-3, 1.6e-3, 2), solid, loads(1e3), initial=near)

@@ -11,7 +11,7 @@ from homogenize.macro.flow import (BLOOD_PLASMA, CeilingModel, _section_y_nodes,
                                    field_for_target_gap, flow_with_interval, plot_channel_flow,
                                    rectangular_duct_conductance_m4_Pa_s,
                                    section_conductance_m4_Pa_s, solve_channel_flow)
-from micro._validate import InputError
+from micro.common.validate import InputError
 from micro.materials import PDMS, SEED
 
 MU = BLOOD_PLASMA.viscosity_Pa_s
@@ -188,7 +188,7 @@ def test_closure_reported_never_negative(plate):
 
 
 def test_interval_of_the_body_force_maps_to_flow(plate):
-    from homogenize.tables import Estimate
+    from homogenize.tables.batch import Estimate
     est = Estimate(4e5, 3e5, 5e5, 5e4, 10.0, 0.95, "N/m^3")
     fi = flow_with_interval(plate, L, est, pressure_drop_Pa=200.0)
     mid = solve_channel_flow(plate, L, body_force_N_m3=4e5, pressure_drop_Pa=200.0)

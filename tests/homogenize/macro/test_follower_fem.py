@@ -9,7 +9,7 @@ from homogenize.macro.fem import neo_hookean_solve, box_mesh
 from homogenize.macro.follower_fem import FollowerFEM, follower_fem_at_gap
 from homogenize.macro.magnets import PermanentMagnet, linear_magnetization
 from homogenize.macro.pullin import MagnetElastica, place_magnet, trace_branch
-from micro._validate import InputError
+from micro.common.validate import InputError
 from micro.demag import prism_demag_factors
 from micro.materials import FE, ElasticMaterial
 

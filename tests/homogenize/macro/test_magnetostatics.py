@@ -23,7 +23,7 @@ from homogenize.macro.magnetostatics import (BodyMesh, ConvergenceError, Cylinde
                                              langevin, linear, magnetic_loads, maxwell_force_N,
                                              solve_3d, solve_axisymmetric, tanh, traction_at,
                                              uniform_applied_gradient_field)
-from micro._validate import InputError
+from micro.common.validate import InputError
 from micro.demag import cylinder_demag_factors, ellipsoid_demag_factors, spheroid_demag_factors
 
 MS = 1.0e6          # saturation magnetization of the test laws [A/m] (a generic soft filler)

@@ -12,7 +12,7 @@ from homogenize.macro.fem import Material
 from homogenize.macro.magnets import (Coil, PermanentMagnet, body_force_along_strip,
                                       linear_magnetization, sample_field,
                                       tabulated_magnetization)
-from micro._validate import InputError
+from micro.common.validate import InputError
 from micro.demag import prism_demag_factors
 
 STRIP = Strip(19.369e-3, 5e-3, 1e-3)

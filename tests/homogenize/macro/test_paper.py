@@ -141,7 +141,7 @@ def test_rerun_keeps_the_figures_of_unchanged_numbers(quick, tmp_path):
     """A figure carries the digest of the rounded numbers it shows and is not redrawn when they
     are unchanged (another CPU's last-digit round-off rewrites nothing); different numbers
     redraw it."""
-    from micro._io import _png_digest, save_png
+    from micro.common.files import _png_digest, save_png
     from matplotlib.figure import Figure
     out, res = quick
     png = out / "channel.png"

@@ -8,7 +8,7 @@ from homogenize.macro.magnets import PermanentMagnet, body_force_along_strip, \
     linear_magnetization
 from homogenize.macro.pullin import MagnetElastica, one_mode_pullin, place_magnet, \
     pullin_sweep, trace_branch
-from micro._validate import InputError
+from micro.common.validate import InputError
 from micro.demag import prism_demag_factors
 from micro.materials import FE, ElasticMaterial
 

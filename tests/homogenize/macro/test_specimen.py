@@ -10,7 +10,7 @@ from homogenize.experiments._physics import shape_stress_coefficient
 from homogenize.macro import finite_strain as fs
 from homogenize.macro import magnetostatics as ms
 from homogenize.macro.specimen import Specimen, solve_specimen
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 R = 1e-3
 CHI = 1e-3            # weakly magnetizable: M uniform to O(chi) inside an ellipsoid and the

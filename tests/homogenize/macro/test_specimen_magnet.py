@@ -15,7 +15,7 @@ from homogenize.macro import magnetostatics as ms
 from homogenize.macro.magnets import PermanentMagnet, _magpylib_source
 from homogenize.macro.specimen import Specimen, check_gaps, solve_specimen, \
     solve_specimen_in_field, solve_specimen_on_magnet
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 #: an NdFeB disk 10 mm x 5 mm, B_r 1.2 T
 MAGNET = (10e-3, 5e-3, 1.2)

@@ -5,7 +5,7 @@ import pytest
 from homogenize.macro import closed_form as cf
 from homogenize.macro.cantilever import Strip, solve_cantilever
 from homogenize.macro.fem import Material
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 GEO = dict(length_m=0.02, width_m=5e-3, thickness_m=1e-3, E_Pa=2e6)
 L, W, T, E = GEO["length_m"], GEO["width_m"], GEO["thickness_m"], GEO["E_Pa"]

@@ -6,9 +6,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from homogenize import cell as C
+from homogenize.cell import problem as C
 from homogenize.solvers import AMGOptions, SolverOptions, smoothed_aggregation
-from micro._validate import InputError
+from micro.common.validate import InputError
 
 
 def test_defaults_are_the_measured_settings():

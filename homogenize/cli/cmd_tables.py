@@ -5,8 +5,8 @@ import json
 import sys
 from pathlib import Path
 
-from micro._io import manifest, write_json
-from micro._validate import InputError
+from micro.common.files import manifest, write_json
+from micro.common.validate import InputError
 from micro.materials import FE, PDMS, matrix_preset
 
 from homogenize.cli._common import (config_of, float_in, int_in, one_line_errors, parse_at,
@@ -14,13 +14,13 @@ from homogenize.cli._common import (config_of, float_in, int_in, one_line_errors
 from homogenize.macro.cantilever import Strip
 from homogenize.macro.effective import beam_with_interval, effective_material_from_table
 from homogenize.macro.exporters import ExportSpec, export_text
-from homogenize.tables import read_table
-from homogenize.tables import BatchError, run_batch
-from homogenize._study import load_study
-from homogenize._evaluate import COARSE, get_evaluator
-from homogenize._stats import summarize
+from homogenize.tables.batch import read_table
+from homogenize.tables.batch import BatchError, run_batch
+from homogenize.tables._study import load_study
+from homogenize.tables._evaluate import COARSE, get_evaluator
+from homogenize.tables._stats import summarize
 from homogenize.studies.rve_size import rve_size_study
-from homogenize._stats import welch_permutation
+from homogenize.tables._stats import welch_permutation
 from homogenize.studies.chain import run_chain
 
 _BATCH_DOC = """\
@@ -85,7 +85,7 @@ def _print_summary(path, max_rows: int = 40) -> None:
     """Every quantity of the table per grid point, its mean and interval (vectors: the z
     component, tensors: zz; all components through xarray or ``mapsim compare``); for the cell
     FEM's quantities also the discretization error and the interval widened by it
-    (:mod:`homogenize.resolution`). The coarse-grid values of the estimate are not printed."""
+    (:mod:`homogenize.tables.resolution`). The coarse-grid values of the estimate are not printed."""
     t = read_table(path)
     if len(t.points) > max_rows:
         print(f"{len(t.points)} grid points: more than {max_rows}, no summary here (open the "
@@ -118,7 +118,7 @@ def _print_summary(path, max_rows: int = 40) -> None:
               f"from the same RVEs at {d.get('coarse_voxels')} (first order, never below "
               f"{100 * d.get('floor_rel_of_filler_contribution', 0):g} % of the filler's "
               f"contribution); combined = the {lvl} interval widened by it on both sides "
-              f"(homogenize/resolution.py)")
+              f"(homogenize/tables/resolution.py)")
 
 
 def _cmd_rve_size(args) -> int:

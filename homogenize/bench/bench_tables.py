@@ -25,11 +25,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from homogenize._evaluate import RVEEvaluator
+from homogenize.tables._evaluate import RVEEvaluator
 import contextlib
 import os
-from homogenize._study import parse_study
-from homogenize.tables import read_table, run_batch
+from homogenize.tables._study import parse_study
+from homogenize.tables.batch import read_table, run_batch
 
 _STUDY = """
 [study]

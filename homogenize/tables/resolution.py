@@ -47,7 +47,7 @@ import math
 
 import numpy as np
 
-from ._stats import t_half_width
+from homogenize.tables._stats import t_half_width
 
 __all__ = ["ORDER", "FILLER_BIAS_REL", "MIN_VOXELS_PER_RADIUS", "coarse_voxels",
            "discretization_error", "combined_interval", "voxels_per_radius",

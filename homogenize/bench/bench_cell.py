@@ -15,14 +15,14 @@ import time
 
 import numpy as np
 import os
-from homogenize import _assembly as A
-from homogenize import _budget
+from homogenize.voxels import _assembly as A
+from homogenize.voxels import _budget
 from homogenize.bench.reference import skfem_reference
 from micro.materials import FE, PDMS
 from micro.particles import generate_rve
-from homogenize.cell import homogenize_rve, isotropic_projection
-from homogenize.cell import Material, homogenize_mesh
-from homogenize.mesh import voxelize
+from homogenize.cell.problem import homogenize_rve, isotropic_projection
+from homogenize.cell.problem import Material, homogenize_mesh
+from homogenize.voxels.mesh import voxelize
 import numba
 
 __all__ = ["bench_records", "bench_rve", "SOLVER_CONFIG"]
@@ -77,7 +77,7 @@ def _assembly_record(n: int) -> dict:
 
 def _residual_fields(r) -> dict:
     """The final relative residuals of a cell result: the strains' largest, and the magnetic
-    column's with the tolerance it stopped at (sqrt(tol), homogenize.cell.magnetic_tol)."""
+    column's with the tolerance it stopped at (sqrt(tol), homogenize.cell.problem.magnetic_tol)."""
     return {"max_residual": max(v for k, v in r.residuals.items() if k != "magnetic"),
             "magnetic_residual": r.residuals.get("magnetic"),
             "tol_magnetic": r.settings["tol_magnetic"]}
@@ -255,12 +255,12 @@ def _solver_choice_records(sizes=CHOICE_SIZES, phis=CHOICE_PHIS,
                            dispersities=CHOICE_DISPERSITIES, matfree_only=()) -> list[dict]:
     """solver="matrix-free" against solver="fast" (the assembled BSR + pyamg SA) on the same RVE
     (:func:`choice_rve`; 6 strains + random particle forces, tol 1e-6), each run in its own
-    process (peak RSS): what ``solver="auto"`` picks (homogenize.cell._choose_solver) rests on
+    process (peak RSS): what ``solver="auto"`` picks (homogenize.cell.problem._choose_solver) rests on
     these. ``ratio`` = fast seconds / matrix-free seconds; ``max_rel_error`` = the largest
     C_eff difference over max |C_eff|; ``stress_mag_rel_diff`` likewise for the magnetic stress
     (its column stops at sqrt(tol)). Grids in ``matfree_only`` run the matrix-free solver alone
     (the assembled one may not fit)."""
-    from homogenize.cell import _choose_solver, _plain_particles, _options
+    from homogenize.cell.problem import _choose_solver, _plain_particles, _options
     from micro import InputError
     out = []
     for n in sizes:
@@ -335,7 +335,7 @@ def _voxel_moduli(voxels: int, seed: int):
     mapsim solves: particle / matrix, and in cut voxels the Reuss average (isotropic: harmonic
     bulk and shear moduli) -- exactly the stiffness field of ``method="composite"``."""
     from micro.materials import FE, PDMS, elastic
-    from homogenize._effective_media import bulk_shear
+    from homogenize.cell._effective_media import bulk_shear
     mesh = voxelize(bench_rve(voxels, seed), voxels, method="composite")
     f = mesh.fraction
     Km, Gm = bulk_shear(*(elastic(PDMS).E_Pa, elastic(PDMS).nu))
@@ -462,7 +462,7 @@ def _run_peer(tool: str, voxels: int, seed: int, threads: int | None) -> dict:
                    OPENBLAS_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads))
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "peer.json")
-        code = (f"from homogenize.bench.cell import _peer_worker; "
+        code = (f"from homogenize.bench.bench_cell import _peer_worker; "
                 f"_peer_worker({tool!r}, {voxels}, {seed}, {out!r})")
         p = subprocess.run(["/usr/bin/time", "-v", sys.executable, "-c", code], env=env,
                            capture_output=True, text=True)

@@ -4,15 +4,15 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from micro._io import manifest, protect_inputs, write_json
-from micro._validate import InputError
+from micro.common.files import manifest, protect_inputs, write_json
+from micro.common.validate import InputError
 
 from homogenize.cli._common import (check_input_file, check_output_dir, check_outputs, int_in,
                                     one_line_errors)
 from homogenize.experiments.diagnose import diagnose
 from homogenize.experiments.io import load_experiment
 from homogenize.experiments.study import run_study, summarize, write_study
-from homogenize.experiments import tables as T
+from homogenize.experiments import rve_tables as T
 from homogenize.experiments.report import write_report
 
 __all__ = ["register"]
@@ -115,7 +115,7 @@ Re-make the RVE tables the diagnosis interpolates in (homogenize/experiments/dat
 spheres in PDMS by the voxel FEM, several seeds per phi), filler_stiffness_resolution.json
 (its discretization check), dipolar_stress.csv (magnetic virial stress of random RVEs from
 micro.dipoles over phi and field) and dipolar_cell_stress.csv (the share of it that stiff
-particles pass on to the matrix, homogenize.cell's stress_mag, 32^3 voxels). On 2 cores:
+particles pass on to the matrix, homogenize.cell.problem's stress_mag, 32^3 voxels). On 2 cores:
 stiffness ~3-8 min at 24^3 voxels, resolution ~3 min, stress < 1 min, cell-stress ~5-10 min."""
 
 

@@ -1,6 +1,6 @@
 """Batch runs of random RVEs on Dask, and the effective-parameter tables they produce.
 
-A study (:mod:`homogenize._study`) is a grid of conditions times a number of random
+A study (:mod:`homogenize.tables._study`) is a grid of conditions times a number of random
 realizations. :func:`run_batch` evaluates every realization on a Dask cluster (a local one,
 or an existing one via its scheduler address) and stores each result the moment it arrives, as
 one small file ``<table>.parts/g<grid>_r<realization>_<hash>.npz`` written atomically by the
@@ -80,25 +80,25 @@ from pathlib import Path
 
 import numpy as np
 
-from micro._io import (atomic_path, hdf5_agree, is_regular_file, manifest as _manifest,
+from micro.common.files import (atomic_path, hdf5_agree, is_regular_file, manifest as _manifest,
                        open_regular, write_json)
-from micro._validate import InputError
+from micro.common.validate import InputError
 
-from ._evaluate import COARSE, FEM_QUANTITIES, QUANTITIES, RELAX_FEM_QUANTITIES, get_evaluator
-from .resolution import FILLER_BIAS_REL, ORDER, combined_interval, discretization_error
+from homogenize.tables._evaluate import COARSE, FEM_QUANTITIES, QUANTITIES, RELAX_FEM_QUANTITIES, get_evaluator
+from homogenize.tables.resolution import FILLER_BIAS_REL, ORDER, combined_interval, discretization_error
 from micro.materials import PDMS
-from ._stats import summarize, t_half_width
-from ._study import Study, Task, _unit_of, load_study
-from micro._progress import progress_bar
+from homogenize.tables._stats import summarize, t_half_width
+from homogenize.tables._study import Study, Task, _unit_of, load_study
+from micro.common.progress import progress_bar
 import shutil
 import h5py
-from micro._io import open_hdf5
+from micro.common.files import open_hdf5
 import itertools
 
 __all__ = ["run_batch", "aggregate", "read_table", "Table", "Estimate", "BatchError",
            "StorageError", "parts_dir_for", "interpolate", "body_force_from_table",
            "modulus_from_table",
-           "load_study"]
+           "load_study", "dask_client"]
 
 FORMAT = "mapsim-table"
 FORMAT_VERSION = 2
@@ -191,7 +191,7 @@ def _read_part(path: Path, key: str, seed: int | None = None) -> dict | None:
     file, a key that does not match its name) or whose values fail :func:`check_part` (NaN, a
     wrong shape or seed) is quarantined: renamed to ``quarantine/<name>`` in the parts
     directory, never deleted, and a note goes to stderr. A FIFO or device is never opened
-    in blocking mode (:func:`micro._io.open_regular`).
+    in blocking mode (:func:`micro.common.files.open_regular`).
     """
     try:
         # our own handle: np.load leaks the one it opens when the file is empty
@@ -396,7 +396,10 @@ ALLOWED_WORKER_DEATHS = 3
 
 
 @contextlib.contextmanager
-def _dask_client(scheduler: str | None, workers: int | None, processes: bool):
+def dask_client(scheduler: str | None, workers: int | None, processes: bool):
+    """The Dask client a batch runs on: connected to ``scheduler`` (an address; refused with one
+    message when it cannot connect), or a local cluster of ``workers`` workers (``processes``:
+    worker processes with nannies, else threads), closed on leaving the ``with`` block."""
     from dask.distributed import Client, LocalCluster
     if scheduler:
         try:
@@ -499,7 +502,7 @@ def _run_batch_locked(study, out, evaluator, *, workers, scheduler, processes, c
     failures = []
     if todo:
         ctx = contextlib.nullcontext(client) if client is not None else \
-            _dask_client(scheduler, workers, processes)
+            dask_client(scheduler, workers, processes)
         with ctx as cl, progress_bar(total=len(tasks), initial=n_done, desc=f"batch {study.name}",
                                      unit="RVE", file=sys.stderr, disable=not progress,
                                      dynamic_ncols=True) as bar:
@@ -684,7 +687,7 @@ def _matrix_value(study: Study, key: str | None, ndim: int):
 
 def _discretization(study: Study, values: dict) -> dict:
     """Per cell-FEM quantity with coarse-grid values: the discretization error of its mean
-    (:func:`homogenize.resolution.discretization_error`), arrays (P, ...)."""
+    (:func:`homogenize.tables.resolution.discretization_error`), arrays (P, ...)."""
     out = {}
     for q, key in {**FEM_QUANTITIES, **RELAX_FEM_QUANTITIES}.items():
         if q in values and q + COARSE in values:
@@ -705,7 +708,7 @@ def discretization_attrs(study: Study) -> dict:
                         "floor_rel |Q - Q_matrix|)",
             "combination": "linear: [ci_low - disc_err, ci_high + disc_err] (a bias shared "
                            "by the realizations)",
-            "source": "homogenize.resolution; results/cell/README.md (dilute sphere "
+            "source": "homogenize.tables.resolution; results/cell/README.md (dilute sphere "
                       "convergence of the composite voxels)"}
 
 
@@ -851,7 +854,7 @@ class Table:
     units: dict           # quantity -> unit
     attrs: dict
     #: quantity -> (P, ...) discretization error of the mean (cell FEM quantities of tables
-    #: with ``[study] coarse_voxels``; :mod:`homogenize.resolution`)
+    #: with ``[study] coarse_voxels``; :mod:`homogenize.tables.resolution`)
     disc_err: dict = dataclasses.field(default_factory=dict)
 
     @property
@@ -1048,7 +1051,7 @@ def _read_table(path: Path) -> Table:
 @dataclass(frozen=True)
 class Estimate:
     """An interpolated table value with its confidence interval and, for the cell FEM's
-    quantities, the discretization error of the grid (:mod:`homogenize.resolution`; 0 when
+    quantities, the discretization error of the grid (:mod:`homogenize.tables.resolution`; 0 when
     the table has no estimate)."""
 
     mean: float

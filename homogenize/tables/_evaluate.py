@@ -8,9 +8,9 @@ and the quantities it returns, all listed in :data:`QUANTITIES` with their unit 
 * :class:`RVEEvaluator` (``evaluator = "rve"``): generate a random RVE
   (:func:`micro.particles.generate_rve`), solve the self-consistent dipoles
   (:func:`micro.dipoles.solve`) and optionally the FEM cell problem
-  (:func:`homogenize.cell.homogenize_rve`).
+  (:func:`homogenize.cell.problem.homogenize_rve`).
 * :class:`RelaxEvaluator` (``evaluator = "relax"``): the coupled RVE whose particles move
-  (:func:`homogenize.relax.relax`): for each realization one random RVE relaxed through the
+  (:func:`homogenize.cell.relax.relax`): for each realization one random RVE relaxed through the
   study's B_T values as field steps (continuation); each grid point stores its step
   (magnetostriction, M_eff, stiffness along and across the field, gaps, displacements).
 * :class:`SyntheticEvaluator` (``evaluator = "synthetic"``): normal outputs with a known mean
@@ -34,15 +34,15 @@ import numpy as np
 
 import micro
 from micro import magnetization
-from micro._validate import InputError
+from micro.common.validate import InputError
 from micro.materials import PDMS, SEED, radius_bounds_m
 from micro.particles import CoreShell, LogNormal, Monodisperse
 import itertools
 from micro.dipoles import solve
 from micro.magnetization import get_law
 from micro.particles import generate_rve
-from homogenize.cell import homogenize_rve
-from homogenize.resolution import resolution_warning
+from homogenize.cell.problem import homogenize_rve
+from homogenize.tables.resolution import resolution_warning
 
 __all__ = ["QUANTITIES", "get_evaluator", "RVEEvaluator", "RelaxEvaluator", "SyntheticEvaluator",
            "synthetic_truth"]
@@ -80,7 +80,7 @@ QUANTITIES = {
 }
 
 #: quantities of the rve evaluator's cell FEM -> the [cell] key of their value without filler
-#: (None: zero), for the discretization error (:mod:`homogenize.resolution`)
+#: (None: zero), for the discretization error (:mod:`homogenize.tables.resolution`)
 FEM_QUANTITIES = {"E_eff_Pa": "matrix_E_Pa", "nu_eff": "matrix_nu", "stress_mag_Pa": None,
                   "strain_mag": None}
 #: the same for the relax evaluator's cell FEM on the relaxed (and as-placed) RVE
@@ -275,7 +275,7 @@ def _source_hash(fem: bool = False) -> str:
     """
     if fem not in _SOURCE_HASH:
         h = hashlib.sha256(b"fem" if fem else b"dipoles")
-        for root in (Path(micro.__file__).resolve().parent, Path(__file__).resolve().parent):
+        for root in (Path(micro.__file__).resolve().parent, Path(__file__).resolve().parents[1]):
             for f in sorted(root.rglob("*.py")):
                 h.update(f.relative_to(root.parent).as_posix().encode())
                 h.update(f.read_bytes())
@@ -346,7 +346,7 @@ def _check_laws_and_particles(study, gen_keys, get_law) -> None:
 def resolution_warnings(study) -> list[str]:
     """One warning per distinct (phi, particle population) of the grid whose mean radius
     is resolved by fewer voxels than the accuracy study needs
-    (:func:`homogenize.resolution.resolution_warning`; the box from the expected particle
+    (:func:`homogenize.tables.resolution.resolution_warning`; the box from the expected particle
     volume: the realizations' boxes scatter around it)."""
     if not study.fem:
         return []
@@ -380,7 +380,7 @@ class RVEEvaluator:
     and the other keywords of :func:`micro.particles.generate_rve` (``arrangement``, ``gap_m``,
     ``cluster_size``, ...) may be grid axes or ``[rve]`` keys; ``[law]`` goes to
     :func:`micro.magnetization.get_law`, ``[magnetics]`` to :func:`micro.dipoles.solve`,
-    ``[cell]`` to :func:`homogenize.cell.homogenize_rve`.
+    ``[cell]`` to :func:`homogenize.cell.problem.homogenize_rve`.
     """
 
     fem: bool = False     # the FEM modules' source enters the id only when they run
@@ -416,7 +416,7 @@ class RVEEvaluator:
         _check_laws_and_particles(study, gen_keys, get_law)
         if study.fem:
             try:
-                from homogenize.cell import homogenize_rve
+                from homogenize.cell.problem import homogenize_rve
             except ModuleNotFoundError as exc:
                 raise InputError(f"{study.path}: [study] fem = true needs {exc.name}, which is "
                                  f"not available in this installation") from None
@@ -452,7 +452,7 @@ class RVEEvaluator:
                        stress_mag_Pa=cell.stress_mag_Pa, strain_mag=cell.strain_mag)
             if s.get("coarse_voxels"):
                 # the same RVE and forces on the coarser grid: the two-grid estimate of the
-                # discretization error (homogenize.resolution)
+                # discretization error (homogenize.tables.resolution)
                 coarse = homogenize_rve(rve, s["coarse_voxels"], forces_N=forces,
                                         virial_stress_Pa=state.virial_stress_Pa, **s["cell"])
                 out.update({q + COARSE: getattr(coarse, q) for q in FEM_QUANTITIES})
@@ -461,7 +461,7 @@ class RVEEvaluator:
 
 # --------------------------------------------------------------------------- relax
 _RELAX_AXES = ("phi", "B_T", "law", "matrix_E_Pa")
-#: [relax] keys -> keyword of homogenize.relax.relax (matrix_E_Pa / matrix_nu build the matrix)
+#: [relax] keys -> keyword of homogenize.cell.relax.relax (matrix_E_Pa / matrix_nu build the matrix)
 _RELAX_KEYS = ("elastic_model", "boundary", "min_gap_m", "tol", "max_iter", "demag_factor",
                "accuracy", "cell_tol", "matrix_E_Pa", "matrix_nu", "near_field")
 _RELAX_CACHE: dict = {}
@@ -484,7 +484,7 @@ def _relax_fem_outputs(res, curve, k: int, B: float) -> dict:
 
 def _relax_sweep(rve, B_steps, law, law_params, matrix, fem: bool, voxels: int, opts: dict):
     """Relaxed (and, with the cell FEM, as-placed) quantities at every field step."""
-    from homogenize.relax import magnetostriction_curve, relax
+    from homogenize.cell.relax import magnetostriction_curve, relax
     if fem:
         curve = magnetostriction_curve(rve, B_steps, law=law, law_params=law_params,
                                        matrix=matrix, voxels=voxels, **opts)
@@ -582,7 +582,7 @@ class RelaxEvaluator:
             coarse = None
             if s["fem"] and s.get("coarse_voxels"):
                 # the same RVE and path with the cell FEM on the coarser grid: the two-grid
-                # estimate of the discretization error (homogenize.resolution)
+                # estimate of the discretization error (homogenize.tables.resolution)
                 coarse = _relax_sweep(rve, B_steps, law, s["law"], matrix, True,
                                       s["coarse_voxels"], opts)
             hit = (rve, res, curve, coarse)

@@ -158,7 +158,7 @@ def _run(n_mesh: int, n_boundary: int | None, env: dict | None = None) -> dict:
     environment; its JSON."""
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "specimen.json")
-        code = (f"from homogenize.bench.specimen import _worker; "
+        code = (f"from homogenize.bench.bench_specimen import _worker; "
                 f"_worker({n_mesh}, {n_boundary}, {out!r})")
         p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                            env={**os.environ, **(env or {})})

@@ -7,7 +7,7 @@ Three tables live in ``homogenize/experiments/data/``, each with a provenance JS
 
 ``filler_stiffness.csv`` -- ``filler_stiffening``
     Effective Young's modulus and Poisson's ratio of random RVEs of Fe spheres (211 GPa, 0.29)
-    in PDMS (2 MPa, 0.45) by the periodic voxel FEM ``homogenize.cell.homogenize_rve``,
+    in PDMS (2 MPa, 0.45) by the periodic voxel FEM ``homogenize.cell.problem.homogenize_rve``,
     isotropic projection of ``C_eff``, several random RVEs per volume fraction. The modulus
     contrast (1e5) makes the ratio ``E_eff / E_matrix`` that of rigid spheres, independent of
     the matrix modulus. Particles are monodisperse, dispersed (``micro.particles.generate_rve``)
@@ -41,7 +41,7 @@ Three tables live in ``homogenize/experiments/data/``, each with a provenance JS
 ``dipolar_cell_stress.csv`` -- its share that reaches the matrix
     Point forces in a homogeneous matrix pass the whole virial on; stiff particles carry part
     of the pair forces themselves (a correction of order (a / r)^3). For a few RVEs per phi
-    (8 saturated Fe particles, 32^3 voxels, matrix nu = 0.49) ``homogenize.cell`` solves the
+    (8 saturated Fe particles, 32^3 voxels, matrix nu = 0.49) ``homogenize.cell.problem`` solves the
     cell problem with the dipole forces and gives ``stress_mag`` = mean elastic stress +
     virial; ``factor = dev(stress_mag) / dev(virial)`` multiplies the virial table.
 
@@ -61,15 +61,15 @@ from pathlib import Path
 import numpy as np
 from scipy.constants import mu_0
 import inspect
-from homogenize.cell import homogenize_rve
+from homogenize.cell.problem import homogenize_rve
 from micro.materials import FE, PDMS, SEED
 from micro.particles import Monodisperse, generate_rve
 from types import SimpleNamespace
-from homogenize.cell import bulk_shear, eshelby_dilute, young_poisson
+from homogenize.cell.problem import bulk_shear, eshelby_dilute, young_poisson
 from micro.dipoles import solve
-from micro._validate import InputError, check_positive
-from micro._io import atomic_write_text, manifest, write_json
-from micro._progress import progress_bar
+from micro.common.validate import InputError, check_positive
+from micro.common.files import atomic_write_text, manifest, write_json
+from micro.common.progress import progress_bar
 from scipy.interpolate import PchipInterpolator
 
 __all__ = ["STIFFNESS_PHIS", "STIFFNESS_SEEDS", "STIFFNESS_VOXELS", "RADIUS_VOXELS", "GAP_VOXELS",
@@ -149,13 +149,13 @@ def build_stiffness_table(phis=STIFFNESS_PHIS, seeds=STIFFNESS_SEEDS, voxels=STI
     cols = ("phi", "seed", "n_particles", "voxels", "phi_voxel", "E_ratio", "nu_eff",
             "anisotropy_index")
     _write_table(path, cols, rows, "filler stiffness of random RVEs, voxel FEM", {
-        "function": "homogenize.experiments.tables.build_stiffness_table",
+        "function": "homogenize.experiments.rve_tables.build_stiffness_table",
         "phis": list(phis), "seeds": list(seeds), "voxels": int(voxels),
         "radius_voxels": RADIUS_VOXELS, "particles": f"monodisperse 25 nm, dispersed, surface gap >= {GAP_VOXELS} voxels "
                      f"of the {STIFFNESS_VOXELS}^3 grid",
         "matrix": {"E_Pa": MATRIX_E_PA, "nu": MATRIX_NU},
         "particle": {"E_Pa": PARTICLE_E_PA, "nu": PARTICLE_NU},
-        "solver": f"homogenize.cell.homogenize_rve (method 'composite', default tol {_cell_tol():g})",
+        "solver": f"homogenize.cell.problem.homogenize_rve (method 'composite', default tol {_cell_tol():g})",
     }, time.perf_counter() - t0, argv)
     stiffness_table.cache_clear()
     return path
@@ -186,7 +186,7 @@ def stiffness_resolution_study(phi: float = 0.02, voxels=(12, 16, 24, 32, 40), p
     out = {"phi": phi, "rows": rows,
            "rate_of_relative_excess_vs_h": float(np.polyfit(np.log(h), np.log(np.abs(rel)), 1)[0])}
     if path is not None:
-        out["manifest"] = manifest({"function": "homogenize.experiments.tables."
+        out["manifest"] = manifest({"function": "homogenize.experiments.rve_tables."
                                     "stiffness_resolution_study", "phi": phi,
                                     "voxels": list(voxels)}, None,
                                    command=" ".join(argv) if argv else None)
@@ -288,7 +288,7 @@ def build_stress_table(phis=STRESS_PHIS, seeds=STRESS_SEEDS, fields=STRESS_FIELD
     rows = [stress_point(p, s, h) for p, s, h in it]
     cols = ("phi", "seed", "law", "h", "m_reduced", "kappa_zz", "kappa_dev")
     _write_table(path, cols, rows, "magnetic virial stress of random RVEs, micro.dipoles", {
-        "function": "homogenize.experiments.tables.build_stress_table",
+        "function": "homogenize.experiments.rve_tables.build_stress_table",
         "phis": list(phis), "seeds": list(seeds), "n_particles": STRESS_N,
         "fields_H_over_Ms": [None if h is None else h for h in fields],
         "particles": "monodisperse 25 nm, dispersed (micro.particles.generate_rve)",
@@ -329,7 +329,7 @@ def microstructure_stress_coefficient(phi, m_reduced, cell: bool = True):
     magnetization ``m = M / (phi Ms)`` (clipped to the table's range) at each tabulated phi,
     then linear in phi (held constant outside). With ``cell`` (default) times
     :func:`cell_stress_factor`, the share of it the stiff particles pass on to the matrix
-    (``homogenize.cell``'s ``stress_mag`` over the virial, ``dipolar_cell_stress.csv``).
+    (``homogenize.cell.problem``'s ``stress_mag`` over the virial, ``dipolar_cell_stress.csv``).
     """
     t = stress_table()
     phis = np.array(sorted(t))
@@ -361,7 +361,7 @@ def affine_kappa(phi: float, Ms_particle_A_per_m: float):
 
 
 # ------------------------------------------------------------------------------------------
-# stiff particles carry part of the interaction stress: homogenize.cell's stress_mag
+# stiff particles carry part of the interaction stress: homogenize.cell.problem's stress_mag
 
 CELL_PHIS = (0.05, 0.1, 0.2, 0.3)
 CELL_SEEDS = (1, 2, 3, 4)          # tried in order; a seed whose placement jams is skipped
@@ -376,7 +376,7 @@ def cell_stress_path() -> Path:
 
 def cell_stress_point(phi: float, seed: int, voxels: int = CELL_VOXELS) -> dict:
     """Deviatoric magnetic stress of one RVE with Fe particles in the matrix (nu = 0.49), by
-    ``homogenize.cell.homogenize_rve`` with the dipole forces and the dipole virial: the
+    ``homogenize.cell.problem.homogenize_rve`` with the dipole forces and the dipole virial: the
     virial alone (point forces in a homogeneous matrix) and the cell's ``stress_mag`` (the
     stiff particles carry part of it), in units of mu0 M^2. Saturated particles."""
 
@@ -425,13 +425,13 @@ def build_cell_stress_table(phis=CELL_PHIS, voxels=CELL_VOXELS, path=None, progr
     cols = ("phi", "seed", "n_particles", "voxels", "phi_voxel", "virial_dev", "cell_dev",
             "factor", "E_ratio")
     _write_table(path, cols, rows, "deviatoric magnetic stress, dipole virial vs FEM cell", {
-        "function": "homogenize.experiments.tables.build_cell_stress_table",
+        "function": "homogenize.experiments.rve_tables.build_cell_stress_table",
         "phis": list(phis), "seeds_tried": list(CELL_SEEDS), "per_phi": CELL_PER_PHI,
         "n_particles": CELL_N, "voxels": int(voxels), "skipped": skipped,
         "particles": f"monodisperse 25 nm, saturated, surface gap >= {GAP_VOXELS} voxels",
         "matrix": {"E_Pa": MATRIX_E_PA, "nu": 0.49},
         "particle": {"E_Pa": PARTICLE_E_PA, "nu": PARTICLE_NU},
-        "solver": "micro.dipoles.solve + homogenize.cell.homogenize_rve(forces_N, "
+        "solver": "micro.dipoles.solve + homogenize.cell.problem.homogenize_rve(forces_N, "
                   f"virial_stress_Pa), default tol {_cell_tol():g}",
         "definition": "factor = dev(stress_mag) / dev(virial), dev(s) = s_zz - (s_xx + s_yy)/2",
     }, time.perf_counter() - t0, argv)
@@ -540,7 +540,7 @@ def relax_tables() -> list[Path]:
 
 
 def _restructuring_from(path: Path, phi: float, E_Pa: float, rtol: float):
-    from homogenize.tables import read_table
+    from homogenize.tables.batch import read_table
     import json as _json
     import tomllib
     t = read_table(path)

@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 from skfem import Basis, BilinearForm, ElementHex1, ElementVector, MeshHex
 from skfem.helpers import ddot, sym_grad, trace
-from homogenize import _kernels as kn
+from homogenize.voxels import _kernels as kn
 
 __all__ = ["CORNERS", "OFFSETS", "reference_matrices", "node_coefficients", "assemble_bsr",
            "affine_load", "body_force_load", "element_mean_strain"]
@@ -161,7 +161,7 @@ def assemble_bsr(lam: np.ndarray, mu: np.ndarray, h: float, *, method: str = "nu
     lam, mu : ndarray, shape (n, n, n) -- Lame parameters per voxel [Pa], indexed [k, j, i]
     h : float -- voxel edge [m]
     method : {"numba", "blas"} -- "numba": one parallel pass writing every row's 27 blocks in
-        sorted column order (:func:`homogenize._kernels.typed_stencil_blocks` on the
+        sorted column order (:func:`homogenize.voxels._kernels.typed_stencil_blocks` on the
         :func:`voxel_types` of the fields); "blas": the
         reference path, one dense product ``(N, 16) @ (16, 243)`` then a reordering of the rows
         that wrap. Both give the same matrix up to the summation order (round-off).

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from micro._validate import InputError
+from micro.common.validate import InputError
 import dataclasses
 
 __all__ = ["summarize", "welch_permutation", "fit_power_law", "realizations_needed",

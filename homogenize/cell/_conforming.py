@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from micro._validate import InputError
+from micro.common.validate import InputError
 from micro.materials import FE, PDMS
-from homogenize._effective_media import lame
-from homogenize.cell import voigt_to_tensor
+from homogenize.cell._effective_media import lame
+from homogenize.cell.problem import voigt_to_tensor
 from homogenize.solvers import (AMGOptions, Deflation, block_cg, rigid_body_modes,
                                 smoothed_aggregation)
 from scipy.sparse.linalg import splu
@@ -266,7 +266,7 @@ def _solve_cg(K, F, xyz, master, basis, phase, centres, free, tol):
                        F, tol=tol, maxiter=5000, deflation=defl)
     bad = [h[-1] for h in hist if h[-1] > tol]
     if bad:
-        from micro._validate import ConvergenceError
+        from micro.common.validate import ConvergenceError
         raise ConvergenceError(f"P2 block CG did not reach {tol:g} (worst {max(bad):.1e})", hist)
     return W, [len(h) - 1 for h in hist]
 

@@ -2,7 +2,7 @@
 command (see :mod:`homogenize.bench`)."""
 from __future__ import annotations
 
-from micro._io import manifest, write_json
+from micro.common.files import manifest, write_json
 
 from homogenize.bench import PROVIDERS, run
 from homogenize.cli._common import check_outputs, one_line_errors

@@ -1,4 +1,4 @@
-"""Benchmark of the coupled RVE (:mod:`homogenize.relax`).
+"""Benchmark of the coupled RVE (:mod:`homogenize.cell.relax`).
 
 Records (``bench_records(quick)``, format of :mod:`homogenize.bench`):
 
@@ -31,7 +31,7 @@ import numpy as np
 
 from micro import Monodisperse, RVE, generate_rve
 from micro.materials import PDMS, ElasticMaterial, elastic
-from homogenize.relax import fem_displaceability, green_displaceability, relax
+from homogenize.cell.relax import fem_displaceability, green_displaceability, relax
 
 __all__ = ["bench_records"]
 

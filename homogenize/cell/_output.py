@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from micro._io import atomic_path
+from micro.common.files import atomic_path
 
-from . import _assembly as asm
+from homogenize.voxels import _assembly as asm
 
 __all__ = ["local_fields", "write_vtu", "write_pvd", "all_cases", "plot_slice",
            "VTK_TENSOR_ORDER", "VTK_COMPONENT_NAMES"]
@@ -18,7 +18,7 @@ __all__ = ["local_fields", "write_vtu", "write_pvd", "all_cases", "plot_slice",
 def local_fields(result, case: str = "magnetic") -> dict:
     """Voxel fields of one load case: stress (n, n, n, 3, 3) [Pa], von Mises (n, n, n) [Pa],
     nodal displacement (n, n, n, 3) [m] (total: affine + fluctuation), phase fraction."""
-    from .cell import CASES, voigt_to_tensor
+    from homogenize.cell.problem import CASES, voigt_to_tensor
     if case not in result.fields:
         raise KeyError(f"no field for load case {case!r}; run with keep_fields=True")
     mesh = result.mesh
@@ -56,7 +56,7 @@ VTU_UNITS = {"points": "m", "displacement_m": "m", "stress_Pa": "Pa", "von_mises
 
 def all_cases(result) -> tuple:
     """Load cases of ``result`` with stored fields: the unit strains, then ``magnetic``."""
-    from .cell import CASES
+    from homogenize.cell.problem import CASES
     return tuple(c for c in CASES + ("magnetic",) if c in result.fields)
 
 
@@ -66,7 +66,7 @@ def _text(s: str) -> np.ndarray:
 
 
 def _vec3(name, v, unit):
-    from micro._validate import InputError
+    from micro.common.validate import InputError
     a = np.asarray(v, dtype=np.float64).reshape(-1)
     if a.size == 1:
         a = np.array([0.0, 0.0, float(a[0])])
@@ -100,7 +100,7 @@ def write_vtu(path, result, case: str = "magnetic", *, B_T=None, gradB_T_per_m=N
     law : str, optional -- magnetization law of the particles
     """
     import meshio
-    from .cell import CASES
+    from homogenize.cell.problem import CASES
 
     fl = local_fields(result, case)
     mesh = result.mesh
@@ -184,8 +184,8 @@ def write_pvd(path, result, cases=None, *, B_T=None, gradB_T_per_m=None,
     """
     import xml.etree.ElementTree as ET
     from pathlib import Path
-    from micro._validate import InputError
-    from .cell import CASES
+    from micro.common.validate import InputError
+    from homogenize.cell.problem import CASES
 
     path = Path(path)
     available = all_cases(result)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 __all__ = ["choose_cache_dir"]
 
-_PACKAGES = (Path(__file__).resolve().parent, Path(__file__).resolve().parent.parent / "homogenize")
+_PACKAGES = (Path(__file__).resolve().parents[1], Path(__file__).resolve().parents[2] / "homogenize")
 
 
 def _writable(d: Path) -> bool:

@@ -16,7 +16,7 @@ import tempfile
 import time
 from importlib import metadata
 from pathlib import Path
-from micro._validate import InputError
+from micro.common.validate import InputError
 import h5py
 import numpy as np
 
@@ -308,7 +308,7 @@ def save_png(fig, path, digest: str, *, dpi: int = 120) -> bool:
 
 def git_revision() -> str:
     """The git revision of the source tree (with ``-dirty``), or ``"unknown"``."""
-    here = Path(__file__).resolve().parent.parent
+    here = Path(__file__).resolve().parents[2]
     try:
         rev = subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True,
                              text=True, timeout=10).stdout.strip()

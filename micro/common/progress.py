@@ -6,7 +6,7 @@ wants, in a log file (stderr redirected, a batch job, CI) it is thousands of lin
 otherwise the same object writes one plain line each time another tenth of the work is done
 (``batch seed-conditions: 30 % (54/180 realization) 12 s``) and one at the end; without a
 known total, a line at 1, 2, 5, 10, 20, 50, ... items. Every caller (``micro.particles``,
-``homogenize.tables``, ``homogenize.cell``, the studies, ``mapsim diagnose``) goes through it.
+``homogenize.tables.batch``, ``homogenize.cell.problem``, the studies, ``mapsim diagnose``) goes through it.
 """
 from __future__ import annotations
 
