@@ -101,11 +101,33 @@ gradB_T_per_m = 1.78
 """
 
 
+def test_interval_ends_pair_the_weak_pull_with_the_stiff_strip():
+    """The ends of a pull-in interval: (E high, M low) gives the smallest gap, (E low, M high)
+    the largest; without any interval only the mean; E's ends are the table's widened by the
+    discretization error (Estimate.total_low / total_high)."""
+    from homogenize.macro.pullin import interval_ends
+    from homogenize.tables import Estimate
+    E = Estimate(mean=2.0e6, ci_low=1.9e6, ci_high=2.1e6, se=4e4, dof=3.0, confidence=0.95,
+                 unit="Pa", disc_err=0.05e6, has_disc=True)
+    m, lo, hi = (lambda H: 1.0 * H), (lambda H: 0.9 * H), (lambda H: 1.1 * H)
+    ends = interval_ends(E.mean, m, E, {"low": lo, "high": hi})
+    assert ends["mean"] == (2.0e6, m)
+    assert ends["low"] == (2.15e6, lo) and ends["high"] == (1.85e6, hi)
+    assert interval_ends(2e6, m) == {"mean": (2e6, m)}
+    only_E = interval_ends(E.mean, m, E)
+    assert only_E["low"] == (2.15e6, m) and only_E["high"] == (1.85e6, m)
+
+
+@pytest.mark.slow
 def test_table_intervals_reach_the_pull_in_gap(tmp_path, capsys, synthetic_table):
     """With --table the pull-in gap carries the table's M_eff interval, and with --E-from-table
     its E_eff interval too (issue 35: intervals through every magnet case): the ends are
     (E high, M low) and (E low, M high), the mean lies between them, and the
     E_eff interval's ends are the table's, widened by its discretization error."""
+    import os
+    if not os.environ.get("MAPSIM_FULL"):
+        pytest.skip("full version: MAPSIM_FULL=1 (three follower-elastica sweeps with contact "
+                    "and release; minutes, and more than 6 min on a loaded 2-core machine)")
     from homogenize.tables import modulus_from_table, read_table
     table = synthetic_table(tmp_path / "t.h5", _SYNTH_FEM)
     E = modulus_from_table(read_table(table), 0.05)
