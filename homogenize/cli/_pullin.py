@@ -89,7 +89,8 @@ def _ends(args, phi, mat, M_of_H):
             raise InputError(f"--E-from-table: {args.table} has no E_eff (the study ran without "
                              f"fem = true)")
         E = E_est.mean
-    what = "table's M_eff" + (" and E_eff" if E_est is not None else "") + " intervals"
+    what = ("table's M_eff and E_eff intervals" if E_est is not None
+            else "table's M_eff interval")
     return interval_ends(E, M_of_H, E_est, bounds), what
 
 
