@@ -423,8 +423,21 @@ def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max
         for k, (name, _) in enumerate(all_events):
             if event_vals[k] > 0.0 >= new_vals[k]:
                 fun = all_events[k][1]
-                sig = brentq(lambda s: fun(*sc.split(on_step(s)[0])) if s < step
-                             else new_vals[k], 0.0, step, xtol=1e-13, rtol=1e-12)
+
+                def ev(s, fun=fun, k=k):
+                    # the step's ends by their known values (a re-corrected point at s = 0
+                    # can land on the other side of an event that sits at the step's start)
+                    if s <= 0.0:
+                        return event_vals[k]
+                    if s >= step:
+                        return new_vals[k]
+                    return fun(*sc.split(on_step(s)[0]))
+                try:
+                    sig = brentq(ev, 0.0, step, xtol=1e-13, rtol=1e-12)
+                except ValueError:
+                    raise PathFollowingError(f"could not locate the event {name} along the "
+                                             f"step at p = {sc.split(z)[1]:.6g}",
+                                             dict(zip(("u", "p"), sc.split(z)))) from None
                 found.append((sig, "event", name))
         if np.sign(tau_new[-1]) != np.sign(tau[-1]) and tau[-1] != 0.0:
             def tp(s):
