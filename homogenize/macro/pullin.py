@@ -1409,8 +1409,13 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                  gap_sweep_m=None, *, round_trip: bool = True, n_segments: int = 32,
                  n_cross: int = 3, demag_factor: float = 0.0, gravity_m_s2: float = 0.0,
                  follower: bool = True, plate: bool = False, far_gap_m: float | None = None,
-                 ds_max: float = 0.05) -> PullInResult:
+                 ds_max: float = 0.05, lying: bool = True) -> PullInResult:
     """Tip deflection of the strip against the magnet gap, with pull-in, contact and release.
+
+    ``lying``: where the tip-only contact cannot be followed, trace the strip lying on the
+    face (:func:`contact_release`; default). False keeps the tip-only result (its
+    ``contact_end_gap_m`` says where it ends): the lying branch from deep contact at a small
+    gap can take minutes for a soft strip.
 
     Parameters
     ----------
@@ -1579,7 +1584,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     # gap opened until the strip lets go (contact_release); it replaces the tip-only branch
     # from the smallest gap and gives the release gap
     lying = None
-    if np.isfinite(contact_end_gap) or release_by == "fold of the contact branch":
+    if lying and (np.isfinite(contact_end_gap) or release_by == "fold of the contact branch"):
         g_deep = max(g_min, LYING_MIN_GAP_REL * strip.thickness_m)
         try:
             lying = contact_release(model, g_deep, g_far, ds_max=ds_max)

@@ -112,9 +112,11 @@ def _pullin(table, phi, strip, E, N, others, gaps_m=MAGNET_GAPS_M):
     try:
         for b in ("mean", "low", "high"):
             law = magnetization_from_table(table, phi, bound=b, **others)
+            # the tip-only contact (lying=False): the strip lying on the face from 2 mm took
+            # more than 5 min per sweep here; pullin_sweep's default traces it
             out[b] = pullin_sweep(geo, mat, magnet, law, gap_sweep_m=gaps,
                                   round_trip=(b == "mean"), n_segments=PULLIN_SEGMENTS,
-                                  demag_factor=N)
+                                  demag_factor=N, lying=False)
     except (InputError, ConvergenceError) as exc:    # beyond the table's B range / no path
         return {"available": False, "why": str(exc).splitlines()[0]}
     r = out["mean"]
