@@ -273,13 +273,13 @@ def parse_values(text: str, opt: str, unit: str, *, max_count: int = 1000,
 B_LIMIT_T = 50.0
 
 
-def add_field_options(g, *, default_B=None, help_B: str = "") -> None:
+def add_field_options(g, *, help_B: str = "") -> None:
     """The one syntax of an applied field on every mapsim command: ``--B`` its magnitude
     mu0 |H| [T] and ``--B-direction BX BY BZ`` its direction (any length; default 0 0 1, along
     z). A vector is never written into ``--B``: ``'Bx,By,Bz'`` reads as a list, and the commands
     that sweep the field (``relax --B``, ``specimen --B``) take lists in the one syntax of
     :func:`parse_values`."""
-    g.add_argument("--B", dest="B_T", type=_field_magnitude, default=default_B,
+    g.add_argument("--B", dest="B_T", type=_field_magnitude, default=None,
                    help=help_B or "applied flux density mu0 |H| [T], along --B-direction")
     g.add_argument("--B-direction", dest="B_direction", nargs=3, metavar=("BX", "BY", "BZ"),
                    type=float_in("--B-direction", -1e6, 1e6), default=None,

@@ -163,34 +163,8 @@ def _prolong_add(nc, xc, x):
                             x[p, r, m] += w * xc[q, r, m]
 
 
-def _restrict(nc, x, xc):
-    """xc = P^T x (full weighting), the transpose of :func:`_prolong_add`."""
-    n = 2 * nc
-    k = x.shape[2]
-    for q in nb.prange(nc * nc * nc):
-        I = q % nc
-        J = (q // nc) % nc
-        K = q // (nc * nc)
-        for r in range(3):
-            for m in range(k):
-                xc[q, r, m] = 0.0
-        for dz in range(-1, 2):
-            wz = 1.0 if dz == 0 else 0.5
-            fk = (2 * K + dz + n) % n
-            for dy in range(-1, 2):
-                wy = 1.0 if dy == 0 else 0.5
-                fj = (2 * J + dy + n) % n
-                for dx in range(-1, 2):
-                    w = wz * wy * (1.0 if dx == 0 else 0.5)
-                    fi = (2 * I + dx + n) % n
-                    p = fi + n * (fj + n * fk)
-                    for r in range(3):
-                        for m in range(k):
-                            xc[q, r, m] += w * x[p, r, m]
-
-
 def _restrict_planes(nc, x, z0, nz, xc, K0, K1):
-    """xc = P^T x (as :func:`_restrict`, the same sums in the same order) for the coarse planes
+    """xc = P^T x (full weighting, the transpose of :func:`_prolong_add`) for the coarse planes
     K0 <= K < K1 only, from the fine planes z0, z0 + 1, ..., z0 + nz - 1 (mod 2 nc) held in x
     ((nz (2 nc)^2, 3, k)); those must include 2 K0 - 1 ... 2 K1 - 1."""
     n = 2 * nc
@@ -222,8 +196,14 @@ def _restrict_planes(nc, x, z0, nz, xc, K0, K1):
 node_op, node_op_serial = parallel_and_serial(_node_op)
 diag_blocks, _ = parallel_and_serial(_diag_blocks)
 prolong_add, _ = parallel_and_serial(_prolong_add)
-restrict, _ = parallel_and_serial(_restrict)
 restrict_planes, _ = parallel_and_serial(_restrict_planes)
+
+
+def restrict(nc, x, xc):
+    """xc = P^T x (full weighting), the transpose of :func:`prolong_add`: the plane kernel
+    over every coarse plane from the whole fine grid (one kernel, the same sums in the same
+    order)."""
+    restrict_planes(nc, x, 0, 2 * nc, xc, 0, nc)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -25,24 +25,24 @@ PARALLEL_MIN_ROWS = 50_000
 
 
 @nb.njit(cache=True, inline="always")
-def block_acc(M, r0, c0, R, C, x, q, y, p, k, sign):
-    """y[p, r, m] += sign * sum_c M[r0 + r, c0 + c] x[q, c, m] for the R x C block of the 2-D
-    matrix M at (r0, c0) and the k columns m (the one block product of the BSR kernels here and
-    of the matrix-free operator, homogenize.solvers._matfree). 3x3 blocks (the voxel grid's) are read
-    once into scalars (measured 1.3-1.5x over one loop per matrix entry); other block sizes (the
-    6-mode aggregates of smoothed aggregation) read each entry once and apply it to all k columns
-    (the column loop innermost), except for one column, where a scalar sum per row is faster
-    (both measured on random 3x6, 6x6 and 6x3 block products at k = 7 and k = 1, session 8)."""
+def _block_acc(M, r0, c0, R, C, x, q, y, p, k, sign, tr):
+    """y[p, r, m] += sign * sum_c A[r, c] x[q, c, m] for the R x C block A of the 2-D matrix M at
+    (r0, c0) (``tr`` False: A[r, c] = M[r0 + r, c0 + c]) or of its transpose (``tr`` True:
+    A[r, c] = M[r0 + c, c0 + r], read in place, no transposed copy), and the k columns m. 3x3
+    blocks (the voxel grid's) are read once into scalars (measured 1.3-1.5x over one loop per
+    matrix entry); other block sizes (the 6-mode aggregates of smoothed aggregation) read each
+    entry once and apply it to all k columns (the column loop innermost), except for one column,
+    where a scalar sum per row is faster (both measured on random 3x6, 6x6 and 6x3 block
+    products at k = 7 and k = 1, session 8)."""
     if R == 3 and C == 3:
-        a00 = sign * M[r0, c0]
-        a01 = sign * M[r0, c0 + 1]
-        a02 = sign * M[r0, c0 + 2]
-        a10 = sign * M[r0 + 1, c0]
-        a11 = sign * M[r0 + 1, c0 + 1]
-        a12 = sign * M[r0 + 1, c0 + 2]
-        a20 = sign * M[r0 + 2, c0]
-        a21 = sign * M[r0 + 2, c0 + 1]
-        a22 = sign * M[r0 + 2, c0 + 2]
+        if tr:
+            a00, a01, a02 = sign * M[r0, c0], sign * M[r0 + 1, c0], sign * M[r0 + 2, c0]
+            a10, a11, a12 = sign * M[r0, c0 + 1], sign * M[r0 + 1, c0 + 1], sign * M[r0 + 2, c0 + 1]
+            a20, a21, a22 = sign * M[r0, c0 + 2], sign * M[r0 + 1, c0 + 2], sign * M[r0 + 2, c0 + 2]
+        else:
+            a00, a01, a02 = sign * M[r0, c0], sign * M[r0, c0 + 1], sign * M[r0, c0 + 2]
+            a10, a11, a12 = sign * M[r0 + 1, c0], sign * M[r0 + 1, c0 + 1], sign * M[r0 + 1, c0 + 2]
+            a20, a21, a22 = sign * M[r0 + 2, c0], sign * M[r0 + 2, c0 + 1], sign * M[r0 + 2, c0 + 2]
         for m in range(k):
             x0 = x[q, 0, m]
             x1 = x[q, 1, m]
@@ -54,14 +54,21 @@ def block_acc(M, r0, c0, R, C, x, q, y, p, k, sign):
         for r in range(R):
             acc = 0.0
             for c in range(C):
-                acc += M[r0 + r, c0 + c] * x[q, c, 0]
+                acc += (M[r0 + c, c0 + r] if tr else M[r0 + r, c0 + c]) * x[q, c, 0]
             y[p, r, 0] += sign * acc
     else:
         for r in range(R):
             for c in range(C):
-                a = sign * M[r0 + r, c0 + c]
+                a = sign * (M[r0 + c, c0 + r] if tr else M[r0 + r, c0 + c])
                 for m in range(k):
                     y[p, r, m] += a * x[q, c, m]
+
+
+@nb.njit(cache=True, inline="always")
+def block_acc(M, r0, c0, R, C, x, q, y, p, k, sign):
+    """The block product of :func:`_block_acc` with the block as stored (the one block product
+    of the BSR kernels here and of the matrix-free operator, homogenize.solvers._matfree)."""
+    _block_acc(M, r0, c0, R, C, x, q, y, p, k, sign, False)
 
 
 def _bsr_matmat(indptr, indices, data, x, y):
@@ -98,32 +105,8 @@ def _bsr_transposed_matmat(indptr, indices, perm, data, x, y):
             for m in range(k):
                 y[p, r, m] = 0.0
         for s in range(indptr[p], indptr[p + 1]):
-            # block_acc of the transposed block, written out (a transposed view is slower)
-            d = perm[s]
-            q = indices[s]
-            if R == 3 and C == 3:
-                a00, a01, a02 = data[d, 0, 0], data[d, 1, 0], data[d, 2, 0]
-                a10, a11, a12 = data[d, 0, 1], data[d, 1, 1], data[d, 2, 1]
-                a20, a21, a22 = data[d, 0, 2], data[d, 1, 2], data[d, 2, 2]
-                for m in range(k):
-                    x0 = x[q, 0, m]
-                    x1 = x[q, 1, m]
-                    x2 = x[q, 2, m]
-                    y[p, 0, m] += a00 * x0 + a01 * x1 + a02 * x2
-                    y[p, 1, m] += a10 * x0 + a11 * x1 + a12 * x2
-                    y[p, 2, m] += a20 * x0 + a21 * x1 + a22 * x2
-            elif k == 1:
-                for r in range(R):
-                    acc = 0.0
-                    for c in range(C):
-                        acc += data[d, c, r] * x[q, c, 0]
-                    y[p, r, 0] += acc
-            else:
-                for r in range(R):
-                    for c in range(C):
-                        a = data[d, c, r]
-                        for m in range(k):
-                            y[p, r, m] += a * x[q, c, m]
+            # the stored block read transposed in place (no transposed copy of A)
+            _block_acc(data[perm[s]], 0, 0, R, C, x, indices[s], y, p, k, 1.0, True)
 
 
 def _bsr_residual(indptr, indices, data, x, b, out):
