@@ -203,3 +203,30 @@ def test_patch_rule():
     assert C.use_patches(100, np.full(100, 1.25))
     assert not C.use_patches(0, np.zeros(0))
     assert not C.use_patches(1000, np.full(1000, 1.0), SolverOptions(patch_shell_voxels=None))
+
+
+def test_factorization_uses_one_blas_thread_and_restores_the_pool(monkeypatch):
+    """The patches are factorized inside numba's parallel loop with ONE BLAS thread (OpenBLAS
+    threads started in each numba thread oversubscribe the cores); the caller's BLAS thread
+    counts are restored afterwards, and the factors equal the ones the serial kernel gives
+    without any limit."""
+    from threadpoolctl import threadpool_info
+
+    seen = []
+    real = pt.threadpool_limits
+
+    def spy(*args, **kw):
+        seen.append((args, kw))
+        return real(*args, **kw)
+
+    before = [(d["filepath"], d["num_threads"]) for d in threadpool_info()]
+    monkeypatch.setattr(pt, "threadpool_limits", spy)
+    mesh, lam, mu, comp, op, P = _setup(n=12, n_part=6)
+    assert seen and seen[0][1].get("limits") == 1
+    assert seen[0][1].get("user_api") == "blas"
+    after = {d["filepath"]: d["num_threads"] for d in threadpool_info()}
+    for path, threads in before:
+        assert after[path] == threads
+    L = np.empty_like(P.L)
+    pt.factorize_serial(op.n, P.ptr, P.nodes, op.stype, op.S, op.pin, P.fptr, L)
+    assert np.array_equal(L, P.L)
