@@ -520,6 +520,17 @@ def _element_state(body, sol):
     return X + u, np.linalg.det(fs.deformation_gradient(sol))
 
 
+def _reference_weights(body) -> np.ndarray:
+    """Reference volume weights (ne, nq) at the points of :func:`fs.element_points` (an
+    axisymmetric body's with ``2 pi r``) [m^3]."""
+    from skfem import CellBasis
+    b = CellBasis(body.mesh, fs._p2(body.mesh), intorder=fs.INTORDER)
+    dx = np.asarray(b.dx)
+    if isinstance(body, fs.AxisymmetricBody):
+        dx = dx * 2.0 * math.pi * np.asarray(b.global_coordinates())[0]
+    return dx
+
+
 def _law_name(law) -> str:
     params = ", ".join(f"{k}={v:g}" for k, v in getattr(law, "__dict__", {}).items()
                        if isinstance(v, (int, float)))
@@ -553,6 +564,7 @@ def _staggered_step(body, law, solid, kappa, field_solve, mech_solve, length_cha
     Returns ``(sol, res, iterations, newton_iterations, history)``."""
     hist, newton, dl_prev, w = [], 0, None, relaxation
     x_prev = r_prev = None
+    vol_w = _reference_weights(body)
     for it in range(1, max_stagger + 1):
         res = field_solve(sol)
         ms.check_table_range(res, "the composite's magnetization table")
@@ -563,11 +575,17 @@ def _staggered_step(body, law, solid, kappa, field_solve, mech_solve, length_cha
         xe, _ = _element_state(body, sol)
         Hf, Mf = ms.body_fields_at(res, xf)
         nf = nf / np.linalg.norm(nf, axis=0)
-        psi_f = magnetic_pressure_Pa(law, np.linalg.norm(Hf, axis=0))
-        t = (0.5 * MU0 * np.sum(Mf * nf, axis=0) ** 2 + psi_f) * nf
         He, Me = ms.body_fields_at(res, xe)
-        S = magnetic_pressure_Pa(law, np.linalg.norm(He, axis=0))[..., None, None] \
-            * np.eye(3)
+        psi_e = magnetic_pressure_Pa(law, np.linalg.norm(He, axis=0))
+        # the uniform part of psi (its volume mean) loads nothing: psi_ref n on the surface
+        # and psi_ref I inside are in equilibrium for any shape. Subtracted from both, it no
+        # longer stiffens or softens the frozen loads of the mechanics' Newton (their
+        # direction is the last iterate's normal): at large fields psi_ref reaches several
+        # G and its spurious load stiffness put a limit point into the mechanics
+        psi_ref = float(np.sum(psi_e * vol_w) / np.sum(vol_w))
+        psi_f = magnetic_pressure_Pa(law, np.linalg.norm(Hf, axis=0)) - psi_ref
+        t = (0.5 * MU0 * np.sum(Mf * nf, axis=0) ** 2 + psi_f) * nf
+        S = (psi_e - psi_ref)[..., None, None] * np.eye(3)
         if kappa is not None:
             S = S + _prescribed_stress(Me, kappa)
         g = np.concatenate([t.ravel(), S.ravel()])
