@@ -73,14 +73,16 @@ def _export_magnet(args, geometry):
         raise InputError("--magnet is written into the abaqus cantilever deck only (--to abaqus "
                          "--deck cantilever)")
     source = _magnet_source(args)
-    M_of_H, phi, law = _magnet_law(args)
+    bound = getattr(args, "bound", "mean")
+    M_of_H, phi, law = _magnet_law(args, bound=bound)
     N = args.demag_factor if args.demag_factor is not None else \
         prism_demag_factors(geometry.length_m, geometry.width_m, geometry.thickness_m)[2]
     # checks the magnet against the strip (overlap) and the law's range along the strip
     bf = body_force_along_strip(source, geometry, M_of_H, n_points=21, demag_factor=N)
     notes = (f"magnet: {args.magnet} at {tuple(source.position_m)} m (strip frame [0, L] x "
              f"[0, w] x [0, t], clamp at x = 0); M_eff(H) from {law}, phi = {phi:g}, "
-             f"demagnetizing factor N = {N:.4g}",
+             f"demagnetizing factor N = {N:.4g}"
+             + (f"; the {bound} end of the table's M_eff interval" if bound != "mean" else ""),
              f"net magnetic force on the undeformed strip {bf.total_force_N[2]:.6g} N along z "
              f"(cross-section average, Simpson on 21 stations)")
     return magnet_body_force(source, M_of_H, N), notes
@@ -101,10 +103,11 @@ def _export_run(args) -> int:
         if getattr(args, dest, None) is not None:
             raise InputError(f"{flag} is not used with --magnet (the magnet gives the field "
                              f"over the strip; --table is read at --phi along its B_T axis)")
-    if getattr(args, "bound", "mean") != "mean":
-        raise InputError("--bound is not used with --magnet (the deck takes the table's mean "
-                         "M_eff(H))")
-    return _export(args)
+    rc = _export(args)         # (--bound without --table is refused before, as for any export)
+    if rc == 0 and args.table and args.bound == "mean" and args.deck is not None:
+        print("the table's M_eff interval: write the decks at its ends with --bound low and "
+              "--bound high (same options) and run all three")
+    return rc
 
 
 def _export(args) -> int:
@@ -166,12 +169,14 @@ def _magnet_source(args):
     return permanent_magnet(args, args.magnet_position)
 
 
-def _magnet_law(args):
-    """M_eff(H) of the composite: from --table at --phi, or demagnetization-limited spheres."""
+def _magnet_law(args, bound: str = "mean"):
+    """M_eff(H) of the composite: from --table at --phi (``bound``: the mean or an end of the
+    table's interval), or demagnetization-limited spheres."""
     phi = args.phi if args.phi is not None else SEED.c * SEED.d
     if args.table:
-        return (magnetization_from_table(read_table(args.table), phi,
-                                         **parse_at(args.table_at)), phi, "table")
+        return (magnetization_from_table(read_table(args.table), phi, bound=bound,
+                                         **parse_at(args.table_at)), phi,
+                "table" if bound == "mean" else f"table ({bound} end of its interval)")
     if args.particle_material == "seed-paper":
         return soft_sphere_magnetization(phi), phi, "soft spheres (dilute)"
     p = particle_preset(args.particle_material)

@@ -374,7 +374,8 @@ def add_export_table_options(p) -> None:
     _add_table_point_options(g, "give the numbers")
     g.add_argument("--bound", default="mean", choices=("mean", "low", "high"),
                    help="export the mean force or an end of its confidence interval (run the "
-                        "macro model at both ends to propagate the interval)")
+                        "macro model at both ends to propagate the interval); with --magnet, "
+                        "the deck's M_eff(H) at that end")
 
 
 def wrap_export(func):

@@ -198,3 +198,54 @@ def test_export_cli_magnet_deck(tmp_path, capsys):
                     if ln[:1].isdigit() and ", BZ," in ln])
     np.testing.assert_allclose(got, want[:, 2], rtol=1e-12)
     assert "linear step" in capsys.readouterr().out
+
+
+_SYNTH = """
+[study]
+name = "syn-deck"
+seed = 7
+realizations = 4
+n_particles = 20
+evaluator = "synthetic"
+[grid]
+phi = [0.02, 0.05]
+B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
+gradB_T_per_m = 1.78
+"""
+
+
+def test_export_magnet_deck_at_the_ends_of_the_table_interval(tmp_path, capsys,
+                                                              synthetic_table):
+    """With --table a magnet deck carries the table's M_eff interval (issue 35): --bound low /
+    high write the element loads of M_eff's interval ends, which bracket the mean deck's loads
+    element by element and equal the loads computed from the table's bounds directly; --bound
+    without --table is refused (exit 2, no file)."""
+    from homogenize.macro.effective import magnetization_from_table
+    from homogenize.tables import read_table
+    table = synthetic_table(tmp_path / "t.h5", _SYNTH)
+    base = ["export", "--to", "abaqus", "--deck", "cantilever", "--E-Pa", "2e6", "--nu",
+            "0.45", "--density-kg-m3", "1210", "--magnet", "cylinder", "--magnet-size",
+            "10e-3", "5e-3", "--remanence-T", "1.2", "--magnet-position", "0.017", "0.0025",
+            "-0.010", "--nlgeom", "off", "--table", str(table), "--phi", "0.05"]
+    d = deck_mesh("cantilever", STRIP, element="C3D20R", divisions=(39, 10, 2))
+    c, _ = element_centroids_volumes(d)
+    loads = {}
+    for bound in ("low", "mean", "high"):
+        out = tmp_path / f"{bound}.inp"
+        assert main(base + ["--bound", bound, "--out", str(out)]) == 0, capsys.readouterr().err
+        printed = capsys.readouterr().out
+        assert ("--bound low and --bound high" in printed) == (bound == "mean")
+        text = out.read_text()
+        assert (f"the {bound} end of the table's M_eff interval" in text) == (bound != "mean")
+        loads[bound] = np.array([float(ln.split(",")[2]) for ln in text.splitlines()
+                                 if ln[:1].isdigit() and ", BZ," in ln])
+        M_of_H = magnetization_from_table(read_table(table), 0.05, bound=bound)
+        want = magnet_body_force(MAGNET, M_of_H, DEMAG)(c)
+        np.testing.assert_allclose(loads[bound], want[:, 2], rtol=1e-12)
+    # the magnet pulls down (negative BZ): the high end pulls hardest everywhere
+    assert np.all(np.abs(loads["low"]) < np.abs(loads["mean"]))
+    assert np.all(np.abs(loads["mean"]) < np.abs(loads["high"]))
+    rc = main(base[:-4] + ["--bound", "low", "--out", str(tmp_path / "x.inp")])
+    assert rc == 2
+    assert "--bound has no effect without --table" in capsys.readouterr().err
+    assert not (tmp_path / "x.inp").exists()
