@@ -564,6 +564,7 @@ def _staggered_step(body, law, solid, kappa, field_solve, mech_solve, length_cha
     Returns ``(sol, res, iterations, newton_iterations, history)``."""
     hist, newton, dl_prev, w = [], 0, None, relaxation
     x_prev = r_prev = None
+    w_used = 1.0
     vol_w = _reference_weights(body)
     for it in range(1, max_stagger + 1):
         res = field_solve(sol)
@@ -603,6 +604,7 @@ def _staggered_step(body, law, solid, kappa, field_solve, mech_solve, length_cha
                     w = float(np.clip(-w * float(r_prev @ dr) / den, 0.05, 1.0))
             x = x_prev + w * r
             r_prev = r
+            w_used = w
         x_prev = x
         t = x[:t.size].reshape(t.shape)
         S = x[t.size:].reshape(S.shape)
@@ -625,7 +627,10 @@ def _staggered_step(body, law, solid, kappa, field_solve, mech_solve, length_cha
                         / solid.G_Pa, 1e-300)
             change = abs(dl - dl_prev) / scale
             hist.append(float(change))
-            if change <= tol:
+            # the change after a load update relaxed by w_used is about w_used times the
+            # fixed point's residual: a strongly damped iteration must not stop on its own
+            # small steps
+            if change <= tol * w_used:
                 break
         elif trivial:
             hist.append(0.0)
@@ -665,7 +670,8 @@ def _check_loop_inputs(model: str, kappa, tol, relaxation):
 def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied_T, *,
                    model: str = "continuum", kappa=None, tol: float = 1e-4,
                    max_stagger: int = 30, relaxation: float = 1.0,
-                   load_steps: int = 2, progress=None) -> SpecimenResult:
+                   load_steps: int = 2, max_substeps: int = 4,
+                   progress=None) -> SpecimenResult:
     """Field steps of a specimen in a uniform applied field along its axis.
 
     Parameters
@@ -687,6 +693,9 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
     relaxation : the first relaxation factor of the magnetic loads in each field step, (0, 1];
         later ones follow Aitken's rule (Irons & Tuck), clipped to [0.05, 1]
     load_steps : load steps of each mechanics solve (Newton from the undeformed body)
+    max_substeps : halvings of a field increment whose staggered iteration or mechanics failed
+        (adaptive field sub-steps from the last converged field; the intermediate states are
+        starting points, not reported steps) before :class:`ConvergenceError` [-], >= 0
     progress : callable ``progress(i, n, B)`` after each field step, or None
 
     Returns
@@ -709,6 +718,9 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
     B = _check_steps(B_applied_T)
     ms.check_law(law)
     kappa, tol, relaxation = _check_loop_inputs(model, kappa, tol, relaxation)
+    if isinstance(max_substeps, bool) or not isinstance(max_substeps, (int, np.integer)) \
+            or max_substeps < 0:
+        raise InputError(f"max_substeps must be an integer >= 0, got {max_substeps!r}")
     body = specimen.mechanics_body()
     is3 = specimen.geometry == "3d"
     field_rtol = _FIELD_RTOL_3D
@@ -719,25 +731,56 @@ def solve_specimen(specimen: Specimen, law, solid: fs.NeoHookeanSolid, B_applied
         g0 = ms.axisymmetric_mesh(_field_shape(specimen),
                                   ms.MeshOptions(n_boundary=int(specimen.n_boundary)))
     L0 = specimen.length_m
-    sol, res, steps = None, None, []
-    for i, b in enumerate(B):
+
+    def solvers(b):
         H0 = b / MU0
         if is3:
-            def field_solve(sol, H0=H0):
+            def field_solve(sol):
                 return ms.solve_3d(_moved_geometry_3d(g0, sol, rays), law, H0, rtol=field_rtol)
 
             def mech_solve(loads, sol):
                 return _solve_mechanics_3d(body, solid, loads, load_steps, sol)
         else:
-            def field_solve(sol, H0=H0):
+            def field_solve(sol):
                 return ms.solve_axisymmetric(None, law, H0, geometry=_moved_geometry(g0, sol))
 
             def mech_solve(loads, sol):
                 return fs.solve_axisymmetric(body, solid, loads, load_steps=load_steps)
-        sol, res, it, newton, hist = _staggered_step(
-            body, law, solid, kappa, field_solve, mech_solve,
-            lambda sol: fs.length_change_m(sol)[0], L0, tol, max_stagger, relaxation, sol,
-            f"B = {b:g} T", b == 0.0, steps)
+        return field_solve, mech_solve
+
+    def length_change(sol):
+        return fs.length_change_m(sol)[0]
+
+    sol, res, steps = None, None, []
+    b_done = 0.0
+    for i, b in enumerate(B):
+        # adaptive field sub-steps: a field step whose staggered iteration or mechanics fails
+        # is cut in half (the body's state at the intermediate field is only the next
+        # attempt's starting geometry, not a reported step), at most max_substeps times
+        pending, cuts, it, newton, hist = [float(b)], 0, 0, 0, []
+        while pending:
+            bt = pending[-1]
+            field_solve, mech_solve = solvers(bt)
+            try:
+                sol_t, res_t, it_t, newton_t, hist_t = _staggered_step(
+                    body, law, solid, kappa, field_solve, mech_solve, length_change, L0, tol,
+                    max_stagger, relaxation, sol, f"B = {bt:g} T", bt == 0.0, steps)
+            except ConvergenceError as exc:
+                cuts += 1
+                if cuts > max_substeps or bt == 0.0:
+                    err = ConvergenceError(
+                        f"field step B = {b:g} T failed after {cuts - 1} field sub-step "
+                        f"cut(s) (max_substeps = {max_substeps}; last converged B = "
+                        f"{b_done:g} T, last tried {bt:g} T): {exc}",
+                                           getattr(exc, "residual_history", ()))
+                    err.steps_converged = tuple(steps)
+                    raise err from None
+                pending.append(0.5 * (b_done + bt))
+                continue
+            sol, res, b_done = sol_t, res_t, bt
+            it, newton = it + it_t, newton + newton_t
+            hist += list(hist_t)
+            pending.pop()
         dl_axis, dl_mean = fs.length_change_m(sol)
         dd = fs.diameter_change_m(sol)
         steps.append(SpecimenStep(
