@@ -1,0 +1,617 @@
+"""The channel ceiling under a real magnet, with the field on the DEFORMED ceiling: its
+deflection against the magnet gap, the gap at which it shuts the channel (contact) or snaps
+down (pull-in), and the gap at which the shut channel holds a pressure drop.
+
+The channel of :mod:`homogenize.macro.channel` (width ``a``, height ``b``, ceiling thickness
+``c``, length ``d``; frame: ``x`` along the channel, ``y`` across it from one side wall,
+``z`` up from the glass, the channel floor at ``z = 0``) lies on glass; a permanent magnet
+(:class:`~homogenize.macro.magnets.PermanentMagnet`, a cylinder or a cuboid, axis along ``z``)
+sits under the glass with its axis at ``(x_axis, y_axis)`` (default: under the middle of the
+channel, ``(d/2, a/2)``, coaxial).
+
+The gap
+-------
+The user's control variable is ``gap_m``: from the magnet's TOP face to the channel floor
+(the top of the glass, ``z = 0``), >= 0. It includes the glass: a magnet pressed against a
+1 mm glass slide is at ``gap_m = 1e-3``. The magnet's top face is at ``z = -gap_m``
+(:func:`place_channel_magnet`).
+
+Model
+-----
+*Load.* As for the cantilever (:mod:`homogenize.macro.magnets`,
+:func:`homogenize.macro.pullin.magnet_body_force`): ``f = M_eff(H_in) grad |B_a|`` [N/m^3]
+with ``H_in + N M_eff(H_in) = |H_a|`` and ``N`` the thin-plate demagnetizing factor of the
+PDMS block through its height (Aharoni's prism, :func:`micro.demag.prism_demag_factors`, of the
+block ``d x (a + 2 wall) x (b + c)``: :func:`channel_demag_factor`, 0.90 for the seed's
+channel), one factor for the whole block and every field direction, as for the strip. Only the
+component towards the glass, ``-f_z``, loads the ceiling; the lateral components ``f_x, f_y``
+(zero on the magnet's axis) are not modelled.
+
+*Where the field is taken.* At ``n_x`` sections ``x_i`` (equally spaced, ends included), on
+``n_y`` Gauss-Legendre columns ``y_k`` across the width and ``n_z`` Gauss-Legendre points
+through the ceiling's thickness, each column at its DEFORMED height: the ceiling column at
+``y`` occupies ``z in [b - w(y) + p u(y), b + c - w(y) + p u(y)]`` (a rigid shift of the column
+by its deflection ``w`` towards the glass and its uplift by the liquid pressure ``p``; the
+bending strains of the column are not followed). The force on a column is its mean over the
+``n_z`` points.
+
+*Mechanics: a consistent one-mode (Galerkin) projection of the CeilingModel.* The
+:class:`~homogenize.macro.flow.CeilingModel` knows the ceiling's response to a UNIFORM body
+force, ``w(y) = f d(y)``, and to a uniform pressure, ``u(y)``, at its columns (from the 3D FEM
+:func:`~homogenize.macro.channel.solve_channel`, or the clamped plate). Under a magnet the
+force varies across the section; the deflection of each section is taken in the shape of the
+uniform-force response, ``w(y) = q phi(y)``, ``phi = d / max d`` (``q``: the deflection of the
+most compliant column, the centre line). Ritz/Galerkin with that mode gives ``k q = F`` with
+
+    F(q) = c int_0^a <f_down>(y; q) phi(y) dy,    k = c int_0^a phi dy / max d  [N/m^2]
+
+(the same quadrature in both). ``k`` is exactly the Ritz stiffness ``a(phi, phi)`` of the
+ceiling when ``phi`` is the exact uniform-load solution of a self-adjoint linear operator
+(``a(w0, v) = <f0 c, v>`` for all v, with ``v = phi``). Hence:
+
+* a UNIFORM force ``f`` (any gap dependence, no position dependence) gives ``w = f d(y)``
+  exactly, to round-off, so the channel shuts exactly where :func:`homogenize.macro.flow.closure`
+  says (tested);
+* a force that varies across the section is weighted by ``phi``: the projection's error is
+  that of one mode. Against the exact clamped plate strip under loads that vary like the field
+  of a magnet across the channel the centre deflection is 0.23 % low for a parabola
+  ``1 + 0.3 (1 - (2 y / a - 1)^2)`` and exact for a ramp ``1 + 0.3 (2 y / a - 1)`` (its
+  antisymmetric part loads no symmetric mode and does not deflect the centre, in both; tested).
+* the FEM's compliance includes the force on the side walls and the block (the uniform force
+  acts on the whole block); here the ceiling's own force is projected and the walls' share is
+  carried in proportion. For the seed channel the one-mode projection of the liquid PRESSURE
+  (a load on the underside only, a different distribution than the body force) gives a centre
+  uplift 0.15 % above the FEM's own (tested): the size of that approximation.
+
+*Along the channel.* Each section bends on its own (the ceiling's bending along ``x`` is
+neglected, as in the flow model of :mod:`homogenize.macro.flow`): ``n_x`` independent
+one-degree-of-freedom problems ``k q_i = F_i(q_i, g)``, coupled only through the gap ``g``.
+The force grows as the ceiling comes down towards the magnet (follower), so a section can lose
+its equilibrium before it touches the glass (snap-down).
+
+*Contact.* A column touches the glass when its gap ``h_j = b - q phi_j + p u_j`` reaches 0 (the
+CeilingModel's columns ``j``), i.e. at ``q_c(p) = min_j (b + p u_j) / phi_j``, on the most
+compliant column: as :func:`~homogenize.macro.flow.closure`. Beyond the first contact the
+linear ceiling model does not hold: states below the closure (or pull-in) gap are reported
+as ``closed`` without numbers.
+
+Path following
+--------------
+:func:`homogenize.macro.pullin.trace_branch` (pseudo arc length, the cantilever's) on each
+section's unknown ``q_i`` with the parameter ``g``, section by section (they are independent;
+traced together, the mirror-image sections of a centred magnet would fold at the same gap and
+make the combined system a bifurcation, not a fold): from a far gap (where the dead-load
+deflection is < 10 % of ``q_c``) towards smaller gaps, with the exact Jacobian ``k -
+dF_i/dq_i`` (``dF/dg`` from the same central differences of ``f`` along ``z``: moving the
+magnet down by ``dg`` is moving the points up by ``dg``). A section's trace stops at the first
+of:
+
+* ``contact`` -- its most compliant column reaches the glass on the stable branch (no snap);
+* ``pull-in`` -- a fold of the branch (``k = dF_i/dq_i``): below that gap no equilibrium exists
+  near the branch; the ceiling snaps down onto the glass (snap-down);
+* the smallest gap asked for, without either (``"none"``).
+
+The channel's event is the section's event with the LARGEST gap (the first met as the magnet
+approaches): ``closure_gap_m``, with where it happens (the sections, ``x``, and the column,
+``y``). For a centred cylinder the sections next to the axis need not be the first: near the
+face ``|grad |B||`` peaks off the axis, under the rim (the seed's channel with the plate
+ceiling: at ``x = d/2 +- 2.5 mm``).
+
+The liquid: with no flow the channel's pressure is ``outlet_pressure_Pa`` everywhere (the
+first touch is computed there, the sweep's deflections too). With ``pressure_drop_Pa`` the
+trace is repeated with ``p_in = p_out + pressure_drop_Pa`` on every section: the largest gap
+at which some section is shut (touching, or snapped) at the inlet pressure is the gap that
+holds the channel shut against the drop (``hold_gap_m``; as ``closure`` does for a uniform
+force, the pressure upstream of a shut section being the inlet's). The coupling with a flowing
+liquid (pressure varying along ``x`` while still open) is not modelled here.
+
+Realistic case
+--------------
+See :data:`REALISTIC_CASE`: the seed's channel (a = 5 mm, b = 50 um, c = 0.5 mm, d = 10 mm,
+PDMS 2 MPa, 0.45) with the seed's composite (soft spheres at phi = 0.0175, Ms of the seed
+powder), an NdFeB cylinder 10 mm x 10 mm, B_r = 1.3 T, coaxial under the middle of the channel.
+
+CLI: :mod:`homogenize.cli.cmd_channel_magnet` (``mapsim channel --magnet ... --close`` /
+``--gap-sweep-m A:B:N``).
+
+Units: SI throughout (m, Pa, T, A/m, N/m^3); names carry them.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from homogenize.macro.channel import ChannelGeometry
+from homogenize.macro.flow import CeilingModel
+from homogenize.macro.magnets import PermanentMagnet
+from homogenize.macro.pullin import (PathFollowingError, magnet_body_force, place_magnet_xy,
+                                     trace_branch)
+from micro.common.validate import ConvergenceError, InputError, check_finite, check_positive, \
+    check_range
+from micro.demag import prism_demag_factors
+
+__all__ = ["channel_demag_factor", "place_channel_magnet", "check_gap_sweep", "ChannelMagnet",
+           "ChannelMagnetResult", "channel_magnet_sweep", "REALISTIC_CASE",
+           "FAR_DEFLECTION_FRACTION"]
+
+#: the path starts at a gap where the dead-load deflection of every section is below this
+#: fraction of the contact deflection ``q_c`` (the follower correction is small there)
+FAR_DEFLECTION_FRACTION = 0.1
+
+#: the numbers of the realistic case (module docstring), filled by the report of issue 35
+REALISTIC_CASE: dict = {}
+
+
+def channel_demag_factor(geometry: ChannelGeometry) -> float:
+    """Demagnetizing factor of the PDMS block through its height [-]: Aharoni's prism
+    ``d x (a + 2 wall) x (b + c)``, ``N_z`` (a thin plate: close to 1)."""
+    if not isinstance(geometry, ChannelGeometry):
+        raise InputError(f"geometry must be a ChannelGeometry, got {type(geometry).__name__}")
+    g = geometry
+    return float(prism_demag_factors(g.d_m, g.a_m + 2.0 * g.wall, g.b_m + g.c_m)[2])
+
+
+def _check_magnet(magnet):
+    if not isinstance(magnet, PermanentMagnet):
+        raise InputError(f"magnet must be a PermanentMagnet (cuboid or cylinder), got "
+                         f"{type(magnet).__name__}")
+    if abs(abs(magnet.axis[2]) - 1.0) > 1e-12:
+        raise InputError(f"magnet: its axis must be along z (a flat top face under the glass), "
+                         f"got axis={magnet.axis}")
+
+
+def place_channel_magnet(magnet: PermanentMagnet, geometry: ChannelGeometry, gap_m: float, *,
+                         x_axis_m: float | None = None,
+                         y_axis_m: float | None = None) -> PermanentMagnet:
+    """The magnet with its axis at ``(x_axis_m, y_axis_m)`` (default: the middle of the
+    channel, ``(d/2, a/2)``) and its top face ``gap_m`` below the channel floor (``z = -gap_m``).
+
+    ``gap_m`` [m], >= 0: from the magnet's top face to the channel floor (the top of the glass;
+    the glass thickness is part of it). A negative gap would put the magnet into the glass
+    and the channel: refused.
+    """
+    _check_magnet(magnet)
+    g = float(check_finite("gap_m", gap_m, "m"))
+    if g < 0:
+        raise InputError(f"gap_m = {g:g} m < 0 puts the magnet into the glass and the channel "
+                         f"(its top face above the channel floor z = 0); gaps must be >= 0 m")
+    x = geometry.d_m / 2 if x_axis_m is None else float(check_finite("x_axis_m", x_axis_m, "m"))
+    y = geometry.a_m / 2 if y_axis_m is None else float(check_finite("y_axis_m", y_axis_m, "m"))
+    return place_magnet_xy(dataclasses.replace(magnet, position_m=(x, y, 0.0)), g)
+
+
+def check_gap_sweep(gap_sweep_m) -> np.ndarray:
+    """The magnet gaps [m] of a sweep: finite, >= 0, strictly monotonic (InputError naming
+    ``gap_sweep_m`` otherwise)."""
+    g = np.atleast_1d(np.asarray(check_finite("gap_sweep_m", gap_sweep_m, "m"), float))
+    if g.ndim != 1 or g.size < 1:
+        raise InputError(f"gap_sweep_m must be a 1-D array of gaps [m], got shape {g.shape}")
+    if np.any(g < 0):
+        raise InputError(f"gap_sweep_m: a gap below zero ({g.min():g} m) puts the magnet into "
+                         f"the glass and the channel; gaps must be >= 0 m (magnet face to "
+                         f"channel floor)")
+    d = np.diff(g)
+    if g.size > 1 and not (np.all(d > 0) or np.all(d < 0)):
+        raise InputError("gap_sweep_m must be strictly monotonic (all increasing or all "
+                         "decreasing) [m]")
+    return g
+
+
+class ChannelMagnet:
+    """The ceiling's one-mode sections under a magnet (module docstring).
+
+    Parameters
+    ----------
+    geometry : ChannelGeometry -- a, b, c, d [m]
+    ceiling : CeilingModel -- compliances of the section (``from_fem`` or ``clamped_plate``)
+    magnet : PermanentMagnet -- axis along z; its ``position_m`` x and y place its axis in the
+        channel frame (its z is set by the gap); None with ``body_force``
+    M_of_H : callable -- ``M_eff(H)`` [A/m] of the composite (e.g.
+        :func:`homogenize.macro.effective.magnetization_from_table`)
+    demag_factor : float in [0, 1] or None -- None: :func:`channel_demag_factor`
+    n_x, n_y, n_z : sections along the channel (ends included); Gauss-Legendre columns across
+        the width; Gauss-Legendre points through the ceiling's thickness
+    body_force : callable ``(points_m (P, 3), gap_m) -> (f_down (P,), df_down_dz (P,))``
+        [N/m^3, N/m^4], optional -- replaces the magnet (tests, other sources): the force
+        towards the glass at the points and its derivative along z
+    gap_scale_m : float -- length scale of the gap for the continuation (default: the magnet's
+        smallest dimension, or ``d`` with ``body_force``)
+    """
+
+    def __init__(self, geometry: ChannelGeometry, ceiling: CeilingModel,
+                 magnet: PermanentMagnet | None, M_of_H=None, *,
+                 demag_factor: float | None = None, n_x: int = 21, n_y: int = 12,
+                 n_z: int = 3, body_force: Callable | None = None,
+                 gap_scale_m: float | None = None):
+        if not isinstance(geometry, ChannelGeometry):
+            raise InputError(f"geometry must be a ChannelGeometry, got "
+                             f"{type(geometry).__name__}")
+        if not isinstance(ceiling, CeilingModel):
+            raise InputError(f"ceiling must be a CeilingModel, got {type(ceiling).__name__}")
+        a, b, c, d = geometry.a_m, geometry.b_m, geometry.c_m, geometry.d_m
+        if not (math.isclose(ceiling.a_m, a, rel_tol=1e-9)
+                and math.isclose(ceiling.b_m, b, rel_tol=1e-9)):
+            raise InputError(f"ceiling: its channel ({ceiling.a_m:g} x {ceiling.b_m:g} m) is not "
+                             f"the geometry's ({a:g} x {b:g} m)")
+        for name, v, lo in (("n_x", n_x, 1), ("n_y", n_y, 2), ("n_z", n_z, 1)):
+            if not float(v).is_integer() or int(v) < lo:
+                raise InputError(f"{name} must be an integer >= {lo}, got {v!r}")
+        if body_force is None:
+            _check_magnet(magnet)
+            if not callable(M_of_H):
+                raise InputError("M_of_H must be a callable M(H) [A/m]")
+        elif not callable(body_force):
+            raise InputError("body_force must be a callable (points_m, gap_m) -> (f, df/dz)")
+        self.geometry, self.ceiling, self.magnet, self.M_of_H = geometry, ceiling, magnet, M_of_H
+        self.body_force = body_force
+        self.demag = (channel_demag_factor(geometry) if demag_factor is None
+                      else check_range("demag_factor", demag_factor, 0.0, 1.0, ""))
+        self.a, self.b, self.c, self.d = a, b, c, d
+        self.x_m = np.linspace(0.0, d, int(n_x)) if int(n_x) > 1 else np.array([d / 2])
+        gy, wy = np.polynomial.legendre.leggauss(int(n_y))
+        self.y_q, self.w_y = 0.5 * a * (1 + gy), 0.5 * a * wy
+        gz, wz = np.polynomial.legendre.leggauss(int(n_z))
+        self.zeta, self.w_z = 0.5 * c * (1 + gz), 0.5 * wz
+        down = np.asarray(ceiling.down_per_force_m4_N, float)
+        up = np.asarray(ceiling.up_per_pressure_m_Pa, float)
+        self.d_max = float(down.max())
+        if self.d_max <= 0:
+            raise InputError("ceiling: the ceiling model does not respond to the body force")
+        self.y_col = np.asarray(ceiling.y_m, float)
+        self.phi_col, self.up_col = down / self.d_max, up
+        self.phi_q = np.interp(self.y_q, self.y_col, self.phi_col)
+        self.up_q = np.interp(self.y_q, self.y_col, up)
+        self.wphi = c * self.w_y * self.phi_q              # generalized-force weights [m^2]
+        self.k = float(np.sum(self.wphi)) / self.d_max    # [N/m^2]
+        if gap_scale_m is not None:
+            self.gap_scale = check_positive("gap_scale_m", gap_scale_m, "m")
+        else:
+            self.gap_scale = magnet.length_scale_m if body_force is None else d
+        self.step = 1e-3 * min(c, self.gap_scale)
+        self.evaluations = 0
+
+    # ------------------------------------------------------------------ geometry and loads
+    @property
+    def n_x(self) -> int:
+        return self.x_m.size
+
+    def magnet_at(self, gap_m: float) -> PermanentMagnet:
+        """The magnet with its top face ``gap_m`` below the channel floor."""
+        return place_magnet_xy(self.magnet, gap_m)
+
+    def points_m(self, q_m, pressure_Pa: float = 0.0, sections=None) -> np.ndarray:
+        """Evaluation points of the deformed ceiling, shape (n_s, n_y, n_z, 3) [m]: section
+        ``i`` (all, or the indices ``sections``) deflected by ``q_i phi(y)`` and lifted by
+        ``p u(y)``."""
+        x = self.x_m if sections is None else self.x_m[np.atleast_1d(sections)]
+        q = np.broadcast_to(np.asarray(q_m, float), (x.size,))
+        z = (self.b + self.zeta[None, None, :] - q[:, None, None] * self.phi_q[None, :, None]
+             + pressure_Pa * self.up_q[None, :, None])
+        pts = np.empty(z.shape + (3,))
+        pts[..., 0] = x[:, None, None]
+        pts[..., 1] = self.y_q[None, :, None]
+        pts[..., 2] = z
+        return pts
+
+    def force_down(self, points_m, gap_m: float):
+        """``(f_down (P,), d f_down / dz (P,))`` at points (P, 3) [N/m^3, N/m^4]: the force
+        towards the glass, ``-f_z``, of the magnet at ``gap_m``, and its z derivative."""
+        p = np.asarray(points_m, float).reshape(-1, 3)
+        self.evaluations += 1
+        if self.body_force is not None:
+            f, dfdz = self.body_force(p, float(gap_m))
+            return np.asarray(f, float).reshape(-1), np.asarray(dfdz, float).reshape(-1)
+        f, D = magnet_body_force(self.magnet_at(gap_m), self.M_of_H, self.demag, p, self.step,
+                                 axes=(2,))
+        return -f[:, 2], -D[:, 2, 0]
+
+    def generalized_force(self, q_m, gap_m: float, pressure_Pa: float = 0.0, *,
+                          follower: bool = True, sections=None):
+        """``(F, dF/dq, dF/dg)`` per section (all, or the indices ``sections``), shape (n_s,)
+        each [N/m, N/m^2, N/m^2].
+
+        ``F_i = c sum_k w_k phi_k <f_down>(x_i, y_k)`` with the field at the deflected columns
+        (``follower``) or at the undeformed ceiling (``follower=False``: the dead load, the
+        pressure's uplift left out too; then ``dF/dq = 0``)."""
+        pts = self.points_m(q_m if follower else 0.0, pressure_Pa if follower else 0.0,
+                            sections)
+        f, dfdz = self.force_down(pts.reshape(-1, 3), gap_m)
+        shape = pts.shape[:3]
+        fbar = f.reshape(shape) @ self.w_z                 # (n_x, n_y) column means
+        dbar = dfdz.reshape(shape) @ self.w_z
+        F = fbar @ self.wphi
+        dF_dq = -(dbar * self.phi_q) @ self.wphi if follower else np.zeros(F.size)
+        dF_dg = dbar @ self.wphi                           # magnet down = points up
+        return F, dF_dq, dF_dg
+
+    def residual(self, q_m, gap_m: float, pressure_Pa: float = 0.0, sections=None):
+        """``R = k q - F``, ``dR/dq`` (n_s, n_s) (diagonal), ``dR/dg`` (n_s,)."""
+        q = np.asarray(q_m, float)
+        F, Fq, Fg = self.generalized_force(q, gap_m, pressure_Pa, sections=sections)
+        return self.k * q - F, np.diag(self.k - Fq), -Fg
+
+    def dead_load_deflection_m(self, gap_m: float, sections=None) -> np.ndarray:
+        """Section deflections ``q_i`` [m] with the field of the UNDEFORMED ceiling."""
+        return self.generalized_force(0.0, gap_m, follower=False, sections=sections)[0] / self.k
+
+    def contact_deflection_m(self, pressure_Pa: float = 0.0):
+        """``(q_c, j)``: the deflection ``q`` at which the first column (index ``j`` of the
+        CeilingModel's ``y_m``) touches the glass at pressure ``p`` [m]."""
+        ok = self.phi_col > 0
+        h = self.b + pressure_Pa * self.up_col[ok]
+        if np.any(h <= 0):
+            raise InputError(f"the pressure {pressure_Pa:g} Pa already shuts the channel")
+        r = h / self.phi_col[ok]
+        j = int(np.flatnonzero(ok)[np.argmin(r)])
+        return float(r.min()), j
+
+    def column_gaps_m(self, q_m: float, pressure_Pa: float = 0.0) -> np.ndarray:
+        """Gap under the CeilingModel's columns of a section deflected by ``q`` [m]."""
+        return self.b - q_m * self.phi_col + pressure_Pa * self.up_col
+
+    # ------------------------------------------------------------------ solving
+    def solve_at(self, gap_m: float, q_guess, pressure_Pa: float = 0.0, *, tol: float = 1e-11,
+                 max_it: int = 40) -> np.ndarray:
+        """Newton on the sections at one gap from ``q_guess`` [m] (a point near the stable
+        branch); ConvergenceError with the residual history if it fails."""
+        q = np.array(np.broadcast_to(np.asarray(q_guess, float), (self.n_x,)))
+        scale = self.k * self.b
+        hist = []
+        for _ in range(max_it):
+            F, Fq, _ = self.generalized_force(q, gap_m, pressure_Pa)
+            R = self.k * q - F
+            hist.append(float(np.max(np.abs(R))) / scale)
+            if hist[-1] <= tol:
+                return q
+            q = q - R / (self.k - Fq)
+        raise ConvergenceError(f"channel magnet: Newton did not converge at gap {gap_m:.6g} m",
+                               hist)
+
+
+@dataclass(frozen=True, eq=False)
+class ChannelMagnetResult:
+    """The ceiling against the magnet gap (:func:`channel_magnet_sweep`).
+
+    The event as the magnet approaches, with the liquid at ``outlet_pressure_Pa``: ``event``
+    "contact" (the ceiling touches the glass on the stable branch; ``closure_gap_m``),
+    "pull-in" (the branch folds first: snap-down at ``closure_gap_m``) or "none" (neither down
+    to the smallest gap of the sweep; ``closure_gap_m`` NaN); ``x_event_m`` the sections where
+    it happens (a tuple: a centred magnet acts alike on mirror-image sections), ``y_event_m``
+    the column (the most compliant); ``event_deflection_m`` the deflection ``q`` there [m];
+    ``event_dead_load_deflection_m`` the dead-load answer at that gap [m];
+    ``contact_deflection_m`` ``q_c`` at the outlet pressure [m].
+
+    With ``pressure_drop_Pa`` > 0: ``hold_gap_m`` the largest gap at which the channel is shut
+    at the inlet pressure (holds the drop), ``hold_event``, ``x_hold_m`` (tuple), ``y_hold_m``
+    (equal to the closure's without a drop).
+
+    Per section (``x_m``, (n_x,)): ``section_event`` and ``section_event_gap_m`` (NaN: none).
+    The traced path of the section that closes first (``path_x_m``; closing, from
+    ``far_gap_m``): ``path_gap_m``, ``path_deflection_m``, ``path_stable``. The sweep:
+    ``sweep_gap_m`` (m,), ``sweep_max_deflection_m`` (largest over the sections, NaN when
+    closed), ``sweep_min_gap_m`` (smallest gap under the ceiling, 0 when closed),
+    ``sweep_x_max_m`` (that section), ``sweep_dead_load_max_deflection_m``,
+    ``sweep_centre_force_N_m3`` (the force towards the glass at the deflected centre column of
+    that section, thickness mean), ``sweep_state`` ("open" | "closed": at or below the closure
+    / pull-in gap, contact and the snapped ceiling are not modelled), ``sweep_deflection_m``
+    (m, n_x).
+    """
+    x_m: np.ndarray
+    event: str
+    closure_gap_m: float
+    x_event_m: tuple
+    y_event_m: float
+    event_deflection_m: float
+    event_dead_load_deflection_m: float
+    contact_deflection_m: float
+    pressure_drop_Pa: float
+    outlet_pressure_Pa: float
+    hold_gap_m: float
+    hold_event: str
+    x_hold_m: tuple
+    y_hold_m: float
+    far_gap_m: float
+    section_event: tuple
+    section_event_gap_m: np.ndarray
+    path_x_m: float
+    path_gap_m: np.ndarray
+    path_deflection_m: np.ndarray
+    path_stable: np.ndarray
+    sweep_gap_m: np.ndarray
+    sweep_max_deflection_m: np.ndarray
+    sweep_min_gap_m: np.ndarray
+    sweep_x_max_m: np.ndarray
+    sweep_dead_load_max_deflection_m: np.ndarray
+    sweep_centre_force_N_m3: np.ndarray
+    sweep_state: np.ndarray
+    sweep_deflection_m: np.ndarray
+    demag_factor: float
+    stiffness_N_m2: float
+    n_y: int
+    n_z: int
+    ceiling_source: str
+    evaluations: int = 0
+
+    def to_dict(self) -> dict:
+        out = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                v = [None if isinstance(e, float) and not math.isfinite(e) else e
+                     for e in v.ravel().tolist()] if v.ndim == 1 else \
+                    [[None if not math.isfinite(e) else e for e in row] for row in v.tolist()]
+            elif isinstance(v, float) and not math.isfinite(v):
+                v = None
+            out[f.name] = v
+        return out
+
+
+def _far_gap(model, g_start, q_c):
+    g = max(float(g_start), 1e-3 * model.gap_scale)
+    for _ in range(80):
+        if np.max(model.dead_load_deflection_m(g)) < FAR_DEFLECTION_FRACTION * q_c:
+            return g
+        g *= 1.5
+    raise InputError(f"the magnet deflects the ceiling by more than "
+                     f"{FAR_DEFLECTION_FRACTION:g} of the channel height even at a gap of "
+                     f"{g:.3g} m: no far start for the path")
+
+
+def _trace_section(model, i, pressure_Pa, g_far, g_end, ds_max):
+    """Trace section ``i`` from ``g_far`` down to ``g_end`` at a pressure (module docstring):
+    ``(BranchTrace, event, event gap)``, event "pull-in" | "contact" | "none"."""
+    q_c, _ = model.contact_deflection_m(pressure_Pa)
+    sec = [i]
+
+    def system(u, g):
+        return model.residual(u, g, pressure_Pa, sections=sec)
+
+    u0 = model.dead_load_deflection_m(g_far, sections=sec)
+    tr = trace_branch(system, u0, g_far, direction=-1.0, ds=0.02, ds_max=ds_max,
+                      p_min=g_end, events=[("contact", lambda u, g: 1.0 - float(u[0]) / q_c)],
+                      u_scale=q_c, p_scale=model.gap_scale, r_scale=model.k * q_c,
+                      xtol=1e-10, ftol=1e-10, stop_at_fold=True)
+    ev = tr.event
+    if ev is None:
+        raise PathFollowingError(f"channel magnet: the path of the section at x = "
+                                 f"{model.x_m[i]:.4g} m did not reach the smallest gap within "
+                                 f"the step limit",
+                                 {"gap_m": float(tr.p[-1]), "deflection_m": float(tr.u[-1, 0])})
+    name = {"fold": "pull-in", "contact": "contact"}.get(ev.name, "none")
+    return tr, name, float(ev.p) if name != "none" else math.nan
+
+
+def _trace_all(model, pressure_Pa, g_far, g_end, ds_max):
+    """Every section traced alone; the channel's event is the first as the gap closes (the
+    largest event gap): ``(traces, events, gaps, i_first)`` (i_first -1: none)."""
+    traces, events, gaps = [], [], np.full(model.n_x, np.nan)
+    for i in range(model.n_x):
+        tr, ev, g = _trace_section(model, i, pressure_Pa, g_far, g_end, ds_max)
+        traces.append(tr)
+        events.append(ev)
+        gaps[i] = g
+    i_first = int(np.nanargmax(gaps)) if np.any(np.isfinite(gaps)) else -1
+    return traces, events, gaps, i_first
+
+
+def channel_magnet_sweep(geometry: ChannelGeometry, ceiling: CeilingModel,
+                         magnet: PermanentMagnet | None, M_of_H=None, gap_sweep_m=None, *,
+                         pressure_drop_Pa: float = 0.0, outlet_pressure_Pa: float = 0.0,
+                         demag_factor: float | None = None, n_x: int = 21, n_y: int = 12,
+                         n_z: int = 3, far_gap_m: float | None = None,
+                         body_force: Callable | None = None, gap_scale_m: float | None = None,
+                         ds_max: float = 0.1) -> ChannelMagnetResult:
+    """The ceiling's deflection against the magnet gap, the closure / pull-in gap and the gap
+    that holds a pressure drop (module docstring).
+
+    Parameters
+    ----------
+    geometry, ceiling : the channel [m] and its CeilingModel
+    magnet : PermanentMagnet -- axis along z, its x, y in the channel frame (e.g. from
+        :func:`place_channel_magnet`); its z is set by the gap. None with ``body_force``
+    M_of_H : callable -- ``M_eff(H)`` [A/m]
+    gap_sweep_m : array_like -- magnet gaps [m] (magnet top face to channel floor), >= 0,
+        strictly monotonic; the path is traced from a far gap down to the smallest of them
+        (which may be 0)
+    pressure_drop_Pa : float >= 0 -- the drop the shut channel must hold (``hold_gap_m``)
+    outlet_pressure_Pa : float -- gauge pressure of the liquid at rest / at the outlet [Pa]
+    demag_factor, n_x, n_y, n_z, body_force, gap_scale_m : see :class:`ChannelMagnet`
+    far_gap_m : the path's start (default: from the largest gap of the sweep up, until the
+        dead-load deflection is below ``FAR_DEFLECTION_FRACTION`` of the contact deflection)
+    ds_max : largest arc-length step (scaled: q / q_c and gap / gap scale)
+
+    Returns
+    -------
+    ChannelMagnetResult
+
+    Raises
+    ------
+    InputError -- a gap < 0 (the magnet in the glass and the channel), a sweep that is not
+        monotonic, bad parameters
+    PathFollowingError -- the path could not be followed (``last_converged``);
+        ConvergenceError -- Newton failed at a sweep gap (with its residual history)
+    """
+    gaps = check_gap_sweep(gap_sweep_m)
+    dp = check_positive("pressure_drop_Pa", pressure_drop_Pa, "Pa", allow_zero=True)
+    p_out = float(check_finite("outlet_pressure_Pa", outlet_pressure_Pa, "Pa"))
+    p_in = p_out + dp
+    model = ChannelMagnet(geometry, ceiling, magnet, M_of_H, demag_factor=demag_factor,
+                          n_x=n_x, n_y=n_y, n_z=n_z, body_force=body_force,
+                          gap_scale_m=gap_scale_m)
+    q_c, _ = model.contact_deflection_m(p_out)
+    model.contact_deflection_m(p_in)                     # refuses a shut channel at p_in
+    g_max, g_min = float(gaps.max()), float(gaps.min())
+    if far_gap_m is not None:
+        g_far = check_positive("far_gap_m", far_gap_m, "m")
+        if g_far < g_max:
+            raise InputError(f"far_gap_m = {g_far:g} m is below the sweep's largest gap "
+                             f"{g_max:g} m")
+    else:
+        g_far = _far_gap(model, g_max, q_c)
+    traces, events, ev_gaps, i_ev = _trace_all(model, p_out, g_far, g_min, ds_max)
+    _, j_ev = model.contact_deflection_m(p_out)
+    event = events[i_ev] if i_ev >= 0 else "none"
+    g_ev = float(ev_gaps[i_ev]) if i_ev >= 0 else math.nan
+    if dp > 0:
+        _, h_events, h_gaps, i_h = _trace_all(model, p_in, g_far, g_min, ds_max)
+        _, j_h = model.contact_deflection_m(p_in)
+        hold = h_events[i_h] if i_h >= 0 else "none"
+        g_hold = float(h_gaps[i_h]) if i_h >= 0 else math.nan
+    else:
+        h_gaps, i_h, j_h, hold, g_hold = ev_gaps, i_ev, j_ev, event, g_ev
+
+    def where(gaps_, i):
+        # every section whose event gap ties with the first (mirror images of a centred magnet)
+        if i < 0:
+            return ()
+        tie = np.isclose(gaps_, gaps_[i], rtol=1e-7, atol=0.0)
+        return tuple(float(v) for v in model.x_m[tie])
+
+    # the sweep: each section on the stable part of its traced branch
+    branch = []
+    for tr in traces:
+        stop = len(tr.p) if tr.event.name not in ("fold", "contact") else tr.event.index + 1
+        o = np.argsort(tr.p[:stop])
+        branch.append((tr.p[:stop][o], tr.u[:stop, 0][o]))
+    m = gaps.size
+    q_sw = np.full((m, model.n_x), np.nan)
+    dead = np.full(m, np.nan)
+    f_centre = np.full(m, np.nan)
+    states = np.empty(m, dtype=object)
+    i_centre_y = int(np.argmax(model.phi_q))
+    for n, g in enumerate(gaps):
+        dead[n] = float(np.max(model.dead_load_deflection_m(g)))
+        if event != "none" and g <= g_ev:
+            states[n] = "closed"
+            continue
+        guess = np.array([np.interp(g, pb, ub) for pb, ub in branch])
+        q_sw[n] = model.solve_at(g, guess, p_out)
+        states[n] = "open"
+        i = int(np.argmax(q_sw[n]))
+        pts = model.points_m(q_sw[n], p_out)[i, i_centre_y]
+        f_centre[n] = float(model.force_down(pts, g)[0] @ model.w_z)
+    is_open = states == "open"
+    qmax = np.full(m, np.nan)
+    xmax = np.full(m, np.nan)
+    min_gap = np.zeros(m)
+    for n in np.flatnonzero(is_open):
+        i = int(np.argmax(q_sw[n]))
+        qmax[n], xmax[n] = q_sw[n, i], model.x_m[i]
+        min_gap[n] = float(np.min(model.column_gaps_m(qmax[n], p_out)))
+    i_path = i_ev if i_ev >= 0 else int(np.argmax(model.dead_load_deflection_m(g_far)))
+    path = traces[i_path]
+    ev_q = float(path.event.u[0]) if event != "none" else math.nan
+    ev_dead = (float(model.dead_load_deflection_m(g_ev, sections=[i_ev])[0])
+               if event != "none" else math.nan)
+    return ChannelMagnetResult(
+        model.x_m.copy(), event, g_ev, where(ev_gaps, i_ev),
+        float(model.y_col[j_ev]) if i_ev >= 0 else math.nan, ev_q, ev_dead, q_c, dp, p_out,
+        g_hold, hold, where(h_gaps, i_h), float(model.y_col[j_h]) if i_h >= 0 else math.nan,
+        g_far, tuple(events), ev_gaps, float(model.x_m[i_path]), path.p.copy(),
+        path.u[:, 0].copy(), path.stable.copy(), gaps, qmax, min_gap, xmax, dead, f_centre,
+        states.astype(str), q_sw, float(model.demag), model.k, int(n_y), int(n_z),
+        ceiling.source, model.evaluations)

@@ -1,0 +1,262 @@
+"""The channel ceiling under a real magnet with the field on the deformed ceiling (issue 35,
+items 1 and 2 for the channel): homogenize.macro.channel_magnet."""
+import math
+
+import magpylib
+import numpy as np
+import pytest
+from numpy.polynomial import polynomial as P
+from scipy.constants import mu_0 as MU0
+
+from homogenize.macro.channel import ChannelGeometry
+from homogenize.macro.channel_magnet import (ChannelMagnet, channel_demag_factor,
+                                             channel_magnet_sweep, check_gap_sweep,
+                                             place_channel_magnet)
+from homogenize.macro.effective import soft_sphere_magnetization
+from homogenize.macro.fem import Material
+from homogenize.macro.flow import CeilingModel, closure
+from homogenize.macro.magnets import PermanentMagnet
+from micro.common.validate import InputError
+
+GEO = ChannelGeometry(5e-3, 50e-6, 0.5e-3, 10e-3)
+MAT = Material(2e6, 0.45, 1210.0)
+CYL = PermanentMagnet("cylinder", (10e-3, 10e-3), 1.3)
+PHI = 0.0175
+CHI = 3 * PHI / (1 - PHI)
+
+
+@pytest.fixture(scope="module")
+def plate():
+    return CeilingModel.clamped_plate(GEO, MAT)
+
+
+def _lopsided():
+    """An asymmetric CeilingModel (any shape: the uniform limit does not depend on it)."""
+    y = np.linspace(0.0, GEO.a_m, 41)
+    s = np.sin(np.pi * y / GEO.a_m) ** 2 * (1 + 0.5 * y / GEO.a_m)
+    return CeilingModel(GEO.a_m, GEO.b_m, y, 3e-11 * s, 8e-8 * s ** 1.3, "test")
+
+
+# ------------------------------------------------------------------ the uniform limit
+@pytest.mark.parametrize("dp", [0.0, 150.0])
+def test_uniform_force_reproduces_closure(dp):
+    """A force uniform in space, f(g) = F0 exp(-g / lam): the ceiling deflects exactly as
+    f d(y), and it shuts where closure() puts the uniform force: f(g_close) = f_close."""
+    ce = _lopsided()
+    F0, lam = 3e6, 2e-3
+
+    def force(pts, g):
+        return np.full(len(pts), F0 * math.exp(-g / lam)), np.zeros(len(pts))
+
+    r = channel_magnet_sweep(GEO, ce, None, gap_sweep_m=np.linspace(6e-3, 0.0, 7),
+                             pressure_drop_Pa=dp, body_force=force, n_x=3, gap_scale_m=lam)
+    first = closure(ce, GEO.d_m).body_force_N_m3
+    hold = closure(ce, GEO.d_m, pressure_drop_Pa=dp).body_force_N_m3
+    assert r.event == "contact" and r.hold_event == "contact"
+    assert math.isclose(r.closure_gap_m, lam * math.log(F0 / first), rel_tol=1e-8)
+    assert math.isclose(r.hold_gap_m, lam * math.log(F0 / hold), rel_tol=1e-8)
+    c = closure(ce, GEO.d_m)
+    assert r.y_event_m == pytest.approx(c.y_contact_m)
+    # every open sweep state is the uniform-force answer: q = f d_max
+    m = ChannelMagnet(GEO, ce, None, body_force=force, n_x=3)
+    for g, q, s in zip(r.sweep_gap_m, r.sweep_max_deflection_m, r.sweep_state):
+        if s == "open":
+            assert math.isclose(q, F0 * math.exp(-g / lam) * m.d_max, rel_tol=1e-9)
+
+
+# ------------------------------------------------------------------ the one-mode projection
+def _plate_centre_exact(load_coef, D, a):
+    """Clamped-clamped strip D w'''' = q(y) (q a polynomial): the exact centre deflection."""
+    W = P.polyint(load_coef, 4) / D
+    A = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [1, a, a * a, a ** 3], [0, 1, 2 * a, 3 * a * a]])
+    rhs = -np.array([P.polyval(0, W), P.polyval(0, P.polyder(W)), P.polyval(a, W),
+                     P.polyval(a, P.polyder(W))])
+    return P.polyval(a / 2, P.polyadd(W, np.linalg.solve(A, rhs)))
+
+
+@pytest.mark.parametrize("shape, rel", [("uniform", 1e-12), ("ramp", 1e-12),
+                                        ("parabola", 3e-3)])
+def test_one_mode_against_the_exact_plate_strip(plate, shape, rel):
+    """A force varying across the width (as under a magnet, +-30 %) on the clamped plate
+    strip: the one-mode projection's centre deflection against the exact solution (exact for
+    uniform and antisymmetric parts, 0.23 % low for the parabola)."""
+    a, c = GEO.a_m, GEO.c_m
+    D = MAT.E_Pa * c ** 3 / (12 * (1 - MAT.nu ** 2))
+    f0 = 1e6
+    s = {"uniform": [1.0], "ramp": [0.7, 0.6 / a],
+         "parabola": P.polyadd([1.3], P.polymul([-0.3], P.polypow([-1, 2 / a], 2)))}[shape]
+    coef = f0 * c * np.asarray(s)               # load per area [N/m^2]
+    m = ChannelMagnet(GEO, plate, None, n_x=1,
+                      body_force=lambda p, g: (P.polyval(p[:, 1], coef) / c, 0 * p[:, 1]))
+    q = m.dead_load_deflection_m(1.0)[0]
+    exact = _plate_centre_exact(coef, D, a)
+    assert q == pytest.approx(exact, rel=rel)
+    if shape == "parabola":
+        assert q / exact - 1 == pytest.approx(-2.3e-3, abs=2e-4)
+
+
+def test_one_mode_projection_of_the_pressure_against_the_fem():
+    """The 3D FEM (solve_channel through CeilingModel.from_fem) under a different load
+    distribution, the liquid pressure on the underside: the one-mode projection with the
+    body-force mode, uplift p d_max / c, is within 0.3 % of the FEM's own centre uplift."""
+    fem = CeilingModel.from_fem(GEO, MAT)
+    m = ChannelMagnet(GEO, fem, None, n_x=1,
+                      body_force=lambda p, g: (np.zeros(len(p)), np.zeros(len(p))))
+    p = 1.0
+    q_one_mode = p * float(np.sum(m.w_y * m.phi_q)) / m.k      # generalized force p int phi
+    assert q_one_mode == pytest.approx(fem.up_per_pressure_m_Pa.max(), rel=3e-3)
+
+
+# ------------------------------------------------------------------ snap-down, 1 dof
+def _piston(geo, d0):
+    y = np.linspace(0.0, geo.a_m, 5)
+    return CeilingModel(geo.a_m, geo.b_m, y, np.full(5, d0), np.zeros(5), "piston")
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_one_dof_snap_down(n):
+    """A rigid (piston) ceiling, one point through the thickness: q = d0 A / (G - q)^n with G
+    the distance of the mid-plane from the magnet face. The fold is at q* = G / (n + 1),
+    G* = ((n + 1)^(n+1) d0 A / n^n)^(1/(n+1)); the ceiling snaps before it touches (q* < b)."""
+    geo = ChannelGeometry(5e-3, 0.4e-3, 0.1e-3, 10e-3)
+    d0, G_want = 2e-11, 0.75 * 0.4e-3 * (n + 1)          # the fold at q* = 0.75 b
+    A = G_want ** (n + 1) * n ** n / ((n + 1) ** (n + 1) * d0)
+
+    def force(pts, g):
+        s = pts[:, 2] + g
+        return A / s ** n, -n * A / s ** (n + 1)
+
+    r = channel_magnet_sweep(geo, _piston(geo, d0), None,
+                             gap_sweep_m=np.linspace(3e-3, 0.0, 13),
+                             body_force=force, n_x=2, n_y=4, n_z=1, gap_scale_m=1e-3)
+    g_star = G_want - geo.b_m - geo.c_m / 2
+    assert r.event == "pull-in"
+    assert r.closure_gap_m == pytest.approx(g_star, rel=1e-6)
+    assert r.event_deflection_m == pytest.approx(G_want / (n + 1), rel=1e-4)
+    assert r.event_deflection_m < geo.b_m
+    assert np.all(r.sweep_state[r.sweep_gap_m > g_star] == "open")
+    assert np.all(r.sweep_state[r.sweep_gap_m < g_star] == "closed")
+
+
+def test_one_dof_contact_before_snap():
+    """Weaker force law (n = 1, far): the piston reaches the glass, q = b, on the stable
+    branch: b (G - b) = d0 A."""
+    geo = ChannelGeometry(5e-3, 0.1e-3, 0.5e-3, 10e-3)
+    d0, A = 2e-11, 2e4
+
+    def force(pts, g):
+        s = pts[:, 2] + g
+        return A / s, -A / s ** 2
+
+    r = channel_magnet_sweep(geo, _piston(geo, d0), None,
+                             gap_sweep_m=np.linspace(3e-3, 0.0, 7),
+                             body_force=force, n_x=2, n_y=4, n_z=1, gap_scale_m=1e-3)
+    G = geo.b_m + d0 * A / geo.b_m
+    assert r.event == "contact"
+    assert r.closure_gap_m == pytest.approx(G - geo.b_m - geo.c_m / 2, rel=1e-8)
+
+
+# ------------------------------------------------------------------ the real magnet
+@pytest.fixture(scope="module")
+def sweep(plate):
+    mag = place_channel_magnet(CYL, GEO, 6e-3)
+    return channel_magnet_sweep(GEO, plate, mag, soft_sphere_magnetization(PHI),
+                                np.linspace(6e-3, 1e-3, 6), n_x=5, n_y=8)
+
+
+def test_far_gaps_reproduce_the_dead_load(plate):
+    """The follower correction vanishes far from the magnet, like the deflection over the
+    distance: < 2e-4 at 10 mm, < 1e-5 at 20 mm."""
+    m = ChannelMagnet(GEO, plate, place_channel_magnet(CYL, GEO, 0.0),
+                      soft_sphere_magnetization(PHI), n_x=5, n_y=8)
+    corr = []
+    for g in (5e-3, 10e-3, 20e-3):
+        dead = m.dead_load_deflection_m(g)
+        q = m.solve_at(g, dead)
+        corr.append(float(np.max(np.abs(q / dead - 1))))
+    assert corr[0] > corr[1] > corr[2]
+    assert corr[1] < 2e-4 and corr[2] < 1e-5
+    assert corr[0] > 1e-3                          # near the magnet the correction is real
+
+
+def test_deformed_sampling_against_magpylib(sweep, plate):
+    """Independent check of an equilibrium of the sweep: the field of a magpylib Cylinder built
+    here, |B| differenced along z at the DEFORMED Gauss points, M = chi H / (1 + N chi) (the
+    linear soft-sphere law below saturation), the force projected on the mode: k q = F."""
+    n = 1                                          # gap 5 mm, open
+    g = sweep.sweep_gap_m[n]
+    assert sweep.sweep_state[n] == "open"
+    q = sweep.sweep_deflection_m[n]
+    N = channel_demag_factor(GEO)
+    src = magpylib.magnet.Cylinder(dimension=(10e-3, 10e-3), polarization=(0, 0, 1.3),
+                                   position=(GEO.d_m / 2, GEO.a_m / 2, -g - 5e-3))
+    a, b, c = GEO.a_m, GEO.b_m, GEO.c_m
+    gy, wy = np.polynomial.legendre.leggauss(8)
+    gz, wz = np.polynomial.legendre.leggauss(3)
+    y, wyy = a / 2 * (1 + gy), a / 2 * wy
+    d_col = plate.down_per_force_m4_N
+    phi = np.interp(y, plate.y_m, d_col) / d_col.max()
+    k = c * np.sum(wyy * phi) / d_col.max()
+    h = 1e-7
+    for i, x in enumerate(np.linspace(0.0, GEO.d_m, 5)):
+        F = F_dead = 0.0
+        for yk, wk, pk in zip(y, wyy, phi):
+            for zk, wzk in zip(c / 2 * (1 + gz), wz / 2):
+                for shift, acc in ((q[i] * pk, "F"), (0.0, "dead")):
+                    z = b + zk - shift
+                    pts = np.array([[x, yk, z + h], [x, yk, z - h], [x, yk, z]])
+                    B = np.linalg.norm(magpylib.getB(src, pts), axis=1)
+                    M = CHI * (B[2] / MU0) / (1 + N * CHI)
+                    assert M < PHI * 1.4e6             # below saturation: linear law
+                    fdown = -M * (B[0] - B[1]) / (2 * h)
+                    if acc == "F":
+                        F += c * wk * pk * wzk * fdown
+                    else:
+                        F_dead += c * wk * pk * wzk * fdown
+        assert k * q[i] == pytest.approx(F, rel=1e-6)
+        assert abs(F / F_dead - 1) > 50e-6          # the deformed position matters
+
+
+def test_realistic_sweep_closes_by_contact(sweep):
+    """The centred cylinder: contact (no snap: b << the field's length scale) on the centre
+    column, at mirror-image sections (the same event gap on both sides of the axis)."""
+    r = sweep
+    assert r.event == "contact"
+    assert 1e-3 < r.closure_gap_m < 6e-3
+    xs = np.array(r.x_event_m)
+    assert np.allclose(np.sort(GEO.d_m - xs), xs, atol=1e-12)
+    assert r.y_event_m == pytest.approx(GEO.a_m / 2)
+    assert np.nanmax(r.section_event_gap_m) == r.closure_gap_m
+    assert r.path_x_m in xs
+    assert r.event_deflection_m == pytest.approx(GEO.b_m, rel=1e-8)
+    # the follower load pulls harder than the dead load: contact at a larger gap
+    assert r.event_dead_load_deflection_m < r.event_deflection_m
+    open_ = r.sweep_state == "open"
+    assert np.all(np.diff(r.sweep_max_deflection_m[open_]) > 0)
+    assert np.all(r.sweep_max_deflection_m[open_] > r.sweep_dead_load_max_deflection_m[open_])
+    assert np.all(r.sweep_state[r.sweep_gap_m <= r.closure_gap_m] == "closed")
+    assert np.allclose(r.sweep_min_gap_m[open_], GEO.b_m - r.sweep_max_deflection_m[open_])
+    d = r.to_dict()
+    assert d["event"] == "contact" and isinstance(d["sweep_state"], list)
+
+
+# ------------------------------------------------------------------ refused input
+@pytest.mark.parametrize("sweep_, words", [
+    ([3e-3, -1e-3], "gap_sweep_m: a gap below zero"),
+    ([3e-3, 1e-3, 2e-3], "gap_sweep_m must be strictly monotonic"),
+])
+def test_bad_sweeps_refused(sweep_, words):
+    with pytest.raises(InputError, match=words):
+        check_gap_sweep(sweep_)
+    with pytest.raises(InputError, match="gap_sweep_m"):
+        channel_magnet_sweep(GEO, CeilingModel.clamped_plate(GEO, MAT),
+                             place_channel_magnet(CYL, GEO, 1e-3),
+                             soft_sphere_magnetization(PHI), sweep_)
+
+
+def test_magnet_overlapping_the_channel_refused():
+    with pytest.raises(InputError, match="gap_m = -0.0001 m < 0 puts the magnet into the glass"):
+        place_channel_magnet(CYL, GEO, -1e-4)
+    tilted = PermanentMagnet("cuboid", (5e-3, 5e-3, 5e-3), 1.3, axis=(1.0, 0.0, 0.0))
+    with pytest.raises(InputError, match="axis must be along z"):
+        place_channel_magnet(tilted, GEO, 1e-3)
