@@ -110,6 +110,13 @@ Realistic case
 See :data:`REALISTIC_CASE`: the seed's channel (a = 5 mm, b = 50 um, c = 0.5 mm, d = 10 mm,
 PDMS 2 MPa, 0.45) with the seed's composite (soft spheres at phi = 0.0175, Ms of the seed
 powder), an NdFeB cylinder 10 mm x 10 mm, B_r = 1.3 T, coaxial under the middle of the channel.
+The ceiling touches the glass (no snap: the channel height b = 50 um is far below the field's
+length scale, the follower correction is 2 % of the deflection) at a gap of 2.24 mm, on the
+centre line at mid-length (2.26 mm with the FEM compliance at nc 4; 2.21 mm with the dead load;
+the quadrature is converged to 1e-5: 41 sections or 24 x 5 points change the fourth digit);
+shut against 100 Pa at 1.95 mm, at x = 3 and 7 mm (closer to the magnet the force grows faster
+off the axis). A snap-down before contact needs a field that varies on the scale of b (a
+sub-millimetre magnet, or a much taller channel): the 1-dof test shows the criterion.
 
 CLI: :mod:`homogenize.cli.cmd_channel_magnet` (``mapsim channel --magnet ... --close`` /
 ``--gap-sweep-m A:B:N``).
@@ -142,8 +149,22 @@ __all__ = ["channel_demag_factor", "place_channel_magnet", "check_gap_sweep", "C
 #: fraction of the contact deflection ``q_c`` (the follower correction is small there)
 FAR_DEFLECTION_FRACTION = 0.1
 
-#: the numbers of the realistic case (module docstring), filled by the report of issue 35
-REALISTIC_CASE: dict = {}
+#: the numbers this module finds for the realistic case (module docstring): the seed's channel,
+#: CeilingModel.from_fem (nc 3, P2), 21 sections x 12 columns x 3 points, no liquid pressure
+#: unless said
+REALISTIC_CASE = {
+    "channel_m": {"a": 5e-3, "b": 50e-6, "c": 0.5e-3, "d": 10e-3}, "E_Pa": 2e6, "nu": 0.45,
+    "magnetization": "soft spheres, phi = 0.0175 (SEED.c * SEED.d), Ms of the seed powder",
+    "demag_factor": 0.8724,
+    "magnet": "NdFeB cylinder 10 mm x 10 mm, B_r 1.3 T, axis z, under the middle (5, 2.5) mm",
+    "event": "contact",
+    "closure_gap_m": 2.244e-3,                 # at x = 5 mm, y = 2.5 mm (the centre line)
+    "closure_gap_m_nc4": 2.263e-3,             # the FEM compliance at nc 4 (+0.8 %)
+    "closure_gap_m_dead_load": 2.207e-3,       # the field of the undeformed ceiling
+    "closure_gap_m_plate": 1.611e-3,           # the (stiffer) clamped-plate ceiling, at x = d/2 +- 2.5 mm
+    "hold_gap_m_100Pa": 1.951e-3,              # at x = 3 and 7 mm (nc 4: 1.965e-3)
+    "uniform_force_closure_N_m3": 1.096e6,     # closure() of the same CeilingModel, for scale
+}
 
 
 def channel_demag_factor(geometry: ChannelGeometry) -> float:

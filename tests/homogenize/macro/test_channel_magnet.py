@@ -260,3 +260,63 @@ def test_magnet_overlapping_the_channel_refused():
     tilted = PermanentMagnet("cuboid", (5e-3, 5e-3, 5e-3), 1.3, axis=(1.0, 0.0, 0.0))
     with pytest.raises(InputError, match="axis must be along z"):
         place_channel_magnet(tilted, GEO, 1e-3)
+
+
+# ------------------------------------------------------------------ the CLI (wired as the lead will)
+@pytest.fixture
+def cli(monkeypatch):
+    """``mapsim`` with the channel command wired to the magnet as cmd_macro.py will be
+    (homogenize.cli.cmd_channel_magnet.wire_channel_command)."""
+    import argparse
+
+    import homogenize.cli as cli_mod
+    from homogenize.cli.cmd_channel_magnet import wire_channel_command
+    build = cli_mod.build_parser
+
+    def wired():
+        parser = build()
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        wire_channel_command(sub.choices["channel"])
+        return parser
+    monkeypatch.setattr(cli_mod, "build_parser", wired)
+    return cli_mod.main
+
+
+MAGNET = ["--magnet", "cylinder", "--magnet-size", "10e-3", "10e-3", "--remanence-T", "1.3",
+          "--sections", "5"]
+
+
+def test_cli_gap_sweep_and_close(cli, tmp_path, capsys):
+    import json
+    out = tmp_path / "m.json"
+    assert cli(["channel", *MAGNET, "--gap-sweep-m", "0.006:0.001:6", "--pressure-drop-Pa",
+                "100", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "closure gap" in text and "<- closure (contact)" in text
+    assert "holds shut below the gap" in text
+    d = json.loads(out.read_text())
+    r = d["channel_magnet"]
+    assert r["event"] == "contact" and 1e-3 < r["closure_gap_m"] < 6e-3
+    assert r["hold_gap_m"] < r["closure_gap_m"]          # holding 100 Pa needs it closer
+    assert d["demag_factor"] == pytest.approx(channel_demag_factor(GEO))
+    assert r["sweep_state"][0] == "open" and r["sweep_state"][-1] == "closed"
+    assert r["sweep_max_deflection_m"][-1] is None
+    assert "manifest" in d
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--gap-sweep-m", "0.003:-0.001:5"], "--gap-sweep-m: START and STOP must be >= 0"),
+    (["--close", "--target-gap-m", "1e-5", "--pressure-drop-Pa", "10"],
+     "--target-gap-m is not used with --magnet"),
+    ([], "needs --close"),
+])
+def test_cli_bad_input(cli, extra, words, tmp_path, capsys):
+    out = tmp_path / "x.json"
+    assert cli(["channel", *MAGNET, *extra, "--json", str(out)]) == 2
+    assert words in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_cli_magnet_options_need_the_magnet(cli, capsys):
+    assert cli(["channel", "--gap-sweep-m", "0.003:0:4"]) == 2
+    assert "--gap-sweep-m has no effect without --magnet" in capsys.readouterr().err
