@@ -10,7 +10,8 @@ import numpy as np
 from homogenize.macro.effective import magnetization_from_table
 from homogenize.macro.follower_fem import FollowerFEM, follower_fem_at_gap
 from homogenize.macro.magnets import PermanentMagnet
-from homogenize.macro.pullin import interval_ends, pullin_sweep, place_magnet
+from homogenize.macro.pullin import (ON_FACE_AT_END, PathFollowingError, interval_ends,
+                                     place_magnet, pullin_sweep)
 from homogenize.tables.batch import modulus_from_table, read_table
 from micro.common.files import atomic_path, manifest, write_json
 from micro.common.validate import InputError
@@ -106,9 +107,24 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
     ends, what = _ends(args, phi, mat, M_of_H)
     results = {}
     for bound, (E, law) in ends.items():
-        results[bound] = pullin_sweep(strip, ElasticMaterial(E, mat.nu, mat.density_kg_m3),
-                                      magnet, law, gap_sweep_m=gaps, round_trip=gaps.size > 1,
-                                      demag_factor=N, gravity_m_s2=args.gravity_m_s2)
+        try:
+            results[bound] = pullin_sweep(strip, ElasticMaterial(E, mat.nu, mat.density_kg_m3),
+                                          magnet, law, gap_sweep_m=gaps,
+                                          round_trip=gaps.size > 1, demag_factor=N,
+                                          gravity_m_s2=args.gravity_m_s2)
+        except PathFollowingError as exc:
+            # exit 3 (the caller): the last converged state written, named as such
+            if args.json:
+                write_json(args.json, json_ready({
+                    "status": "did not converge", "error": str(exc),
+                    "interval_end": bound, "E_Pa": E, "strip": vars(strip),
+                    "gap_definition": GAP_HELP, "gap_sweep_m": gaps.tolist(),
+                    "last_converged": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
+                                       for k, v in exc.last_converged.items()},
+                    "manifest": manifest(config_of(args), None)}))
+                print(f"the path could not be followed ({bound} end); its last converged "
+                      f"state is written to {args.json} as 'last_converged'")
+            raise
     r = results["mean"]
     lo_hi = {}
     if "low" in results:
@@ -126,18 +142,9 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
             return ""
         a, b = lo_hi[key]
         return f" [{a:.4g}, {b:.4g}] ({what})"
-    snap = "snaps to the magnet" if r.snap else "touches the magnet without a snap"
-    print(f"pull-in gap {r.pull_in_gap_m:.4g} m{iv('pull_in_gap_m')} (tip deflection there "
-          f"{r.pull_in_tip_deflection_m:.4g} m): closing the gap below it the strip {snap}")
-    if math.isfinite(r.release_gap_m):
-        jumps = (f"; opening from deep contact the strip snapped between contact states at "
-                 + ", ".join(f"{g:.4g}" for g in r.contact_jumps_m) + " m"
-                 if r.contact_jumps_m else "")
-        print(f"release gap {r.release_gap_m:.4g} m{iv('release_gap_m')} ({r.release_by}); "
-              f"snap back at {r.snap_back_gap_m:.4g} m{jumps}")
-    else:
-        print("release gap: not determined (no contact traced in the range, or the contact "
-              "could not be followed: see the JSON's contact_end_gap_m)")
+    what = describe(r, iv, float(gaps.max()))
+    for line in what:
+        print(line)
     print(f"{'gap [m]':>10} {'tip deflection [m]':>19} {'tip gap [m]':>12} "
           f"{'contact force [N]':>18} {'nodes on face':>13} {'contact length [m]':>18}  branch")
     for g, d, tg, fc, nc, cl, b in zip(r.sweep_gap_m, r.sweep_tip_deflection_m,
@@ -151,7 +158,7 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
         "kind": args.magnet, "size_m": list(args.magnet_size), "remanence_T": args.remanence_T,
         "axis_x_m": magnet.position_m[0], "axis_y_m": magnet.position_m[1]},
         "magnetization": law_name, "phi": phi, "demag_factor": N,
-        "pullin": r.to_dict(),
+        "pullin": r.to_dict(), "what_happens": what,
         "E_Pa": ends["mean"][0],
         "interval": {k: v for k, v in lo_hi.items()} or None, "interval_from": what,
         "interval_ends": {b: {"E_Pa": E, "M_eff": "low" if b == "low" else "high"}
@@ -162,6 +169,66 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
     if getattr(args, "png", None):
         _plot(args.png, r, lo_hi)
     return 0
+
+
+def describe(r, iv=lambda key: "", largest_gap_m=math.nan) -> list:
+    """What the strip does, in words (printed and in the JSON's ``what_happens``): the state it
+    snaps into at pull-in (:attr:`PullInResult.pull_in_lands_on`), where it touches, how it lets
+    go on the way back and where it returns to the small deflection. ``iv(key)``: the interval
+    text of a result key."""
+    lines = []
+    if not math.isfinite(r.pull_in_gap_m):
+        lines.append("pull-in gap: not reached in the range of gaps (no fold, no touch)")
+    elif not r.snap:
+        lines.append(f"pull-in gap {r.pull_in_gap_m:.4g} m{iv('pull_in_gap_m')}: the tip "
+                     f"touches the magnet's face without a snap (tip deflection "
+                     f"{r.pull_in_tip_deflection_m:.4g} m)")
+    else:
+        head = (f"pull-in gap {r.pull_in_gap_m:.4g} m{iv('pull_in_gap_m')} (tip deflection "
+                f"there {r.pull_in_tip_deflection_m:.4g} m): closing the gap below it the strip ")
+        if r.pull_in_lands_on == "free":
+            text = (f"snaps to a large deflection WITHOUT touching the magnet (tip deflection "
+                    f"{r.landing_tip_deflection_m:.4g} m, its tip {r.landing_tip_gap_m:.3g} m "
+                    f"above the plane of the face)")
+            if math.isfinite(r.touch_gap_m) and r.touch_gap_m < r.pull_in_gap_m:
+                text += (f"; closing further, its tip touches the face at {r.touch_gap_m:.4g} m "
+                         f"without a snap")
+        elif r.pull_in_lands_on == "tip contact":
+            text = (f"snaps onto the magnet: its tip on the face (contact force "
+                    f"{r.landing_contact_force_N:.3g} N)")
+        elif r.pull_in_lands_on == "lying on the face":
+            text = (f"snaps onto the magnet, lying on the face ({r.landing_n_contact} nodes, "
+                    f"contact force {r.landing_contact_force_N:.3g} N)")
+        else:
+            text = "snaps (the state it lands in is not on the traced path)"
+        lines.append(head + text)
+    jumps = ("it jumps between contact states at "
+             + ", ".join(f"{g:.4g}" for g in r.contact_jumps_m) + " m, then "
+             if r.contact_jumps_m else "")
+    back = ""
+    if math.isfinite(r.snap_back_gap_m) and math.isfinite(r.release_gap_m):
+        if r.snap_back_gap_m > r.release_gap_m * (1 + 1e-9):
+            back = (f"; it stays bent without contact and snaps back to the small deflection "
+                    f"at {r.snap_back_gap_m:.4g} m")
+        else:
+            back = "; it is back on the small-deflection branch"
+        if math.isfinite(r.pull_in_gap_m) and r.snap:
+            back += (f" (hysteresis: pull-in at {r.pull_in_gap_m:.4g} m, return at "
+                     f"{max(r.snap_back_gap_m, r.release_gap_m):.4g} m)")
+    if r.release_by == "contact force zero" and math.isfinite(r.release_gap_m):
+        lines.append(f"opening the gap: {jumps}the strip lifts off the face where its contact "
+                     f"force vanishes, release gap {r.release_gap_m:.4g} m"
+                     f"{iv('release_gap_m')}{back}")
+    elif r.release_by == "fold of the contact branch" and math.isfinite(r.release_gap_m):
+        lines.append(f"opening the gap: {jumps}the strip snaps off the face (the contact state "
+                     f"ends), release gap {r.release_gap_m:.4g} m{iv('release_gap_m')}{back}")
+    elif r.release_by == ON_FACE_AT_END:
+        lines.append(f"opening the gap: {jumps}the strip is still on the face at the largest "
+                     f"gap of the sweep ({largest_gap_m:.4g} m): no release within the sweep")
+    else:
+        lines.append("release gap: not determined (no contact traced in the range, or the "
+                     "contact could not be followed: see the JSON's contact_end_gap_m)")
+    return lines
 
 
 def follower_fem_gap(args, strip, mat, M_of_H, phi, law_name, N) -> int:

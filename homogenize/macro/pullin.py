@@ -159,7 +159,8 @@ __all__ = ["BranchTrace", "LimitPoint", "EventPoint", "PathFollowingError", "tra
            "place_magnet", "magnet_below", "magnet_body_force", "MagnetElastica", "PullInResult", "pullin_sweep",
            "one_mode_pullin", "OneModeResult", "FD_HESSIAN_REL", "REALISTIC_CASE",
            "LyingBranch", "ContactRelease", "solve_lying", "relax_on_face", "deep_contact_start",
-           "lying_contact_branch", "contact_release", "LYING_MIN_GAP_REL", "interval_ends"]
+           "lying_contact_branch", "contact_release", "LYING_MIN_GAP_REL", "interval_ends",
+           "PathBudgetError", "EvaluationBudget", "MAX_EVALUATIONS"]
 
 #: the smallest gap the strip lying on the face is started from, relative to the thickness:
 #: at a zero gap the whole strip lies flat on the face (every node in contact, a degenerate
@@ -211,6 +212,47 @@ class PathFollowingError(ConvergenceError):
     def __init__(self, message, last_converged=None):
         super().__init__(message)
         self.last_converged = last_converged or {}
+
+
+class PathBudgetError(PathFollowingError):
+    """The evaluation budget of a path ran out (:class:`EvaluationBudget`): never caught by
+    the fallbacks that try another route after a failed one, so the path ends here;
+    ``last_converged`` names the last converged state."""
+
+
+#: ``release_by`` when the strip lying on the face is still on it at the largest gap of the
+#: sweep (no release within the sweep; ``release_gap_m`` nan)
+ON_FACE_AT_END = "still on the face at the largest gap"
+
+#: the default evaluation budget of one :func:`pullin_sweep` (evaluations of the strip's
+#: residual and Hessian, each one field evaluation of ~1.5k points: ~10-25 ms at 32
+#: segments, n_cross 3): a few times what the realistic sweeps need (module docstring)
+MAX_EVALUATIONS = 6000
+
+
+class EvaluationBudget:
+    """A count of the model's evaluations (:meth:`MagnetElastica.system_free`, which every
+    system of the strip calls once) with a limit: past it :class:`PathBudgetError`. ``stage``
+    names the loop running (set by the caller), ``last`` the last converged state seen
+    (``(stage, u, p)``, set by :func:`trace_branch` and :func:`relax_on_face`)."""
+
+    def __init__(self, max_evaluations):
+        if not float(max_evaluations).is_integer() or int(max_evaluations) < 1:
+            raise InputError(f"max_evaluations must be an integer >= 1, got "
+                             f"{max_evaluations!r}")
+        self.max = int(max_evaluations)
+        self.n = 0
+        self.stage = ""
+        self.last = None
+
+    def spend(self):
+        self.n += 1
+        if self.n > self.max:
+            raise PathBudgetError(f"the evaluation budget ({self.max} evaluations of the strip) "
+                                  f"ran out in: {self.stage or 'the path'}")
+
+    def note(self, u, p):
+        self.last = (self.stage, np.array(u, float), float(p))
 
 
 # ============================================================================================
@@ -326,7 +368,8 @@ def _default_stability(u, p, J):
 def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max=0.2,
                  p_min=-math.inf, p_max=math.inf, events=(), u_scale=1.0, p_scale=1.0,
                  r_scale=1.0, xtol=1e-10, ftol=1e-9, max_newton=12, max_steps=2000,
-                 max_turn_deg=20.0, stability=None, stop_at_fold=False) -> BranchTrace:
+                 max_turn_deg=20.0, stability=None, stop_at_fold=False,
+                 budget=None) -> BranchTrace:
     """Follow the branch of ``R(u, p) = 0`` through limit points (pseudo arc length).
 
     Parameters
@@ -345,6 +388,10 @@ def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max
         the same branch near a fold)
     stability : callable ``(u, p, J) -> bool``; default: ``J`` (a Hessian) positive definite
     stop_at_fold : end the trace at the first limit point (a terminal event named "fold")
+    budget : an :class:`EvaluationBudget` told each converged point (``note``), so that when
+        it runs out (the system spends it) the last converged point is known; ``max_steps``
+        bounds the steps (a halving is a step): past it the trace ends, stop_reason
+        "max_steps"
 
     Returns
     -------
@@ -377,6 +424,8 @@ def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max
 
     def record(z, Jz, tau):
         u, p = sc.split(z)
+        if budget is not None:
+            budget.note(u, p)
         zs.append(z.copy())
         taus.append(tau[-1])
         stables.append(stab(u, p, sc.raw_jacobian(Jz)))
@@ -633,6 +682,8 @@ class MagnetElastica:
         self.weight_N_m3 = material.density_kg_m3 * gr
         self.fd_step = FD_HESSIAN_REL * min(t, min(magnet.dimensions_m))
         self._dead_cache = {}
+        #: an :class:`EvaluationBudget` spent by every evaluation (None: no limit)
+        self.budget = None
 
     # ---------------------------------------------------------------- geometry
     def magnet_at(self, gap_m):
@@ -753,6 +804,8 @@ class MagnetElastica:
 
     def system_free(self, u, gap_m):
         """``(R, J, dR/dg)`` of the free strip; ``u`` = theta_1..N [rad], ``gap_m`` [m]."""
+        if self.budget is not None:
+            self.budget.spend()
         th = self._full(u)
         G, Hm, Gp = self._gradient_and_hessian(th, gap_m)
         R = self.K @ th[1:] + G[1:]
@@ -964,6 +1017,14 @@ class PullInResult:
     sweep_n_contact: np.ndarray = None
     sweep_contact_length_m: np.ndarray = None
     contact_jumps_m: tuple = ()
+    # what the strip does at pull-in (the state it lands in) and the touch point
+    touch_gap_m: float = math.nan
+    pull_in_lands_on: str = ""
+    landing_tip_deflection_m: float = math.nan
+    landing_tip_gap_m: float = math.nan
+    landing_n_contact: int = -1
+    landing_contact_force_N: float = math.nan
+    evaluations: int = 0
 
     def to_dict(self) -> dict:
         out = {}
@@ -1166,6 +1227,8 @@ def relax_on_face(model, gap_m, theta0, *, active=(), max_steps=400):
         try:
             th_new, lam_new, A_new = solve_lying(_Proximal(model, th, mu), gap_m, th, A,
                                                  lam_scale=ls, max_newton=15)
+        except PathBudgetError:
+            raise
         except PathFollowingError:
             mu *= 4.0
             continue
@@ -1174,6 +1237,8 @@ def relax_on_face(model, gap_m, theta0, *, active=(), max_steps=400):
         if step < 1e-4:
             try:
                 th2, lam2, A2 = solve_lying(model, gap_m, th, A, lam_scale=ls, max_newton=15)
+            except PathBudgetError:
+                raise
             except PathFollowingError:
                 th2 = None
             if th2 is not None:
@@ -1209,6 +1274,8 @@ def deep_contact_start(model, gap_m, *, lam_scale=None):
         active = [k for k in range(1, n + 1) if s[k - 1] >= l - 1e-12 * L] or [n]
         try:
             th, lam, A = solve_lying(model, g, th0, active, lam_scale=ls)
+        except PathBudgetError:
+            raise
         except PathFollowingError as exc:
             fails.append(str(exc))
             continue
@@ -1274,6 +1341,7 @@ def lying_contact_branch(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_segm
             u_scale=np.concatenate([np.full(n, math.sqrt(n)), np.full(m, ls)]), p_scale=L,
             r_scale=np.concatenate([np.full(n, model.EI / L), np.full(m, L)]),
             ftol=1e-9, xtol=1e-10, max_steps=1500, stop_at_fold=not through_folds,
+            budget=getattr(model, "budget", None),
             stability=lambda uu, p, J: model.stable_lying(J))
         for k in range(len(tr.p)):
             if rows and k == 0:
@@ -1288,6 +1356,22 @@ def lying_contact_branch(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_segm
         g, u = float(ev.p), ev.u.copy()
         direction = float(np.sign(tr.dp_ds[-1])) or direction
         folds.extend(float(lp.p) for lp in tr.limit_points)
+        if ev.name in ("drop", "add"):
+            if ev.name == "drop":
+                k_ev = act[int(np.argmin(u[n:]))]
+            else:
+                free = [k for k in range(1, n + 1) if k not in act]
+                k_ev = free[int(np.argmin(model.node_gaps_m(u[:n], g)[np.array(free) - 1]))]
+            if events and events[-1][2] == k_ev and events[-1][1] != ev.name \
+                    and abs(events[-1][0] - g) <= 1e-7 * L:
+                # the node that has just left (joined) the set at this gap must join (leave)
+                # it again at once: with it the contact force would pull, without it the
+                # node would be below the plane -- no contact state continues this way (a
+                # fold of the piecewise-smooth branch): the strip snaps here
+                folds.append(g)
+                release_by, release_gap = "fold of the contact branch", g
+                release_defl = model.tip_deflection_m(u[:n])
+                break
         if ev.name == "drop":
             j = int(np.argmin(u[n:]))
             events.append((g, "drop", act[j]))
@@ -1409,7 +1493,8 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                  gap_sweep_m=None, *, round_trip: bool = True, n_segments: int = 32,
                  n_cross: int = 3, demag_factor: float = 0.0, gravity_m_s2: float = 0.0,
                  follower: bool = True, plate: bool = False, far_gap_m: float | None = None,
-                 ds_max: float = 0.05, lying: bool = True) -> PullInResult:
+                 ds_max: float = 0.05, lying: bool = True,
+                 max_evaluations: int = MAX_EVALUATIONS) -> PullInResult:
     """Tip deflection of the strip against the magnet gap, with pull-in, contact and release.
 
     ``lying``: where the tip-only contact cannot be followed, trace the strip lying on the
@@ -1463,6 +1548,37 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     model = MagnetElastica(strip, material, magnet, M_of_H, n_segments=n_segments,
                            n_cross=n_cross, demag_factor=demag_factor,
                            gravity_m_s2=gravity_m_s2, follower=follower, plate=plate)
+    budget = model.budget = EvaluationBudget(max_evaluations)
+    try:
+        return _trace_sweep(model, strip, gaps, far_gap_m, ds_max, lying, round_trip)
+    except PathBudgetError as exc:
+        raise _budget_error(model, budget) from exc
+
+
+def _budget_error(model, budget):
+    """The :class:`PathBudgetError` of a sweep whose budget ran out, naming its last converged
+    state (``last_converged``: the loop it was in, the gap, the shape, the contact forces)."""
+    last = {"what": "the last converged state before the evaluation budget ran out",
+            "evaluations": budget.n, "max_evaluations": budget.max}
+    if budget.last is not None:
+        stage, u, p = budget.last
+        th = u[:model.N]
+        last.update(stage=stage, gap_m=p, tip_deflection_m=model.tip_deflection_m(th),
+                    tip_gap_m=model.tip_gap_m(th, p),
+                    contact_force_N=float(np.sum(u[model.N:])),
+                    theta_rad=np.concatenate([[0.0], th]), s_m=model.s.copy())
+        where = (f"; the last converged state: gap {p:.6g} m, tip deflection "
+                 f"{last['tip_deflection_m']:.6g} m ({stage})")
+    else:
+        where = "; no converged state yet"
+    return PathBudgetError(f"path following stopped: the evaluation budget ({budget.max} "
+                           f"evaluations of the strip) ran out in {budget.stage or 'the path'}"
+                           + where, last)
+
+
+def _trace_sweep(model, strip, gaps, far_gap_m, ds_max, lying, round_trip):
+    """The body of :func:`pullin_sweep` (the model built, the gaps checked)."""
+    budget = model.budget
     L = strip.length_m
     g_max, g_min = float(gaps.max()), float(gaps.min())
     # the start: a gap where the strip is nearly straight
@@ -1483,11 +1599,17 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     rs_free = model.EI / L
     tol_gap = 1e-9 * L
     common = dict(ds=0.02, ds_max=ds_max, u_scale=math.sqrt(model.N), p_scale=L,
-                  ftol=1e-9, xtol=1e-10)
+                  ftol=1e-9, xtol=1e-10, budget=budget)
+    budget.stage = "the free branch from the far gap"
     free = trace_branch(model.system_free, model.linear_guess(g_far), g_far, direction=-1.0,
                         p_min=g_min, p_max=4.0 * g_far, r_scale=rs_free,
                         events=[("touch", lambda u, p: model.tip_gap_m(u, p))], **common)
-    if free.event is not None and free.event.name == "p_max":
+    if free.event is None:
+        raise PathFollowingError(f"the free branch did not reach the smallest gap or the face "
+                                 f"within its steps ({len(free.p)} points)",
+                                 {"what": "the last converged state", "stage": budget.stage,
+                                  "gap_m": float(free.p[-1]), "theta_rad": free.u[-1]})
+    if free.event.name == "p_max":
         raise PathFollowingError("the free branch left the range of gaps without touching the "
                                  "magnet", {"gap_m": float(free.p[-1]), "theta_rad": free.u[-1]})
     for k in range(len(free.p)):
@@ -1513,6 +1635,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
         # pull-in gap
         ls_t = max(model.EI / L**2, abs(model.magnetic_force_N(free.event.u, g_touch)[1]))
         us_t = np.concatenate([np.full(model.N, math.sqrt(model.N)), [ls_t]])
+        budget.stage = "the tip-only contact branch from the touch point, closing"
         try:
             contact_top = trace_branch(
                 model.system_contact, np.concatenate([free.event.u, [0.0]]), g_touch,
@@ -1521,6 +1644,8 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                 stability=lambda u, p, J: (u[-1] >= -1e-9 * ls_t
                                            and model.stable_contact(u, p, J)),
                 stop_at_fold=True, max_steps=300, **{**common, "u_scale": us_t})
+        except PathBudgetError:
+            raise
         except PathFollowingError:
             contact_top = None
         if contact_top is not None and len(contact_top.p) > 1 and contact_top.stable[1] \
@@ -1530,6 +1655,14 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
         if contact_top is not None and contact_top.event is not None \
                 and contact_top.event.name == "p_min":
             g_lost = math.nan                       # the whole range is covered
+    # a second node of the strip reached the face on the tip-only branch: the tip-only
+    # contact from a small gap cannot hold either; with the strip lying on the face modelled,
+    # that takes over from the smallest gap (below), without the tip-only trials
+    second_node = (lying and contact_top is not None and contact_top.event is not None
+                   and contact_top.event.name == "other_contact")
+    if second_node and np.isfinite(g_lost) and g_min < g_lost - tol_gap:
+        contact_end_gap = float(contact_top.event.p)
+        g_lost = math.nan
     if np.isfinite(g_lost) and g_min < g_lost - tol_gap:
         ls = max(model.EI / L**2, abs(model.magnetic_force_N(np.zeros(model.N), g_min)[1]))
         us = np.concatenate([np.full(model.N, math.sqrt(model.N)), [ls]])
@@ -1539,9 +1672,12 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
             g_start = g_min + frac * (g_lost - g_min)
             d = g_start
             th0 = -(3 * d / (2 * L**3)) * (2 * L * s_n - s_n**2)
+            budget.stage = "the tip-only contact at a small gap (a start)"
             try:
                 u_try = _solve_damped(model.system_contact, np.concatenate([th0, [0.1 * ls]]),
                                       g_start, rs_contact)
+            except PathBudgetError:
+                raise
             except PathFollowingError:
                 continue
             if u_try[-1] > 0 and model.other_clearance_m(u_try[:-1], g_start) > 0:
@@ -1550,6 +1686,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
         if u_start is not None:
             if frac > 0:
                 contact_end_gap = g_start
+            budget.stage = "the tip-only contact branch from a small gap, opening"
             try:
                 contact = trace_branch(
                     model.system_contact, u_start, g_start, direction=1.0, p_max=g_far,
@@ -1559,6 +1696,8 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                     stability=lambda u, p, J: (u[-1] >= -1e-9 * ls
                                                and model.stable_contact(u, p, J)),
                     stop_at_fold=True, max_steps=400, **{**common, "u_scale": us})
+            except PathBudgetError:
+                raise
             except PathFollowingError:
                 # the tip-only contact branch cannot be followed (e.g. an event at a kink of
                 # the contact state): the strip lying on the face below takes over from the
@@ -1583,20 +1722,28 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     # folded), the distributed contact with an active set, from deep contact at the smallest
     # gap opened until the strip lets go (contact_release); it replaces the tip-only branch
     # from the smallest gap and gives the release gap
-    lying = None
+    lying_rel = None
     if lying and (np.isfinite(contact_end_gap) or release_by == "fold of the contact branch"):
         g_deep = max(g_min, LYING_MIN_GAP_REL * strip.thickness_m)
+        budget.stage = "the strip lying on the face, opened from deep contact"
         try:
-            lying = contact_release(model, g_deep, g_far, ds_max=ds_max)
+            # opened up to the largest gap of the sweep (the sweep goes no further)
+            lying_rel = contact_release(model, g_deep, g_max, ds_max=ds_max)
+        except PathBudgetError:
+            raise
         except PathFollowingError:
-            lying = None                      # keep the tip-only result (contact_end_gap says)
-        if lying is not None and lying.release_by:
+            lying_rel = None                  # keep the tip-only result (contact_end_gap says)
+        if lying_rel is not None and not lying_rel.release_by \
+                and lying_rel.pieces[-1].gap_m[-1] >= g_max - tol_gap:
+            # still on the face at the largest gap: no release within the sweep
+            lying_rel = dataclasses.replace(lying_rel, release_by=ON_FACE_AT_END)
+        if lying_rel is not None and lying_rel.release_by:
             contact = None
-            release_gap, release_by = lying.release_gap_m, lying.release_by
-            release_defl = lying.release_tip_deflection_m
+            release_gap, release_by = lying_rel.release_gap_m, lying_rel.release_by
+            release_defl = lying_rel.release_tip_deflection_m
             contact_end_gap = g_deep if g_deep > g_min + tol_gap else math.nan
         else:
-            lying = None
+            lying_rel = None
 
     # the path: the free branch, then the contact branch
     th_rows, gap_l, lam_l, br_l, st_l, part_l = [], [], [], [], [], []
@@ -1622,9 +1769,9 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
             act_l.append("tip")
     # the pieces of the strip on the face, in the order of the path (closing the gap: the
     # piece the strip leaves last first, deep contact last)
-    for i_piece, pc in enumerate(lying.pieces[::-1] if lying is not None else ()):
+    for i_piece, pc in enumerate(lying_rel.pieces[::-1] if lying_rel is not None else ()):
         for k in range(len(pc.gap_m) - 1, -1, -1):
-            part_l.append(3 + i_piece)
+            part_l.append(4 + i_piece)
             th_rows.append(np.asarray(pc.theta_rad[k]))
             gap_l.append(float(pc.gap_m[k]))
             lam_l.append(float(pc.contact_force_N[k]))
@@ -1697,6 +1844,65 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
     else:
         pull_in_gap = pull_in_defl = math.nan
         snap = False
+    budget.stage = "the states at the sweep's gaps"
+
+    def state_on(i, g):
+        """The equilibrium at the gap g on the stable segment i: (theta, total contact force,
+        nodes in contact, contact length)."""
+        a, b = segs[i]
+        guess = _interp_branch(gap_arr[a:b + 1], np.column_stack([th[a:b + 1],
+                                                                  lam_arr[a:b + 1]]), g)
+        if br_arr[a] == "free":
+            return _solve_at(model.system_free, guess[:-1], g, 1e-9, rs_free), 0.0, 0, 0.0
+        if act_l[a] == "tip":
+            u = _solve_at(model.system_contact, guess, g, 1e-9, rs_contact)
+            return u[:-1], float(u[-1]), 1, 0.0
+        j = a + int(np.argmin(np.abs(gap_arr[a:b + 1] - g)))
+        try:
+            u, f_nodes, act = solve_lying(model, g, guess[:-1], act_l[j])
+        except PathBudgetError:
+            raise
+        except PathFollowingError:
+            # the interpolated guess mixes two active sets: from the nearest traced state
+            u, f_nodes, act = solve_lying(model, g, th[j], act_l[j])
+        cl = float(model.s[max(act)] - model.s[min(act)]) if act else 0.0
+        return u, float(np.sum(f_nodes)), len(act), cl
+
+    # where the strip lands at pull-in: the stable states at the pull-in gap on the traced
+    # path other than the small-deflection one; if one, that one; if several, the nearest in
+    # the direction of the snap: the smallest tip deflection beyond the fold's (the strip
+    # moves from the fold towards the magnet and stops at the first stable state it meets;
+    # for the case of issue 35's CLI check, relax_on_face's gradient flow from the fold lands
+    # in that same state, the free strip with its tip beside the magnet's rim -- the flow
+    # itself costs ~1500 evaluations, so it is not run here)
+    landing_seg = None
+    landing = {"kind": "", "tip_deflection_m": math.nan, "tip_gap_m": math.nan,
+               "n_contact": -1, "contact_force_N": math.nan}
+    if snap and first_fold is not None:
+        cands = [i for i in range(1, len(segs)) if contains(i, pull_in_gap)]
+        if len(cands) == 1:
+            landing_seg = cands[0]
+        elif cands:
+            budget.stage = "the states at the pull-in gap"
+            near = []
+            for i in cands:
+                a, b = segs[i]
+                o = np.argsort(gap_arr[a:b + 1])
+                near.append((float(np.interp(pull_in_gap, gap_arr[a:b + 1][o],
+                                             defl[a:b + 1][o])), i))
+            beyond = [x for x in near if x[0] > pull_in_defl]
+            landing_seg = min(beyond or near)[1]
+        if landing_seg is not None:
+            budget.stage = "the state the strip lands in at pull-in"
+            u_l, f_l, nc_l_, _ = state_on(landing_seg, pull_in_gap)
+            landing = {"kind": ("free" if nc_l_ == 0 else "tip contact"
+                                if act_l[segs[landing_seg][0]] == "tip" or
+                                tuple(act_l[segs[landing_seg][0]]) == (model.N,)
+                                else "lying on the face"),
+                       "tip_deflection_m": model.tip_deflection_m(u_l),
+                       "tip_gap_m": model.tip_gap_m(u_l, pull_in_gap),
+                       "n_contact": int(nc_l_), "contact_force_N": float(f_l)}
+
     # snap-back: from contact, opening the gap, the gap at which the state returns to the
     # first segment
     snap_back = math.nan
@@ -1724,6 +1930,8 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
         closing = g < g_prev
         if seg is not None and not contains(seg, g):
             cands = range(seg + 1, len(segs)) if closing else range(seg - 1, -1, -1)
+            if seg == 0 and closing and landing_seg is not None:
+                cands = [landing_seg] + [j for j in cands if j != landing_seg]
             seg = next((j for j in cands if contains(j, g)), None)
         elif seg is None and not closing:
             # from beyond the modelled contact (the strip lying on the face), opening the gap
@@ -1737,23 +1945,8 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
             sw_nc.append(-1)
             sw_cl.append(math.nan)
             continue
-        a, b = segs[seg]
-        guess = _interp_branch(gap_arr[a:b + 1], np.column_stack([th[a:b + 1],
-                                                                  lam_arr[a:b + 1]]), g)
-        nc, cl = 0, 0.0
-        if br_arr[a] == "free":
-            u = _solve_at(model.system_free, guess[:-1], g, 1e-9, rs_free)
-            lam = 0.0
-        elif act_l[a] == "tip":
-            u = _solve_at(model.system_contact, guess, g, 1e-9, rs_contact)
-            u, lam = u[:-1], float(u[-1])
-            nc = 1
-        else:
-            j = a + int(np.argmin(np.abs(gap_arr[a:b + 1] - g)))
-            u, f_nodes, act = solve_lying(model, g, guess[:-1], act_l[j])
-            lam = float(np.sum(f_nodes))
-            nc = len(act)
-            cl = float(model.s[max(act)] - model.s[min(act)]) if act else 0.0
+        u, lam, nc, cl = state_on(seg, g)
+        a = segs[seg][0]
         sw_nc.append(nc)
         sw_cl.append(cl)
         sw_def.append(model.tip_deflection_m(u))
@@ -1780,7 +1973,13 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                         contact_end_gap_m=contact_end_gap,
                         n_segments=model.N, n_cross=model.n_cross,
                         demag_factor=model.demag, follower=model.follower,
-                        contact_jumps_m=tuple(lying.jumps_m) if lying is not None else ())
+                        contact_jumps_m=tuple(lying_rel.jumps_m) if lying_rel is not None else (),
+                        touch_gap_m=g_touch, pull_in_lands_on=landing["kind"],
+                        landing_tip_deflection_m=landing["tip_deflection_m"],
+                        landing_tip_gap_m=landing["tip_gap_m"],
+                        landing_n_contact=landing["n_contact"],
+                        landing_contact_force_N=landing["contact_force_N"],
+                        evaluations=budget.n)
 
 
 def interval_ends(E_Pa, M_of_H, E_estimate=None, M_bounds=None) -> dict:
