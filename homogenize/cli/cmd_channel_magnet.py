@@ -103,6 +103,9 @@ def wire_channel_command(channel_parser) -> None:
 
     def func(args):
         if getattr(args, "magnet", None) is not None:
+            from homogenize.cli.cmd_macro import _check_channel_size, _fill_matrix
+            _fill_matrix(args)                 # as _channel does before the dispatch
+            _check_channel_size(args)
             return run_channel_magnet(args)
         return base(args)
     channel_parser.set_defaults(func=func)
@@ -166,7 +169,8 @@ def run_channel_magnet(args) -> int:
     dp = args.pressure_drop_Pa or 0.0
     r = channel_magnet_sweep(geo, ceiling, magnet, M_of_H, gaps, pressure_drop_Pa=dp,
                              outlet_pressure_Pa=args.outlet_pressure_Pa, demag_factor=N,
-                             n_x=args.sections)
+                             n_x=args.sections, self_weight_N_m3=mat.density_kg_m3
+                             * (getattr(args, "gravity_m_s2", 0.0) or 0.0))
     print(f"magnet: {args.magnet} {tuple(args.magnet_size)} m, B_r {args.remanence_T:g} T, axis "
           f"at x = {magnet.position_m[0]:.4g} m, y = {magnet.position_m[1]:.4g} m under the "
           f"{geo.a_m:g} x {geo.d_m:g} m channel; M_eff(H) from {law}, phi = {phi:g}; block "

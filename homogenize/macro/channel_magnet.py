@@ -71,7 +71,9 @@ its equilibrium before it touches the glass (snap-down).
 
 *Contact.* A column touches the glass when its gap ``h_j = b - q phi_j + p u_j`` reaches 0 (the
 CeilingModel's columns ``j``), i.e. at ``q_c(p) = min_j (b + p u_j) / phi_j``, on the most
-compliant column: as :func:`~homogenize.macro.flow.closure`. Beyond the first contact the
+compliant column: as :func:`~homogenize.macro.flow.closure` (with one mode the contact column
+is the mode's most compliant one whatever the force's distribution across the width; a magnet
+off the channel's centre line shifts the real contact towards it). Beyond the first contact the
 linear ceiling model does not hold: states below the closure (or pull-in) gap are reported
 as ``closed`` without numbers.
 
@@ -95,7 +97,7 @@ The channel's event is the section's event with the LARGEST gap (the first met a
 approaches): ``closure_gap_m``, with where it happens (the sections, ``x``, and the column,
 ``y``). For a centred cylinder the sections next to the axis need not be the first: near the
 face ``|grad |B||`` peaks off the axis, under the rim (the seed's channel with the plate
-ceiling: at ``x = d/2 +- 2.5 mm``).
+ceiling, 21 sections: at ``x = d/2 +- 3 mm``, 1.627 mm against 1.484 mm on the axis).
 
 The liquid: with no flow the channel's pressure is ``outlet_pressure_Pa`` everywhere (the
 first touch is computed there, the sweep's deflections too). With ``pressure_drop_Pa`` the
@@ -161,7 +163,7 @@ REALISTIC_CASE = {
     "closure_gap_m": 2.244e-3,                 # at x = 5 mm, y = 2.5 mm (the centre line)
     "closure_gap_m_nc4": 2.263e-3,             # the FEM compliance at nc 4 (+0.8 %)
     "closure_gap_m_dead_load": 2.207e-3,       # the field of the undeformed ceiling
-    "closure_gap_m_plate": 1.611e-3,           # the (stiffer) clamped-plate ceiling, at x = d/2 +- 2.5 mm
+    "closure_gap_m_plate": 1.627e-3,           # the (stiffer) clamped-plate ceiling, x = d/2 +- 3 mm
     "hold_gap_m_100Pa": 1.951e-3,              # at x = 3 and 7 mm (nc 4: 1.965e-3)
     "uniform_force_closure_N_m3": 1.096e6,     # closure() of the same CeilingModel, for scale
 }
@@ -241,13 +243,15 @@ class ChannelMagnet:
         towards the glass at the points and its derivative along z
     gap_scale_m : float -- length scale of the gap for the continuation (default: the magnet's
         smallest dimension, or ``d`` with ``body_force``)
+    self_weight_N_m3 : float >= 0 -- a uniform extra force towards the glass, ``rho g``
+        [N/m^3] (uniform: exact in the one-mode projection)
     """
 
     def __init__(self, geometry: ChannelGeometry, ceiling: CeilingModel,
                  magnet: PermanentMagnet | None, M_of_H=None, *,
                  demag_factor: float | None = None, n_x: int = 21, n_y: int = 12,
                  n_z: int = 3, body_force: Callable | None = None,
-                 gap_scale_m: float | None = None):
+                 gap_scale_m: float | None = None, self_weight_N_m3: float = 0.0):
         if not isinstance(geometry, ChannelGeometry):
             raise InputError(f"geometry must be a ChannelGeometry, got "
                              f"{type(geometry).__name__}")
@@ -269,6 +273,8 @@ class ChannelMagnet:
             raise InputError("body_force must be a callable (points_m, gap_m) -> (f, df/dz)")
         self.geometry, self.ceiling, self.magnet, self.M_of_H = geometry, ceiling, magnet, M_of_H
         self.body_force = body_force
+        self.self_weight = check_positive("self_weight_N_m3", self_weight_N_m3, "N/m^3",
+                                          allow_zero=True)
         self.demag = (channel_demag_factor(geometry) if demag_factor is None
                       else check_range("demag_factor", demag_factor, 0.0, 1.0, ""))
         self.a, self.b, self.c, self.d = a, b, c, d
@@ -344,7 +350,7 @@ class ChannelMagnet:
         shape = pts.shape[:3]
         fbar = f.reshape(shape) @ self.w_z                 # (n_x, n_y) column means
         dbar = dfdz.reshape(shape) @ self.w_z
-        F = fbar @ self.wphi
+        F = (fbar + self.self_weight) @ self.wphi
         dF_dq = -(dbar * self.phi_q) @ self.wphi if follower else np.zeros(F.size)
         dF_dg = dbar @ self.wphi                           # magnet down = points up
         return F, dF_dq, dF_dg
@@ -472,14 +478,20 @@ class ChannelMagnetResult:
 
 
 def _far_gap(model, g_start, q_c):
+    """From ``g_start`` up (x 1.5) to a gap where the magnet's dead-load deflection is below
+    ``FAR_DEFLECTION_FRACTION`` of what is left to contact after the self-weight's."""
+    q_w = model.self_weight * model.d_max
+    if q_w >= q_c:
+        raise InputError(f"self_weight_N_m3 = {model.self_weight:g} N/m^3 alone shuts the "
+                         f"channel (deflection {q_w:.4g} m >= {q_c:.4g} m)")
     g = max(float(g_start), 1e-3 * model.gap_scale)
     for _ in range(80):
-        if np.max(model.dead_load_deflection_m(g)) < FAR_DEFLECTION_FRACTION * q_c:
+        if np.max(model.dead_load_deflection_m(g)) - q_w < FAR_DEFLECTION_FRACTION * (q_c - q_w):
             return g
         g *= 1.5
     raise InputError(f"the magnet deflects the ceiling by more than "
-                     f"{FAR_DEFLECTION_FRACTION:g} of the channel height even at a gap of "
-                     f"{g:.3g} m: no far start for the path")
+                     f"{FAR_DEFLECTION_FRACTION:g} of the way to the glass even at a gap of "
+                     f"{g:.3g} m: no far start for the path (give far_gap_m)")
 
 
 def _trace_section(model, i, pressure_Pa, g_far, g_end, ds_max):
@@ -525,6 +537,7 @@ def channel_magnet_sweep(geometry: ChannelGeometry, ceiling: CeilingModel,
                          demag_factor: float | None = None, n_x: int = 21, n_y: int = 12,
                          n_z: int = 3, far_gap_m: float | None = None,
                          body_force: Callable | None = None, gap_scale_m: float | None = None,
+                         self_weight_N_m3: float = 0.0,
                          ds_max: float = 0.1) -> ChannelMagnetResult:
     """The ceiling's deflection against the magnet gap, the closure / pull-in gap and the gap
     that holds a pressure drop (module docstring).
@@ -540,7 +553,8 @@ def channel_magnet_sweep(geometry: ChannelGeometry, ceiling: CeilingModel,
         (which may be 0)
     pressure_drop_Pa : float >= 0 -- the drop the shut channel must hold (``hold_gap_m``)
     outlet_pressure_Pa : float -- gauge pressure of the liquid at rest / at the outlet [Pa]
-    demag_factor, n_x, n_y, n_z, body_force, gap_scale_m : see :class:`ChannelMagnet`
+    demag_factor, n_x, n_y, n_z, body_force, gap_scale_m, self_weight_N_m3 : see
+        :class:`ChannelMagnet`
     far_gap_m : the path's start (default: from the largest gap of the sweep up, until the
         dead-load deflection is below ``FAR_DEFLECTION_FRACTION`` of the contact deflection)
     ds_max : largest arc-length step (scaled: q / q_c and gap / gap scale)
@@ -562,7 +576,7 @@ def channel_magnet_sweep(geometry: ChannelGeometry, ceiling: CeilingModel,
     p_in = p_out + dp
     model = ChannelMagnet(geometry, ceiling, magnet, M_of_H, demag_factor=demag_factor,
                           n_x=n_x, n_y=n_y, n_z=n_z, body_force=body_force,
-                          gap_scale_m=gap_scale_m)
+                          gap_scale_m=gap_scale_m, self_weight_N_m3=self_weight_N_m3)
     q_c, _ = model.contact_deflection_m(p_out)
     model.contact_deflection_m(p_in)                     # refuses a shut channel at p_in
     g_max, g_min = float(gaps.max()), float(gaps.min())

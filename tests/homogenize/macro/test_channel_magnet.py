@@ -240,6 +240,48 @@ def test_realistic_sweep_closes_by_contact(sweep):
     assert d["event"] == "contact" and isinstance(d["sweep_state"], list)
 
 
+def test_self_weight_adds_as_a_uniform_force():
+    """rho g on top of the uniform force: closure where f(g) + rho g = f_close."""
+    ce = _lopsided()
+    F0, lam, w = 3e6, 2e-3, 2e5
+
+    def force(pts, g):
+        return np.full(len(pts), F0 * math.exp(-g / lam)), np.zeros(len(pts))
+
+    r = channel_magnet_sweep(GEO, ce, None, gap_sweep_m=[6e-3, 0.0], body_force=force, n_x=1,
+                             gap_scale_m=lam, self_weight_N_m3=w)
+    f_close = closure(ce, GEO.d_m).body_force_N_m3
+    assert math.isclose(r.closure_gap_m, lam * math.log(F0 / (f_close - w)), rel_tol=1e-8)
+
+
+def test_cuboid_and_an_opening_sweep(plate):
+    """A cuboid magnet off the middle of the channel (axis at x = 7, y = 2 mm); the sweep run
+    opening gives the same states and deflections as closing (no hysteresis without a snap)."""
+    cub = PermanentMagnet("cuboid", (10e-3, 10e-3, 5e-3), 1.3)
+    mag = place_channel_magnet(cub, GEO, 0.0, x_axis_m=7e-3, y_axis_m=2e-3)
+    kw = dict(n_x=5, n_y=6, n_z=2)
+    M = soft_sphere_magnetization(PHI)
+    down = channel_magnet_sweep(GEO, plate, mag, M, [4e-3, 2e-3, 0.5e-3], **kw)
+    up = channel_magnet_sweep(GEO, plate, mag, M, [0.5e-3, 2e-3, 4e-3], **kw)
+    assert down.event == up.event == "contact"
+    assert down.closure_gap_m == pytest.approx(up.closure_gap_m, rel=1e-9)
+    assert list(down.sweep_state) == list(up.sweep_state)[::-1] == ["open", "open", "closed"]
+    assert np.allclose(down.sweep_max_deflection_m[:2], up.sweep_max_deflection_m[::-1][:2],
+                       rtol=1e-9)
+    # a flat magnet's face pulls hardest under its rim (x = 2 mm), little over its middle
+    assert down.x_event_m == (2.5e-3,)
+    assert np.isnan(down.section_event_gap_m[2])         # x = 5 mm: open down to 0.5 mm
+
+
+def test_newton_failure_is_a_convergence_error_with_history(plate):
+    from micro.common.validate import ConvergenceError
+    m = ChannelMagnet(GEO, plate, place_channel_magnet(CYL, GEO, 0.0),
+                      soft_sphere_magnetization(PHI), n_x=2, n_y=4, n_z=1)
+    with pytest.raises(ConvergenceError) as exc:
+        m.solve_at(3e-3, 0.0, max_it=1)
+    assert len(exc.value.residual_history) == 1 and exc.value.residual_history[0] > 0
+
+
 # ------------------------------------------------------------------ refused input
 @pytest.mark.parametrize("sweep_, words", [
     ([3e-3, -1e-3], "gap_sweep_m: a gap below zero"),
@@ -315,6 +357,13 @@ def test_cli_bad_input(cli, extra, words, tmp_path, capsys):
     assert cli(["channel", *MAGNET, *extra, "--json", str(out)]) == 2
     assert words in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_cli_close_alone(cli, capsys):
+    """--close without a sweep: from the magnet's size down to contact."""
+    assert cli(["channel", *MAGNET, "--close", "--b-m", "30e-6"]) == 0
+    text = capsys.readouterr().out
+    assert "closure gap" in text and "<- closure (contact)" in text
 
 
 def test_cli_magnet_options_need_the_magnet(cli, capsys):
