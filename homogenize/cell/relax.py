@@ -70,8 +70,8 @@ from micro.common.validate import (ConvergenceError, InputError, check_choice, c
                              check_range)
 from scipy.constants import mu_0 as MU0
 
-from micro.dipoles import solve as solve_dipoles
-from micro.magnetization import DEFAULT_LAW
+from micro.dipoles import _law_jacobian, solve as solve_dipoles
+from micro.magnetization import DEFAULT_LAW, MagnetizationLaw, get_law
 from micro.materials import PDMS, ElasticMaterial, elastic
 from micro.nearfield import MU_MAX, chord_permeability, near_field_correction_N
 from micro.box import PeriodicBox
@@ -89,6 +89,13 @@ __all__ = ["relax", "RelaxResult", "equilibrium", "Equilibrium", "fem_displaceab
 
 BOUNDARIES = ("free", "strain")
 ELASTIC_MODELS = ("green", "fem")
+#: the Jacobian's magnetic stiffness in :func:`equilibrium` (``stiffness``)
+STIFFNESS_MODELS = ("auto", "analytic", "differences")
+#: smallest pseudo-time step of :func:`equilibrium` (in units of the relaxation time of the
+#: overdamped dynamics du/dt = M F - u)
+DT_MIN = 1e-4
+#: a pseudo-time step that raises the residual by more than this factor is rejected
+REJECT_RISE = 2.0
 #: the cell FEM solvers of :func:`relax` (``cell_solver``; homogenize.cell.problem.SOLVERS)
 CELL_SOLVERS = SOLVERS
 
@@ -282,6 +289,108 @@ def _dipole_pair_stiffness(x, moments, a, box, near=2.0):
     return K
 
 
+#: Image sums of the analytic magnetic stiffness run over lattice vectors up to this many box
+#: edges (the pair terms decay as r^-4 and r^-5; the dipole tensor's conditionally convergent
+#: tail is taken in spherical order with the tin-foil correction): the stiffness agrees with
+#: differences of the Ewald-summed self-consistent forces to ~1e-3 of its largest entry.
+STIFFNESS_IMAGE_CUTOFF_BOXES = 2.0
+
+
+def _lattice_vectors(L, rc):
+    k = int(math.ceil(rc / L)) + 1
+    r = np.arange(-k, k + 1)
+    n = np.stack(np.meshgrid(r, r, r, indexing="ij"), -1).reshape(-1, 3) * L
+    return n[np.einsum("ij,ij->i", n, n) < (rc + math.sqrt(3.0) * L) ** 2]
+
+
+def magnetic_stiffness_analytic(rve, state, law=DEFAULT_LAW, law_params=None, *,
+                                demag_factor=None,
+                                cutoff_boxes: float = STIFFNESS_IMAGE_CUTOFF_BOXES) -> np.ndarray:
+    """Stiffness ``dF/dx`` (3N, 3N) [N/m] of the self-consistent periodic point-dipole forces
+    (:func:`micro.dipoles.solve`, uniform applied field) of the RVE at the magnetic ``state``
+    (solved at ``rve.centers_m``), by the implicit function theorem.
+
+    With ``H_i = H_app + sum_j T_ij m_j - N sum_j m_j / V`` (T: periodic dipole tensor),
+    ``m_i = m(H_i)`` (differential susceptibility ``D_i = dm/dH``, :func:`micro.dipoles.
+    _law_jacobian`) and ``F_i = mu0 sum_j (m_i . grad) T m_j``::
+
+        dm/dx = (I - D T_N)^-1 D dH/dx|_m,     dF/dx = dF/dx|_m + dF/dm dm/dx,
+
+    all terms in closed form from the pair kernel, summed over lattice images up to
+    ``cutoff_boxes`` box edges (spherical order; tin-foil ``I/(3V)`` and demagnetizing
+    ``-N I/V`` added to every block of T). One dense (3N, 3N) solve: for the small RVEs of
+    :func:`relax` it costs less than one dipole solve, against 3 dipole solves per particle
+    for finite differences. The image cutoff makes it an approximation to ~1e-3 (tested
+    against differences of the Ewald-summed forces); it only steers the Newton iteration.
+    """
+    x = np.asarray(rve.centers_m, dtype=float)
+    N = x.shape[0]
+    L = float(rve.box_m)
+    V = L ** 3
+    m = np.asarray(state.moments_Am2, dtype=float)
+    law_obj = law if isinstance(law, MagnetizationLaw) else get_law(law, **dict(law_params or {}))
+    if getattr(law_obj, "bind", None) is not None:
+        law_obj = law_obj.bind(rve)
+    vol = 4.0 / 3.0 * math.pi * np.asarray(rve.radii_m, dtype=float) ** 3
+    D = _law_jacobian(law_obj, np.asarray(state.H_local_A_m, dtype=float),
+                      np.asarray(rve.m_sat_Am2, dtype=float), vol)
+    rc = float(cutoff_boxes) * L
+    imgs = _lattice_vectors(L, rc)
+    I3 = np.eye(3)
+    T = np.zeros((N, N, 3, 3))
+    Hx = np.zeros((N, N, 3, 3))          # dH_i/dx_k at frozen moments
+    Fx = np.zeros((N, N, 3, 3))          # dF_i/dx_k at frozen moments
+    Fm = np.zeros((N, N, 3, 3))          # dF_i/dm_k
+    for i in range(N):
+        d = (x[i] - x)[:, None, :] + imgs[None, :, :]           # x_i - x_j + n L
+        r2 = np.einsum("jnk,jnk->jn", d, d)
+        jj, nn = np.nonzero((r2 > 0) & (r2 < rc * rc))
+        dv = d[jj, nn]
+        r = np.sqrt(r2[jj, nn])
+        e = dv / r[:, None]
+        ee = e[:, :, None] * e[:, None, :]
+        T_p = (3.0 * ee - I3) / (4.0 * math.pi * r[:, None, None] ** 3)
+
+        def grad_field(mv):
+            # d/dd of the field (3 (m.e) e - m) / (4 pi r^3) of dipole mv at d
+            me = np.einsum("pk,pk->p", mv, e)[:, None, None]
+            return 3.0 / (4.0 * math.pi * r[:, None, None] ** 4) * (
+                e[:, :, None] * mv[:, None, :] + mv[:, :, None] * e[:, None, :] + me * I3
+                - 5.0 * me * ee)
+
+        mj = m[jj]
+        mi = np.broadcast_to(m[i], mj.shape)
+        Aj, Ai = grad_field(mj), grad_field(mi)
+        # Hessian of mu0 mi . T(d) mj (the force on i is its gradient)
+        ae = np.einsum("pk,pk->p", mi, e)[:, None, None]
+        be = np.einsum("pk,pk->p", mj, e)[:, None, None]
+        ab = np.einsum("pk,pk->p", mi, mj)[:, None, None]
+
+        def o(u, v):
+            return u[:, :, None] * v[:, None, :]
+
+        Hs = (3.0 * (o(mi, mj) + o(mj, mi) + ab * I3) - 15.0 * ab * ee
+              - 15.0 * (be * (o(mi, e) + o(e, mi)) + ae * (o(mj, e) + o(e, mj)) + ae * be * I3)
+              + 105.0 * ae * be * ee) * (MU0 / (4.0 * math.pi * r[:, None, None] ** 5))
+        np.add.at(T[i], jj, T_p)
+        Hx[i, i] += Aj.sum(axis=0)
+        np.add.at(Hx[i], jj, -Aj)
+        Fx[i, i] += Hs.sum(axis=0)
+        np.add.at(Fx[i], jj, -Hs)
+        Fm[i, i] += MU0 * Aj.sum(axis=0)
+        np.add.at(Fm[i], jj, MU0 * Ai)
+
+    def dense(A):
+        return A.transpose(0, 2, 1, 3).reshape(3 * N, 3 * N)
+
+    Tn = dense(T) + np.kron(np.ones((N, N)), I3) * (1.0 / 3.0 - float(demag_factor or 0.0)) / V
+    Dm = np.zeros((3 * N, 3 * N))
+    for i in range(N):
+        Dm[3 * i:3 * i + 3, 3 * i:3 * i + 3] = D[i]
+    dmdx = np.linalg.solve(np.eye(3 * N) - Dm @ Tn, Dm @ dense(Hx))
+    return dense(Fx) + dense(Fm) @ dmdx
+
+
 # ------------------------------------------------------------------------------------------
 # Near-field magnetic forces beyond point dipoles
 # ------------------------------------------------------------------------------------------
@@ -356,6 +465,27 @@ def _near_field_forces(x, a, box, state, gap_floor_m, mu_max=MU_MAX, tol=1e-6):
     return F, pairs_out
 
 
+def _near_field_stiffness(x, a, box, state, gap_floor_m, mu_max, rel_step=1e-4):
+    """Stiffness (3N, 3N) [N/m] of the near-field corrections (:func:`_near_field_forces`) at
+    frozen moments and local fields, by central differences of the positions of the particles
+    in near-field pairs (no dipole solve; zero without such pairs). Jacobian only."""
+    N = a.size
+    K = np.zeros((3 * N, 3 * N))
+    g2 = NEAR_FIELD_GAPS[1] * float(a.mean())
+    i, j, _, _, _ = _pairs(x, a, box, g2)
+    if i.size == 0:
+        return K
+    h = rel_step * float(a.mean())
+    for p in np.unique(np.concatenate([i, j])):
+        for c in range(3):
+            dx = np.zeros((N, 3))
+            dx[p, c] = h
+            fp = _near_field_forces(x + dx, a, box, state, gap_floor_m, mu_max)[0]
+            fm = _near_field_forces(x - dx, a, box, state, gap_floor_m, mu_max)[0]
+            K[:, 3 * p + c] = ((fp - fm) / (2.0 * h)).ravel()
+    return K
+
+
 # ------------------------------------------------------------------------------------------
 # Equilibrium at one field
 # ------------------------------------------------------------------------------------------
@@ -403,7 +533,8 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
                 u0_m=None, tol=1e-6, max_iter=60, demag_factor=None, accuracy=1e-6,
                 magnetic_tol=1e-10, matrix: ElasticMaterial = elastic(PDMS), fd_gap=0.25,
                 max_fd=12, near_field: bool = False,
-                near_field_mu_max: float = MU_MAX) -> Equilibrium:
+                near_field_mu_max: float = MU_MAX, stiffness: str = "auto",
+                trust_dt: bool = True, reject_rise: bool = True) -> Equilibrium:
     """Solve ``u = M F(X + u)`` at one applied field (see the module docstring).
 
     Parameters
@@ -422,6 +553,18 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
     near_field : bool -- add the near-field corrections beyond point dipoles of close pairs
         (:func:`_near_field_forces`, :mod:`micro.nearfield`) to the magnetic forces
     near_field_mu_max : cap of the chord relative permeability in the near-field model
+    stiffness : {"auto", "analytic", "differences"} -- the Jacobian's magnetic stiffness:
+        ``"analytic"`` (= ``"auto"``): :func:`magnetic_stiffness_analytic` (implicit function
+        theorem on the self-consistent moments, no dipole solve, every iteration), plus the
+        near-field corrections' stiffness at frozen moments and fields by central differences
+        (:func:`_near_field_stiffness`); or ``"differences"``: differences of the full forces
+        for at most ``max_fd`` close particles (``fd_gap``; refreshed every 5 iterations; the
+        former default: it misses the pairs beyond ``max_fd``, so it converges linearly at
+        best on dense RVEs)
+    trust_dt, reject_rise : the safeguards of the pseudo-transient iteration (default on):
+        a step the trust region would cut below half is re-solved with a shorter pseudo-time
+        step, and a step that raises the residual by more than ``REJECT_RISE`` is rejected
+        and retried with dt / 4 (off: the former iteration, for comparison)
 
     Raises
     ------
@@ -439,6 +582,9 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
     if near_field:
         k_c = k_c * _near_field_stiffening(a_mean, g0, near_field_mu_max)
     law_params = dict(law_params or {})
+    check_choice("stiffness", stiffness, STIFFNESS_MODELS)
+    if stiffness == "auto":
+        stiffness = "analytic"
     last = {"m": None, "state": None, "Fc": None, "nf": None}
     nf_floor = g0               # near-field forces inside the contact layer: at its edge
 
@@ -468,6 +614,12 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
         respond strongly to the positions; frozen-moment pair stiffness for the others (each
         difference column costs one dipole solve)."""
         x = X + u
+        if stiffness == "analytic":
+            K = magnetic_stiffness_analytic(_rve_at(rve, x), st, law, law_params,
+                                            demag_factor=demag_factor)
+            if near_field:
+                K += _near_field_stiffness(x, a, L, st, nf_floor, near_field_mu_max)
+            return K
         K = _dipole_pair_stiffness(x, st.moments_Am2, a, L)
         ii, jj, _, _, _ = _pairs(x, a, L, fd_gap * a_mean)
         close = np.unique(np.concatenate([ii, jj]))[:max_fd]
@@ -508,37 +660,53 @@ def equilibrium(rve, B_T, M, *, law=DEFAULT_LAW, law_params=None, min_gap_m=None
     dt = 1.0e3       # start as Newton; the pseudo-time damping enters when the residual rises
     n_newton = 0
     Kmag, k_mag = None, 0
+    accepted = (last["state"], last["m"])
     ok = rn < tol
     while not ok and n_newton < max_iter:
         n_newton += 1
         u = y.reshape(N, 3) * a_mean
         x = X + u
         _, Kc, _ = _contact(x, a, L, g0, k_c, X)
-        if Kmag is None or (n_newton - k_mag) >= 5:
+        if Kmag is None or (n_newton - k_mag) >= (1 if stiffness == "analytic" else 5):
             Kmag, k_mag = magnetic_stiffness(u, last["state"]), n_newton
-        K = Kc + Kmag
-        J = (1.0 + 1.0 / dt) * np.eye(3 * N) - M @ K
-        dy = np.linalg.solve(J, r)
+        MK = M @ (Kc + Kmag)
         # trust region in physical terms: no pair closes more than half of its current gap
         # (plus a tenth of the contact layer) in one step, so a snap-through towards contact is
         # followed in steps instead of jumping into an overlap
         ii, jj, dd, rr, gg = _pairs(x, a, L, 0.5 * a_mean)
-        du = dy.reshape(N, 3) * a_mean
-        approach = -np.einsum("ij,ij->i", du[ii] - du[jj], dd / rr[:, None])
+        nn_ = dd / rr[:, None]
         allowed = 0.5 * np.maximum(gg, 0.0) + 0.1 * g0
-        scale = float(min(1.0, np.min(allowed / np.maximum(approach, 1e-300), initial=1.0)))
+        while True:
+            dy = np.linalg.solve((1.0 + 1.0 / dt) * np.eye(3 * N) - MK, r)
+            du = dy.reshape(N, 3) * a_mean
+            approach = -np.einsum("ij,ij->i", du[ii] - du[jj], nn_)
+            scale = float(min(1.0, np.min(allowed / np.maximum(approach, 1e-300),
+                                          initial=1.0)))
+            if not trust_dt or scale >= 0.5 or dt <= DT_MIN:
+                break
+            # a step the trust region would cut is no Newton step: shorten the pseudo-time
+            # step instead, so the iterate follows the overdamped dynamics (towards a stable
+            # equilibrium) rather than a truncated Newton direction (which can aim at an
+            # unstable one and cycle)
+            dt = max(dt * max(scale, 0.01), DT_MIN)
         y_new = y + scale * dy
         r_new = -resid(y_new)
         rn_new = float(np.abs(r_new).max())
-        if not np.isfinite(rn_new):
-            dt = max(dt / 4.0, 1e-4)           # rejected: shorter pseudo-time step
+        if not np.isfinite(rn_new) or (reject_rise and rn_new > REJECT_RISE * rn
+                                       and dt > DT_MIN):
+            # rejected (the residual rose steeply: the linear model failed, typically a
+            # contact switching on or off within the step): back to the last accepted state
+            # with a shorter pseudo-time step
+            dt = max(dt / 4.0, DT_MIN)
+            last["state"], last["m"] = accepted
             continue
         # switched evolution relaxation, asymmetric: grow dt with the residual ratio (at least
         # x2) when the residual falls, shrink it only by the square root of the ratio when it
         # rises (a snap-through or a damped two-cycle must not freeze dt)
         ratio = np.linalg.norm(r) / max(np.linalg.norm(r_new), 1e-300)
-        dt = min(dt * max(ratio, 2.0), 1e12) if ratio > 1.0 else max(dt * math.sqrt(ratio), 1e-4)
+        dt = min(dt * max(ratio, 2.0), 1e12) if ratio > 1.0 else max(dt * math.sqrt(ratio), DT_MIN)
         y, r, rn = y_new, r_new, rn_new
+        accepted = (last["state"], last["m"])
         ok = rn < tol
     u = y.reshape(N, 3) * a_mean
     if not ok:
@@ -721,6 +889,30 @@ def _substepped(rve, M, n, B_from, B_to, u_from, eq_kw, max_halvings):
 
 
 
+#: The particle relaxations of the last sweeps (:func:`relax`): the same RVE relaxed through
+#: the same field steps with the same solver settings and displaceability is the same path
+#: (a deterministic computation), e.g. the fine and the coarse cell FEM of a batch's two-grid
+#: estimate; the cell FEM is run again on every call.
+_SWEEP_CACHE: dict = {}
+_SWEEP_CACHE_SIZE = 2
+
+
+def _sweep_key(rve, M, n, B, eq_kw, max_halvings):
+    """A digest of everything the particle relaxation of :func:`relax` depends on, or None
+    (no caching) when an input does not pickle (e.g. a law object)."""
+    import hashlib
+    import pickle
+    if not isinstance(eq_kw.get("law"), str):
+        return None
+    try:
+        blob = pickle.dumps((rve, np.asarray(M), np.asarray(n), np.asarray(B),
+                             sorted((k, repr(v)) for k, v in eq_kw.items()), int(max_halvings)),
+                            protocol=4)
+    except Exception:                                   # noqa: BLE001 -- then no caching
+        return None
+    return hashlib.sha256(blob).hexdigest()
+
+
 def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
           matrix: ElasticMaterial = elastic(PDMS), boundary: str = "free", voxels: int | None = 32,
           near_field: bool = False, elastic_model: str = "green", direction=(0.0, 0.0, 1.0),
@@ -832,9 +1024,16 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
     eq_kw = dict(law=law, law_params=law_params, min_gap_m=min_gap_m, tol=tol,
                  max_iter=max_iter, demag_factor=demag_factor, accuracy=accuracy, matrix=matrix,
                  near_field=bool(near_field), near_field_mu_max=near_field_mu_max)
-    for Bk in B:
+    ckey = _sweep_key(rve, M, n, B, eq_kw, max_substep_halvings)
+    cached = _SWEEP_CACHE.get(ckey) if ckey is not None else None
+    path = []                      # (Equilibrium, sub-stepping summary) per field step
+    for k, Bk in enumerate(B):
         t0 = time.perf_counter()
-        eq, sub = _substepped(rve, M, n, B_done, float(Bk), u, eq_kw, max_substep_halvings)
+        if cached is not None:
+            eq, sub = cached[k]
+        else:
+            eq, sub = _substepped(rve, M, n, B_done, float(Bk), u, eq_kw, max_substep_halvings)
+            path.append((eq, sub))
         t["relax"] += time.perf_counter() - t0
         u = eq.displacement_m
         B_done = float(Bk)
@@ -915,6 +1114,10 @@ def relax(rve, B_steps_T, *, law=DEFAULT_LAW, law_params=None,
             print(f"B = {Bk:.3f} T: {sub['iterations']} Newton its in {sub['substeps']} "
                   f"sub-step(s), u_rms {rec['displacement_rms_m']:.3g} m, contacts "
                   f"{rec['n_contacts']}", flush=True)
+    if ckey is not None and cached is None:
+        while len(_SWEEP_CACHE) >= _SWEEP_CACHE_SIZE:
+            _SWEEP_CACHE.pop(next(iter(_SWEEP_CACHE)))
+        _SWEEP_CACHE[ckey] = tuple(path)
     t["total"] = time.perf_counter() - t_all
     settings = {"law": law if isinstance(law, str) else getattr(law, "name", str(law)),
                 "law_params": dict(law_params or {}), "matrix_E_Pa": matrix.E_Pa,
