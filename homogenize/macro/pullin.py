@@ -99,8 +99,39 @@ monotone control variable. The cantilever is traced as follows:
    fold leaves no contact state (a snap-off, "fold of the contact branch"). These segments
    replace the tip-only branch from the smallest gap in the path and the sweep.
 
+   When the tip-only branch from the touch point ends because a second node reaches the
+   face, the strip lying on the face takes over at once (no tip-only trials from a small
+   gap). The lying branch is opened up to the largest gap of the sweep (not beyond: the sweep
+   never goes there; "still on the face at the largest gap" if it holds that far). A node
+   that leaves the active set and must rejoin it at the same gap (or the reverse), or one
+   that joins with a zero force which then turns negative, ends the contact state: a fold of
+   the piecewise-smooth branch, where the strip snaps (without this the continuation ran on
+   along a branch where the face pulls the strip, to 18 mm and minutes).
+
+The state the strip lands in at pull-in (``pull_in_lands_on``): the stable segment of the
+traced path that holds the pull-in gap, other than the small-deflection one; of several, the
+one with the smallest tip deflection beyond the fold's (the first met moving towards the
+magnet; for the CLI case below :func:`relax_on_face`'s gradient flow from the fold lands in
+the same state). For a soft strip with a strong magnetization the free branch folds twice
+(pull-in, then back at a larger gap) and between its touch point and the second fold a stable
+free state exists, the tip beside the magnet's rim: the strip snaps into it WITHOUT
+contact, touches the face later without a snap (``touch_gap_m``), lifts off there on the way
+back (release gap < pull-in gap, no contradiction: it never snapped into contact) and snaps
+back to the small deflection at the second fold (``snap_back_gap_m`` > pull-in gap). CLI case
+(2.2496 MPa, the synthetic table's M_eff at phi 0.05, 32 segments): pull-in 13.41 mm into
+the free state (tip deflection 12.16 mm, 1.42 mm above the face), touch 12.36 mm, lying on
+the face below 9.35 mm, opening from deep contact a jump at 8.43 mm, lift-off 12.36 mm, snap
+back 14.59 mm.
+
+Budget: every evaluation of the strip (:meth:`MagnetElastica.system_free`, which each
+system calls once) spends one unit of the sweep's :class:`EvaluationBudget`
+(``max_evaluations``, default :data:`MAX_EVALUATIONS`); past it :class:`PathBudgetError`, which
+no fallback swallows, naming the last converged state (``last_converged``). Each loop is also
+bounded by its own steps (``max_steps``, ``max_segments``, ``max_jumps``, ``max_outer``).
+
 The quasi-static sweep moves along stable segments and jumps, at the end of one, to the next
-stable segment containing the gap (towards the magnet when closing, away when opening).
+stable segment containing the gap (towards the magnet when closing, away when opening; on
+leaving the small-deflection segment, to the landing state).
 If the tip reaches the face before any fold (a weak magnet, a stiff strip), there is no snap:
 pull-in gap = release gap = that gap (``snap`` False).
 
@@ -1343,6 +1374,21 @@ def lying_contact_branch(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_segm
             ftol=1e-9, xtol=1e-10, max_steps=1500, stop_at_fold=not through_folds,
             budget=getattr(model, "budget", None),
             stability=lambda uu, p, J: model.stable_lying(J))
+        if rows and len(tr.p) > 1:
+            # a node that has just joined (left) the set with a zero force (gap) whose force
+            # (gap) turns negative at once: no event can fire (it starts at zero), and the
+            # branch traced is not a contact state (the face pulling, or the strip through
+            # it): no contact state continues this way, a fold -- the strip snaps here
+            free_k = np.array([k for k in range(1, n + 1) if k not in act], int) - 1
+            pull = float(np.min(tr.u[1:, n:])) < -1e-7 * ls if m else False
+            through = bool(free_k.size) and min(
+                float(np.min(model.node_gaps_m(tr.u[k, :n], tr.p[k])[free_k]))
+                for k in range(1, len(tr.p))) < -1e-7 * L
+            if pull or through:
+                folds.append(g)
+                release_by, release_gap = "fold of the contact branch", g
+                release_defl = model.tip_deflection_m(u[:n])
+                break
         for k in range(len(tr.p)):
             if rows and k == 0:
                 continue                            # the event point, already recorded
