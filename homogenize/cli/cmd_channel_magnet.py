@@ -49,8 +49,8 @@ CHANNEL_MAGNET_HELP = (
     "varies along and across the channel and grows as the ceiling comes down; it is sampled on "
     "the DEFORMED ceiling (sections along x, Gauss columns across, each at its deflected "
     "height), with the block's thin-plate demagnetizing factor (--demag-factor to override), "
-    "the ceiling's FEM compliance projected on one mode per section, each section followed in "
-    "the gap through its fold. --gap-sweep-m A:B:N prints the deflection against the gap; "
+    "the ceiling's FEM compliance projected on one mode per section, the sections coupled by "
+    "the ceiling's bending along the channel, followed in the gap through a fold. --gap-sweep-m A:B:N prints the deflection against the gap; "
     "--close (or the sweep) reports the gap where the ceiling first touches the glass or snaps "
     "down (pull-in), and with --pressure-drop-Pa the gap that holds the shut channel against "
     "it. M_eff(H) from --table at --phi, else demagnetization-limited soft spheres (--phi, "
@@ -71,9 +71,9 @@ def add_channel_magnet_options(group) -> None:
                        metavar="START:STOP:COUNT",
                        help="magnet gaps [m]: " + CHANNEL_GAP_HELP + ". Traced from a far gap; "
                             "the deflection at each, closure / pull-in marked")
-    group.add_argument("--sections", type=int_in("--sections", 1, 201), default=21,
-                       help="sections along the channel where the field is sampled (ends "
-                            "included; default 21)")
+    group.add_argument("--sections", type=int_in("--sections", 3, 201), default=21,
+                       help="sections along the channel where the field is sampled, coupled by "
+                            "the ceiling's bending along it (ends included; default 21)")
 
 
 def channel_magnet_option_needs(needs: dict | None) -> dict:
@@ -170,12 +170,15 @@ def run_channel_magnet(args) -> int:
     r = channel_magnet_sweep(geo, ceiling, magnet, M_of_H, gaps, pressure_drop_Pa=dp,
                              outlet_pressure_Pa=args.outlet_pressure_Pa, demag_factor=N,
                              n_x=args.sections, self_weight_N_m3=mat.density_kg_m3
-                             * (getattr(args, "gravity_m_s2", 0.0) or 0.0))
+                             * (getattr(args, "gravity_m_s2", 0.0) or 0.0),
+                             plate_rigidity_N_m=mat.E_Pa * geo.c_m ** 3
+                             / (12.0 * (1.0 - mat.nu ** 2)))
     print(f"magnet: {args.magnet} {tuple(args.magnet_size)} m, B_r {args.remanence_T:g} T, axis "
           f"at x = {magnet.position_m[0]:.4g} m, y = {magnet.position_m[1]:.4g} m under the "
           f"{geo.a_m:g} x {geo.d_m:g} m channel; M_eff(H) from {law}, phi = {phi:g}; block "
           f"demagnetizing factor N = {N:.4f}; field on the DEFORMED ceiling ({args.sections} "
-          f"sections, one mode each; ceiling compliance: {ceiling.source}); E = {mat.E_Pa:.6g} Pa")
+          f"sections, one mode each, coupled by the ceiling's bending along the channel; "
+          f"ceiling compliance: {ceiling.source}); E = {mat.E_Pa:.6g} Pa")
     print("gap: " + CHANNEL_GAP_HELP)
 
     def xs(v):
