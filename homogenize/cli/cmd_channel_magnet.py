@@ -5,18 +5,22 @@ deflection against the magnet gap, the closure (contact) or pull-in (snap-down) 
 and with ``--pressure-drop-Pa`` the gap that holds the shut channel against it; printed and in
 ``--json``.
 
-Wiring into ``mapsim channel`` (``homogenize/cli/cmd_macro.py``; see
-:func:`wire_channel_command`, which does exactly these three things and which the tests use):
+Wiring into ``mapsim channel`` (``homogenize/cli/cmd_macro.py``; :func:`wire_channel_command`
+does the same to a built parser, and the tests use it):
 
-1. in ``register``, after the channel parser's ``p.set_defaults(...)``:
-   ``add_channel_magnet_options(p.add_argument_group(CHANNEL_MAGNET_GROUP, CHANNEL_MAGNET_HELP))``
-   and ``p.set_defaults(option_needs=channel_magnet_option_needs(p.get_default("option_needs")))``;
-2. in ``_channel``, after ``_check_channel_size(args)``:
-   ``if getattr(args, "magnet", None) is not None: return run_channel_magnet(args)``.
+1. in ``register``, after the channel parser's ``p.set_defaults(...)``::
+
+       add_channel_magnet_options(p.add_argument_group(CHANNEL_MAGNET_GROUP,
+                                                       CHANNEL_MAGNET_HELP))
+       p.set_defaults(option_needs=channel_magnet_option_needs(
+           p.get_default("option_needs")))
+
+2. in ``_channel``, after ``_check_channel_size(args)``::
+
+       if getattr(args, "magnet", None) is not None:
+           return run_channel_magnet(args)
 """
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -50,7 +54,8 @@ CHANNEL_MAGNET_HELP = (
     "the DEFORMED ceiling (sections along x, Gauss columns across, each at its deflected "
     "height), with the block's thin-plate demagnetizing factor (--demag-factor to override), "
     "the ceiling's FEM compliance projected on one mode per section, the sections coupled by "
-    "the ceiling's bending along the channel, followed in the gap through a fold. --gap-sweep-m A:B:N prints the deflection against the gap; "
+    "the ceiling's bending along the channel, followed in the gap through a fold. "
+    "--gap-sweep-m A:B:N prints the deflection against the gap; "
     "--close (or the sweep) reports the gap where the ceiling first touches the glass or snaps "
     "down (pull-in), and with --pressure-drop-Pa the gap that holds the shut channel against "
     "it. M_eff(H) from --table at --phi, else demagnetization-limited soft spheres (--phi, "

@@ -194,7 +194,7 @@ REALISTIC_CASE = {
     "closure_gap_m_nc4": 2.228e-3,             # the FEM compliance at nc 4 (+0.7 %)
     "closure_gap_m_dead_load": 2.175e-3,       # the field of the undeformed ceiling
     "closure_gap_m_independent_sections": 2.244e-3,
-    "closure_gap_m_plate": 1.553e-3,           # the (stiffer) clamped-plate ceiling, x = d/2 +- 2 mm
+    "closure_gap_m_plate": 1.553e-3,           # the stiffer clamped-plate ceiling, x = d/2 +- 2 mm
     "hold_gap_m_100Pa": 1.923e-3,              # at x = 5 mm (nc 4: 1.937e-3)
     "deflection_m_at_gap": {6e-3: 5.28e-6, 5e-3: 9.32e-6, 4e-3: 1.687e-5, 3e-3: 3.101e-5,
                             2.5e-3: 4.204e-5},

@@ -251,42 +251,59 @@ def test_far_gaps_reproduce_the_dead_load(plate):
     assert corr[0] > 1e-3                          # near the magnet the correction is real
 
 
-def test_deformed_sampling_against_magpylib(sweep, plate):
-    """Independent check of an equilibrium of the sweep: the field of a magpylib Cylinder built
-    here, |B| differenced along z at the DEFORMED Gauss points, M = chi H / (1 + N chi) (the
-    linear soft-sphere law below saturation), the force projected on the mode: k q = F."""
-    n = 1                                          # gap 5 mm, open
-    g = sweep.sweep_gap_m[n]
-    assert sweep.sweep_state[n] == "open"
-    q = sweep.sweep_deflection_m[n]
+def _magpylib_generalized_force(q, g, ceiling, n_x=5, n_y=8, n_z=3):
+    """Per section, c sum_k w_k phi_k <f_down> with the field of a magpylib Cylinder built here,
+    |B| differenced along z at the deflected Gauss points, M = chi H / (1 + N chi) (the linear
+    soft-sphere law below saturation); and the same at the undeformed points."""
     N = channel_demag_factor(GEO)
     src = magpylib.magnet.Cylinder(dimension=(10e-3, 10e-3), polarization=(0, 0, 1.3),
                                    position=(GEO.d_m / 2, GEO.a_m / 2, -g - 5e-3))
     a, b, c = GEO.a_m, GEO.b_m, GEO.c_m
-    gy, wy = np.polynomial.legendre.leggauss(8)
-    gz, wz = np.polynomial.legendre.leggauss(3)
+    gy, wy = np.polynomial.legendre.leggauss(n_y)
+    gz, wz = np.polynomial.legendre.leggauss(n_z)
     y, wyy = a / 2 * (1 + gy), a / 2 * wy
-    d_col = plate.down_per_force_m4_N
-    phi = np.interp(y, plate.y_m, d_col) / d_col.max()
+    d_col = ceiling.down_per_force_m4_N
+    phi = np.interp(y, ceiling.y_m, d_col) / d_col.max()
     k = c * np.sum(wyy * phi) / d_col.max()
     h = 1e-7
-    for i, x in enumerate(np.linspace(0.0, GEO.d_m, 5)):
-        F = F_dead = 0.0
+    F, F_dead = np.zeros(n_x), np.zeros(n_x)
+    for i, x in enumerate(np.linspace(0.0, GEO.d_m, n_x)):
         for yk, wk, pk in zip(y, wyy, phi):
             for zk, wzk in zip(c / 2 * (1 + gz), wz / 2):
-                for shift, acc in ((q[i] * pk, "F"), (0.0, "dead")):
+                for shift, acc in ((q[i] * pk, F), (0.0, F_dead)):
                     z = b + zk - shift
                     pts = np.array([[x, yk, z + h], [x, yk, z - h], [x, yk, z]])
                     B = np.linalg.norm(magpylib.getB(src, pts), axis=1)
                     M = CHI * (B[2] / MU0) / (1 + N * CHI)
                     assert M < PHI * 1.4e6             # below saturation: linear law
-                    fdown = -M * (B[0] - B[1]) / (2 * h)
-                    if acc == "F":
-                        F += c * wk * pk * wzk * fdown
-                    else:
-                        F_dead += c * wk * pk * wzk * fdown
-        assert k * q[i] == pytest.approx(F, rel=1e-6)
-        assert abs(F / F_dead - 1) > 50e-6          # the deformed position matters
+                    acc[i] += c * wk * pk * wzk * (-M * (B[0] - B[1]) / (2 * h))
+    return k, F, F_dead
+
+
+def test_deformed_sampling_against_magpylib(sweep, plate):
+    """Independent check of an equilibrium of the sweep (independent sections): k q = F with F
+    from magpylib at the DEFORMED points, and not the dead load's."""
+    n = 1                                          # gap 5 mm, open
+    g = sweep.sweep_gap_m[n]
+    assert sweep.sweep_state[n] == "open"
+    q = sweep.sweep_deflection_m[n]
+    k, F, F_dead = _magpylib_generalized_force(q, g, plate)
+    assert np.allclose(k * q, F, rtol=1e-6, atol=0)
+    assert np.all(np.abs(F / F_dead - 1) > 50e-6)      # the deformed position matters
+
+
+def test_coupled_equilibrium_against_magpylib(plate):
+    """The coupled sections at 3 mm: K q = W F with F from magpylib at the deflected points."""
+    m = ChannelMagnet(GEO, plate, place_channel_magnet(CYL, GEO, 0.0),
+                      soft_sphere_magnetization(PHI), n_x=5, n_y=8, n_z=3,
+                      plate_rigidity_N_m=D_PLATE)
+    g = 3e-3
+    q = m.solve_at(g, m.dead_load_deflection_m(g))
+    k, F, F_dead = _magpylib_generalized_force(q, g, plate)
+    assert k == pytest.approx(m.k, rel=1e-12)
+    assert np.allclose(m.K @ q, m.W * F, rtol=1e-6, atol=0)
+    assert not np.allclose(m.K @ q, m.W * F_dead, rtol=1e-3, atol=0)
+    assert q[2] == pytest.approx(np.max(q))            # the centre deflects most at 3 mm
 
 
 def test_realistic_sweep_closes_by_contact(sweep):
@@ -376,7 +393,7 @@ def test_magnet_overlapping_the_channel_refused():
         place_channel_magnet(tilted, GEO, 1e-3)
 
 
-# ------------------------------------------------------------------ the CLI (wired as the lead will)
+# ------------------------------------------------------------- the CLI (wired as the lead will)
 @pytest.fixture
 def cli(monkeypatch):
     """``mapsim`` with the channel command wired to the magnet as cmd_macro.py will be
