@@ -128,14 +128,17 @@ def _parse_sweep(text) -> np.ndarray:
 
 
 def _law(args):
+    """``(M_of_H, phi, name, bounds)``: the composite's law, and with --table the laws of the
+    two ends of the table's M_eff interval (``{"low": law, "high": law}``, else None)."""
     phi = args.phi if getattr(args, "phi", None) is not None else SEED.c * SEED.d
     if getattr(args, "table", None):
         if args.phi is None:
             raise InputError("--phi is required with --table")
-        return (magnetization_from_table(read_table(args.table), phi,
-                                         **parse_at(getattr(args, "table_at", None))),
-                phi, f"table {args.table}")
-    return soft_sphere_magnetization(phi), phi, "soft spheres (dilute), the seed's Ms"
+        t = read_table(args.table)
+        at = parse_at(getattr(args, "table_at", None))
+        bounds = {b: magnetization_from_table(t, phi, bound=b, **at) for b in ("low", "high")}
+        return magnetization_from_table(t, phi, **at), phi, f"table {args.table}", bounds
+    return soft_sphere_magnetization(phi), phi, "soft spheres (dilute), the seed's Ms", None
 
 
 def run_channel_magnet(args) -> int:
@@ -167,17 +170,24 @@ def run_channel_magnet(args) -> int:
         gaps = np.linspace(max(m0.dimensions_m), 0.0, 11)
     xy = (None, None) if args.magnet_position is None else tuple(args.magnet_position[:2])
     magnet = place_channel_magnet(m0, geo, float(gaps[0]), x_axis_m=xy[0], y_axis_m=xy[1])
-    M_of_H, phi, law = _law(args)
+    M_of_H, phi, law, bounds = _law(args)
     N = args.demag_factor if args.demag_factor is not None else channel_demag_factor(geo)
     ceiling = CeilingModel.from_fem(geo, mat, nc=max(getattr(args, "nc", 3), 3),
                                     order=getattr(args, "order", 2))
     dp = args.pressure_drop_Pa or 0.0
-    r = channel_magnet_sweep(geo, ceiling, magnet, M_of_H, gaps, pressure_drop_Pa=dp,
-                             outlet_pressure_Pa=args.outlet_pressure_Pa, demag_factor=N,
-                             n_x=args.sections, self_weight_N_m3=mat.density_kg_m3
-                             * (getattr(args, "gravity_m_s2", 0.0) or 0.0),
-                             plate_rigidity_N_m=mat.E_Pa * geo.c_m ** 3
-                             / (12.0 * (1.0 - mat.nu ** 2)))
+    kw = dict(pressure_drop_Pa=dp, outlet_pressure_Pa=args.outlet_pressure_Pa,
+              demag_factor=N, n_x=args.sections,
+              self_weight_N_m3=mat.density_kg_m3 * (getattr(args, "gravity_m_s2", 0.0) or 0.0),
+              plate_rigidity_N_m=mat.E_Pa * geo.c_m ** 3 / (12.0 * (1.0 - mat.nu ** 2)))
+    r = channel_magnet_sweep(geo, ceiling, magnet, M_of_H, gaps, **kw)
+    # the table's M_eff interval: the weaker magnetization closes at the smaller gap
+    ends = ({b: channel_magnet_sweep(geo, ceiling, magnet, law_b, gaps, **kw)
+             for b, law_b in bounds.items()} if bounds else {})
+    interval = {}
+    if ends:
+        for key in ("closure_gap_m", "hold_gap_m"):
+            v = [getattr(ends[b], key) for b in ("low", "high")]
+            interval[key] = [None if not np.isfinite(x) else float(x) for x in v]
     print(f"magnet: {args.magnet} {tuple(args.magnet_size)} m, B_r {args.remanence_T:g} T, axis "
           f"at x = {magnet.position_m[0]:.4g} m, y = {magnet.position_m[1]:.4g} m under the "
           f"{geo.a_m:g} x {geo.d_m:g} m channel; M_eff(H) from {law}, phi = {phi:g}; block "
@@ -188,26 +198,33 @@ def run_channel_magnet(args) -> int:
 
     def xs(v):
         return ", ".join(f"{x:.4g}" for x in v) + " m"
+    def iv(key):
+        if key not in interval:
+            return ""
+        return (" [" + ", ".join("none in the range" if v is None else f"{v:.4g}"
+                                 for v in interval[key]) + "] (table's M_eff interval)")
     if r.event == "none":
         print(f"no closure down to the gap {gaps.min():.4g} m: the ceiling stays open "
               f"(largest deflection there {np.nanmax(r.sweep_max_deflection_m):.4g} m of "
               f"b = {geo.b_m:g} m)")
     elif r.event == "contact":
-        print(f"closure gap {r.closure_gap_m:.4g} m: the ceiling touches the glass (no snap) at "
-              f"x = {xs(r.x_event_m)}, y = {r.y_event_m:.4g} m; the dead load (field of the "
-              f"undeformed ceiling) gives {r.event_dead_load_deflection_m:.4g} m there instead "
-              f"of {r.event_deflection_m:.4g} m")
+        print(f"closure gap {r.closure_gap_m:.4g} m{iv('closure_gap_m')}: the ceiling touches "
+              f"the glass (no snap) at x = {xs(r.x_event_m)}, y = {r.y_event_m:.4g} m; the dead "
+              f"load (field of the undeformed ceiling) gives "
+              f"{r.event_dead_load_deflection_m:.4g} m there instead of "
+              f"{r.event_deflection_m:.4g} m")
     else:
-        print(f"pull-in gap {r.closure_gap_m:.4g} m: the ceiling snaps down onto the glass at "
-              f"x = {xs(r.x_event_m)}, y = {r.y_event_m:.4g} m, from a deflection of "
-              f"{r.event_deflection_m:.4g} m (the glass is {r.contact_deflection_m:.4g} m away)")
+        print(f"pull-in gap {r.closure_gap_m:.4g} m{iv('closure_gap_m')}: the ceiling snaps "
+              f"down onto the glass at x = {xs(r.x_event_m)}, y = {r.y_event_m:.4g} m, from a "
+              f"deflection of {r.event_deflection_m:.4g} m (the glass is "
+              f"{r.contact_deflection_m:.4g} m away)")
     if dp > 0:
         if r.hold_event == "none":
             print(f"against {dp:.4g} Pa: not shut down to the gap {gaps.min():.4g} m")
         else:
             print(f"against {dp:.4g} Pa (inlet {r.outlet_pressure_Pa + dp:.4g} Pa): the channel "
-                  f"holds shut below the gap {r.hold_gap_m:.4g} m ({r.hold_event} at x = "
-                  f"{xs(r.x_hold_m)})")
+                  f"holds shut below the gap {r.hold_gap_m:.4g} m{iv('hold_gap_m')} "
+                  f"({r.hold_event} at x = {xs(r.x_hold_m)})")
     print(f"{'gap [m]':>10} {'deflection [m]':>15} {'smallest gap [m]':>17} {'at x [m]':>9} "
           f"{'dead load [m]':>14} {'f centre [N/m^3]':>17}  state")
     marked = r.event == "none"
@@ -232,6 +249,10 @@ def run_channel_magnet(args) -> int:
                           "remanence_T": args.remanence_T, "axis_x_m": magnet.position_m[0],
                           "axis_y_m": magnet.position_m[1]},
                "magnetization": law, "phi": phi, "demag_factor": N,
-               "channel_magnet": r.to_dict(), "manifest": manifest(config_of(args), None)}
+               "channel_magnet": r.to_dict(),
+               "interval": dict(interval, **{"from": "table's M_eff interval"})
+               if interval else None,
+               "interval_ends": {b: e.to_dict() for b, e in ends.items()} or None,
+               "manifest": manifest(config_of(args), None)}
         write_json(args.json, json_ready(out))
     return 0

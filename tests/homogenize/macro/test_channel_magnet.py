@@ -458,3 +458,35 @@ def test_cli_close_alone(cli, capsys):
 def test_cli_magnet_options_need_the_magnet(cli, capsys):
     assert cli(["channel", "--gap-sweep-m", "0.003:0:4"]) == 2
     assert "--gap-sweep-m has no effect without --magnet" in capsys.readouterr().err
+
+
+_SYNTH = """
+[study]
+name = "syn-channel"
+seed = 7
+realizations = 4
+n_particles = 20
+evaluator = "synthetic"
+[grid]
+phi = [0.02, 0.05]
+B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
+gradB_T_per_m = 1.78
+"""
+
+
+def test_cli_table_interval(cli, tmp_path, capsys, synthetic_table):
+    """With --table: the closure and hold gaps carry the table's M_eff interval (the weaker
+    magnetization closes closer to the magnet), the mean inside it."""
+    import json
+    table = synthetic_table(tmp_path / "t.h5", _SYNTH)
+    out = tmp_path / "m.json"
+    assert cli(["channel", *MAGNET, "--table", str(table), "--phi", "0.05",
+                "--gap-sweep-m", "0.008:0.0005:4", "--pressure-drop-Pa", "100",
+                "--json", str(out)]) == 0, capsys.readouterr().err
+    assert "(table's M_eff interval)" in capsys.readouterr().out
+    d = json.loads(out.read_text())
+    lo, hi = d["interval"]["closure_gap_m"]
+    assert lo < d["channel_magnet"]["closure_gap_m"] < hi
+    lo, hi = d["interval"]["hold_gap_m"]
+    assert lo < d["channel_magnet"]["hold_gap_m"] < hi
+    assert set(d["interval_ends"]) == {"low", "high"}
