@@ -22,7 +22,7 @@ Model
 :func:`homogenize.macro.pullin.magnet_body_force`): ``f = M_eff(H_in) grad |B_a|`` [N/m^3]
 with ``H_in + N M_eff(H_in) = |H_a|`` and ``N`` the thin-plate demagnetizing factor of the
 PDMS block through its height (Aharoni's prism, :func:`micro.demag.prism_demag_factors`, of the
-block ``d x (a + 2 wall) x (b + c)``: :func:`channel_demag_factor`, 0.90 for the seed's
+block ``d x (a + 2 wall) x (b + c)``: :func:`channel_demag_factor`, 0.87 for the seed's
 channel), one factor for the whole block and every field direction, as for the strip. Only the
 component towards the glass, ``-f_z``, loads the ceiling; the lateral components ``f_x, f_y``
 (zero on the magnet's axis) are not modelled.
@@ -84,7 +84,7 @@ ceiling when ``phi`` is the exact uniform-load solution of a self-adjoint linear
   symmetric positive definite. Against the 3D FEM of :func:`~homogenize.macro.channel.
   solve_channel` under a force varying along the channel (tested, seed channel): the
   mid-length centre deflection is 0.7 % / 1.7 % / 1.9 % below the FEM's for ``1 + 0.3 cos(2 pi
-  (x - d/2) / d)`` and Gaussians of 3 mm / 2 mm half-width, where independent sections are
+  (x - d/2) / d)`` and Gaussians of 3 mm / 2 mm 1/e half-width, where independent sections are
   11 % / 27 % / 54 % above it.
   A ceiling whose shape has ``I1 = 0`` (a rigid piston) has no stiffness against a rotation
   along ``x`` beyond ``k``: under a force uniform along ``x`` its uniform and linear modes fold
