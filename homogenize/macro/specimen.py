@@ -32,6 +32,17 @@ first order, and not at all across the surface):
   deviatoric part is kept: the RVE's isotropic part is a pressure that a nearly incompressible
   body does not feel.
 
+A uniform part of ``psi`` loads nothing (``psi_ref n`` on the surface and ``psi_ref I`` inside
+are in equilibrium for any shape), so the solver takes the body's volume mean ``psi_ref`` out
+of both. This matters for the mechanics' Newton, not for the answer: the loads are frozen at
+each staggered iterate (the traction's direction is the last iterate's normal), and a frozen
+traction of several G (``psi`` reaches ~4 G near 1 T in the Diguet composite) that no longer
+turns with the surface has a spurious load stiffness that put a limit point into the Newton
+near the rim (the cylinders stopped at 0.85-0.99 T before; they reach 1.13 T now, and the
+staggered iteration contracts faster). A field step that still fails is cut in half
+(``max_substeps``) before :class:`ConvergenceError`; the staggered iteration stops when its
+change, divided by the Aitken factor of that update, is below ``tol``.
+
 Models (``model=``), so that three descriptions can be compared on the same specimen:
 
 * ``"continuum"`` -- the Kelvin loads only (no microstructural term), as the continuum models
