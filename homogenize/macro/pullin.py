@@ -341,6 +341,7 @@ class _Scaled:
         return np.concatenate([np.asarray(u, float) / self.us, [p / self.ps]])
 
     def eval(self, z):
+        self.n_eval = getattr(self, "n_eval", 0) + 1
         u, p = self.split(z)
         R, J, Rp = self.system(u, p)
         F = np.asarray(R, float) / self.rs
@@ -400,7 +401,7 @@ def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max
                  p_min=-math.inf, p_max=math.inf, events=(), u_scale=1.0, p_scale=1.0,
                  r_scale=1.0, xtol=1e-10, ftol=1e-9, max_newton=12, max_steps=2000,
                  max_turn_deg=20.0, stability=None, stop_at_fold=False,
-                 budget=None) -> BranchTrace:
+                 budget=None, max_evaluations=None) -> BranchTrace:
     """Follow the branch of ``R(u, p) = 0`` through limit points (pseudo arc length).
 
     Parameters
@@ -423,6 +424,9 @@ def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max
         it runs out (the system spends it) the last converged point is known; ``max_steps``
         bounds the steps (a halving is a step): past it the trace ends, stop_reason
         "max_steps"
+    max_evaluations : at most this many evaluations of the system (None: no limit); past
+        them :class:`PathFollowingError` (a trace that no longer progresses: steps halved
+        and retried without end)
 
     Returns
     -------
@@ -467,6 +471,11 @@ def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max
     event_vals = [fun(*sc.split(z)) for _, fun in all_events]
     step = float(ds)
     for _ in range(max_steps):
+        if max_evaluations is not None and sc.n_eval > max_evaluations:
+            u, p = sc.split(z)
+            raise PathFollowingError(f"path following stopped: {sc.n_eval} evaluations "
+                                     f"(limit {max_evaluations}) reached at p = {p:.6g} with "
+                                     f"{len(zs)} points", {"u": u, "p": p})
         res = _correct(sc, z + step * tau, tau, z, step, xtol, ftol, max_newton)
         tau_new = None
         if res is not None:
@@ -1320,14 +1329,17 @@ def deep_contact_start(model, gap_m, *, lam_scale=None):
 
 def lying_contact_branch(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_segments=400,
                          through_folds=False, start=None, gap_min_m=None,
-                         direction=1.0) -> LyingBranch:
+                         direction=1.0, max_steps=600,
+                         max_evaluations=600) -> LyingBranch:
     """Follow the strip lying on the face's plane from deep contact at ``gap_start_m`` opening
     the gap (up to ``gap_max_m``) until every contact force vanishes (the release gap).
 
     Along the way the active set changes: a node whose contact force reaches zero leaves it
     (event "drop", located by Brent's method on the smallest force), a free node reaching the
     plane joins it (event "add", on the smallest height of the free nodes); each active set is
-    a branch of :meth:`MagnetElastica.system_lying` followed by :func:`trace_branch`. The
+    a branch of :meth:`MagnetElastica.system_lying` followed by :func:`trace_branch` (at most
+    ``max_steps`` steps and ``max_evaluations`` evaluations each: past them
+    :class:`PathFollowingError`; the healthy pieces take < 150). The
     branch ends when the set is empty (release_by "contact force zero"; the last point is the
     free strip touching the plane with zero force) or at a fold (the contact state disappears:
     release_by "fold of the contact branch", a snap-off).
@@ -1371,7 +1383,8 @@ def lying_contact_branch(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_segm
             ds=ds, ds_max=ds_max,
             u_scale=np.concatenate([np.full(n, math.sqrt(n)), np.full(m, ls)]), p_scale=L,
             r_scale=np.concatenate([np.full(n, model.EI / L), np.full(m, L)]),
-            ftol=1e-9, xtol=1e-10, max_steps=1500, stop_at_fold=not through_folds,
+            ftol=1e-9, xtol=1e-10, max_steps=max_steps, stop_at_fold=not through_folds,
+            max_evaluations=max_evaluations,
             budget=getattr(model, "budget", None),
             stability=lambda uu, p, J: model.stable_lying(J))
         if rows and len(tr.p) > 1:
@@ -1701,11 +1714,12 @@ def _trace_sweep(model, strip, gaps, far_gap_m, ds_max, lying, round_trip):
         if contact_top is not None and contact_top.event is not None \
                 and contact_top.event.name == "p_min":
             g_lost = math.nan                       # the whole range is covered
-    # a second node of the strip reached the face on the tip-only branch: the tip-only
-    # contact from a small gap cannot hold either; with the strip lying on the face modelled,
-    # that takes over from the smallest gap (below), without the tip-only trials
+    # a second node of the strip reached the face on the tip-only branch, or it folded: with
+    # the strip lying on the face modelled, that takes over from the smallest gap (below),
+    # without the tip-only trials from a small gap (~1500 evaluations, and a second node
+    # reaches the face there too)
     second_node = (lying and contact_top is not None and contact_top.event is not None
-                   and contact_top.event.name == "other_contact")
+                   and contact_top.event.name in ("other_contact", "fold"))
     if second_node and np.isfinite(g_lost) and g_min < g_lost - tol_gap:
         contact_end_gap = float(contact_top.event.p)
         g_lost = math.nan
