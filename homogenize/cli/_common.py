@@ -425,3 +425,34 @@ def _opt_name(parser, dest: str) -> str:
             return max(a.option_strings, key=len)
     return "--" + dest.replace("_", "-")
 
+
+def add_magnet_options(g) -> None:
+    """The field source of `beam`, `export` and `channel` (magpylib; homogenize.macro.magnets)."""
+    g.add_argument("--magnet", choices=("cuboid", "cylinder", "coil"), default=None,
+                   help="field source (default: none, the uniform --body-force-N-m3)")
+    g.add_argument("--magnet-size", type=float_in("--magnet-size", 0.0, 10.0, "m", lo_open=True), nargs="+", default=None,
+                   metavar="M",
+                   help="cuboid: A B C edges; cylinder: DIAMETER HEIGHT; coil: RADIUS LENGTH [m]")
+    g.add_argument("--magnet-position", type=float_in("--magnet-position", -10.0, 10.0, "m"),
+                   nargs=3, default=None,
+                   metavar=("X", "Y", "Z"), help="centre of the source in the strip frame [m]")
+    g.add_argument("--magnet-direction", type=float_in("--magnet-direction", -1e6, 1e6), nargs=3,
+                   default=(0.0, 0.0, 1.0),
+                   metavar=("X", "Y", "Z"), help="magnetization direction of a permanent magnet")
+    g.add_argument("--magnet-axis", type=float_in("--magnet-axis", -1e6, 1e6), nargs=3,
+                   default=(0.0, 0.0, 1.0),
+                   metavar=("X", "Y", "Z"), help="axis of a cylinder or coil (cuboid: its C edge)")
+    g.add_argument("--remanence-T", dest="remanence_T", type=float_in("--remanence-T", 0.0, 3.0,
+                                                                       "T", lo_open=True),
+                   default=None,
+                   help="remanent polarization B_r of a permanent magnet [T] (NdFeB ~1.2-1.4)")
+    g.add_argument("--current-A", dest="current_A", type=float_in("--current-A", -1e5, 1e5, "A"),
+                   default=None,
+                   help="coil current [A] (the seed's electromagnet: 1.5 A)")
+    g.add_argument("--turns", type=int_in("--turns", 1, 100000), default=None,
+                   help="coil turns")
+    g.add_argument("--demag-factor", dest="demag_factor",
+                   type=float_in("--demag-factor", 0.0, 1.0), default=None,
+                   help="specimen demagnetizing factor for the field direction (default: "
+                        "Aharoni's prism factor of the strip through its thickness, 0.771 for "
+                        "19.4 x 5 x 1 mm)")

@@ -5,20 +5,7 @@ deflection against the magnet gap, the closure (contact) or pull-in (snap-down) 
 and with ``--pressure-drop-Pa`` the gap that holds the shut channel against it; printed and in
 ``--json``.
 
-Wiring into ``mapsim channel`` (``homogenize/cli/cmd_macro.py``; :func:`wire_channel_command`
-does the same to a built parser, and the tests use it):
-
-1. in ``register``, after the channel parser's ``p.set_defaults(...)``::
-
-       add_channel_magnet_options(p.add_argument_group(CHANNEL_MAGNET_GROUP,
-                                                       CHANNEL_MAGNET_HELP))
-       p.set_defaults(option_needs=channel_magnet_option_needs(
-           p.get_default("option_needs")))
-
-2. in ``_channel``, after ``_check_channel_size(args)``::
-
-       if getattr(args, "magnet", None) is not None:
-           return run_channel_magnet(args)
+Wired into ``mapsim channel`` by ``homogenize/cli/cmd_macro.py`` (``--magnet`` dispatches here).
 """
 from __future__ import annotations
 
@@ -35,12 +22,12 @@ from micro.common.files import manifest, write_json
 from micro.common.validate import InputError
 from micro.materials import SEED
 
-from homogenize.cli._common import config_of, int_in, json_ready, parse_at, parse_values
+from homogenize.cli._common import (add_magnet_options, config_of, int_in, json_ready, parse_at,
+                                    parse_values)
 from homogenize.cli._pullin import permanent_magnet
 
 __all__ = ["CHANNEL_MAGNET_GROUP", "CHANNEL_MAGNET_HELP", "CHANNEL_GAP_HELP",
-           "add_channel_magnet_options", "channel_magnet_option_needs", "run_channel_magnet",
-           "wire_channel_command"]
+           "add_channel_magnet_options", "channel_magnet_option_needs", "run_channel_magnet"]
 
 CHANNEL_GAP_HELP = ("the magnet gap: from the magnet's top face to the channel floor (the top "
                     "of the glass; the glass thickness is part of it) [m], >= 0; the magnet's "
@@ -68,10 +55,9 @@ MAX_GAPS = 200
 def add_channel_magnet_options(group) -> None:
     """The magnet options of ``mapsim beam`` (the same names: ``--magnet``, ``--magnet-size``,
     ``--remanence-T``, ``--magnet-position``, ``--magnet-direction``, ``--magnet-axis``,
-    ``--demag-factor``, ... from :func:`homogenize.cli.cmd_macro._magnet_options`) and the
+    ``--demag-factor``, ... from :func:`homogenize.cli._common.add_magnet_options`) and the
     channel's own: ``--gap-sweep-m``, ``--sections``."""
-    from homogenize.cli.cmd_macro import _magnet_options      # (cmd_macro imports this module)
-    _magnet_options(group)
+    add_magnet_options(group)
     group.add_argument("--gap-sweep-m", dest="gap_sweep_m", default=None,
                        metavar="START:STOP:COUNT",
                        help="magnet gaps [m]: " + CHANNEL_GAP_HELP + ". Traced from a far gap; "
@@ -95,25 +81,6 @@ def channel_magnet_option_needs(needs: dict | None) -> dict:
 
 def _as_tuple(v):
     return (v,) if isinstance(v, str) else tuple(v)
-
-
-def wire_channel_command(channel_parser) -> None:
-    """What cmd_macro.py must do (module docstring), applied to a built ``channel`` parser:
-    the options, the option needs, and ``--magnet`` dispatched to :func:`run_channel_magnet`."""
-    add_channel_magnet_options(channel_parser.add_argument_group(CHANNEL_MAGNET_GROUP,
-                                                                 CHANNEL_MAGNET_HELP))
-    channel_parser.set_defaults(option_needs=channel_magnet_option_needs(
-        channel_parser.get_default("option_needs")))
-    base = channel_parser.get_default("func")
-
-    def func(args):
-        if getattr(args, "magnet", None) is not None:
-            from homogenize.cli.cmd_macro import _check_channel_size, _fill_matrix
-            _fill_matrix(args)                 # as _channel does before the dispatch
-            _check_channel_size(args)
-            return run_channel_magnet(args)
-        return base(args)
-    channel_parser.set_defaults(func=func)
 
 
 def _parse_sweep(text) -> np.ndarray:
@@ -159,9 +126,6 @@ def run_channel_magnet(args) -> int:
             (0.0, 0.0, 1.0), (0.0, 0.0, -1.0)):
         raise InputError("channel --magnet: the magnet's axis and magnetization must be along z "
                          "(a magnet below the glass, facing the channel)")
-    if getattr(args, "E_Pa", None) is None:
-        from homogenize.cli.cmd_macro import _fill_matrix
-        _fill_matrix(args)
     geo = ChannelGeometry(args.a_m, args.b_m, args.c_m, args.d_m, args.wall_m)
     mat = Material(args.E_Pa, args.nu, args.density_kg_m3)
     gaps = (_parse_sweep(args.gap_sweep_m) if args.gap_sweep_m is not None else None)

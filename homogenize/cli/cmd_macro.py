@@ -13,7 +13,12 @@ from micro.demag import prism_demag_factors
 from micro.materials import PDMS, POISSON_RANGE, SEED, matrix_preset, particle_preset
 
 from homogenize.cli._pullin import GAP_HELP, gap_sweep, permanent_magnet
-from homogenize.cli._common import (add_material_options, check_memory, config_of,
+from homogenize.cli.cmd_channel_magnet import (CHANNEL_MAGNET_GROUP, CHANNEL_MAGNET_HELP,
+                                               add_channel_magnet_options,
+                                               channel_magnet_option_needs,
+                                               run_channel_magnet)
+from homogenize.cli._common import (add_magnet_options, add_material_options, check_memory,
+                                    config_of,
                                     fill_from_preset, float_in, int_in, parse_at,
                                     write_snippet)
 from homogenize.cli.cmd_tables import (add_beam_table_options, add_export_table_options,
@@ -330,6 +335,8 @@ def _channel_closure(args, geo, mat) -> int:
 def _channel(args) -> int:
     _fill_matrix(args)
     _check_channel_size(args)
+    if getattr(args, "magnet", None) is not None:
+        return run_channel_magnet(args)      # a real magnet below the glass (follower field)
     geo = ChannelGeometry(args.a_m, args.b_m, args.c_m, args.d_m, args.wall_m)
     mat = Material(args.E_Pa, args.nu, args.density_kg_m3)
     operating = (args.flow_rate_m3_s, args.pressure_drop_Pa)
@@ -419,38 +426,6 @@ _F_EXPORT = float_in("--body-force-N-m3", 0.0, 1e9, "N/m^3")
 
 def _length(opt: str, hi: float = 10.0):
     return float_in(opt, 0.0, hi, "m", lo_open=True)
-
-
-def _magnet_options(g) -> None:
-    """The field source of `beam` and `export` (magpylib; homogenize.macro.magnets)."""
-    g.add_argument("--magnet", choices=("cuboid", "cylinder", "coil"), default=None,
-                   help="field source (default: none, the uniform --body-force-N-m3)")
-    g.add_argument("--magnet-size", type=_length("--magnet-size"), nargs="+", default=None,
-                   metavar="M",
-                   help="cuboid: A B C edges; cylinder: DIAMETER HEIGHT; coil: RADIUS LENGTH [m]")
-    g.add_argument("--magnet-position", type=float_in("--magnet-position", -10.0, 10.0, "m"),
-                   nargs=3, default=None,
-                   metavar=("X", "Y", "Z"), help="centre of the source in the strip frame [m]")
-    g.add_argument("--magnet-direction", type=float_in("--magnet-direction", -1e6, 1e6), nargs=3,
-                   default=(0.0, 0.0, 1.0),
-                   metavar=("X", "Y", "Z"), help="magnetization direction of a permanent magnet")
-    g.add_argument("--magnet-axis", type=float_in("--magnet-axis", -1e6, 1e6), nargs=3,
-                   default=(0.0, 0.0, 1.0),
-                   metavar=("X", "Y", "Z"), help="axis of a cylinder or coil (cuboid: its C edge)")
-    g.add_argument("--remanence-T", dest="remanence_T", type=float_in("--remanence-T", 0.0, 3.0,
-                                                                       "T", lo_open=True),
-                   default=None,
-                   help="remanent polarization B_r of a permanent magnet [T] (NdFeB ~1.2-1.4)")
-    g.add_argument("--current-A", dest="current_A", type=float_in("--current-A", -1e5, 1e5, "A"),
-                   default=None,
-                   help="coil current [A] (the seed's electromagnet: 1.5 A)")
-    g.add_argument("--turns", type=int_in("--turns", 1, 100000), default=None,
-                   help="coil turns")
-    g.add_argument("--demag-factor", dest="demag_factor",
-                   type=float_in("--demag-factor", 0.0, 1.0), default=None,
-                   help="specimen demagnetizing factor for the field direction (default: "
-                        "Aharoni's prism factor of the strip through its thickness, 0.771 for "
-                        "19.4 x 5 x 1 mm)")
 
 
 #: memory of the FEM per degree of freedom [bytes]: measured peak RSS of `mapsim beam --model
@@ -605,7 +580,7 @@ def register(sub, formatter) -> None:
         "pull-in (mapsim beam --gap-m takes the field on the deformed strip). M_eff(H) from "
         "--table at --phi (interpolated, never extrapolated) or demagnetization-limited soft "
         "spheres (--particle-material); the magnet options as in mapsim beam.")
-    _magnet_options(g)
+    add_magnet_options(g)
     add_export_table_options(p)
     add_material_options(p, what="--matrix-material fills --E-Pa, --nu, --density-kg-m3 not "
                                  "given (the matrix alone: give the composite's numbers for "
@@ -658,7 +633,7 @@ def register(sub, formatter) -> None:
         "[0, t], clamp at x = 0), H_in = H_a - N M with the strip's demagnetizing factor N. "
         "M_eff(H) comes from --table at --phi (interpolated along B_T, never extrapolated) or, "
         "without a table, from demagnetization-limited soft spheres.")
-    _magnet_options(g)
+    add_magnet_options(g)
     g.add_argument("--stations", type=int_in("--stations", 3, 2001), default=101,
                    help="stations along the strip where the field is sampled")
     g.add_argument("--gap-m", dest="gap_m", type=float_in("--gap-m", 0.0, 1.0, "m"),
@@ -754,3 +729,5 @@ def register(sub, formatter) -> None:
                                                         "close"),
                                  **{d: ("flow_rate_m3_s", "pressure_drop_Pa") for d in (
                                      "viscosity_Pa_s", "png")}})
+    add_channel_magnet_options(p.add_argument_group(CHANNEL_MAGNET_GROUP, CHANNEL_MAGNET_HELP))
+    p.set_defaults(option_needs=channel_magnet_option_needs(p.get_default("option_needs")))

@@ -393,24 +393,12 @@ def test_magnet_overlapping_the_channel_refused():
         place_channel_magnet(tilted, GEO, 1e-3)
 
 
-# ------------------------------------------------------------- the CLI (wired as the lead will)
+# ------------------------------------------------------------------------------- the CLI
 @pytest.fixture
-def cli(monkeypatch):
-    """``mapsim`` with the channel command wired to the magnet as cmd_macro.py will be
-    (homogenize.cli.cmd_channel_magnet.wire_channel_command)."""
-    import argparse
-
-    import homogenize.cli as cli_mod
-    from homogenize.cli.cmd_channel_magnet import wire_channel_command
-    build = cli_mod.build_parser
-
-    def wired():
-        parser = build()
-        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        wire_channel_command(sub.choices["channel"])
-        return parser
-    monkeypatch.setattr(cli_mod, "build_parser", wired)
-    return cli_mod.main
+def cli():
+    """``mapsim`` (the channel command with --magnet)."""
+    from homogenize.cli import main
+    return main
 
 
 MAGNET = ["--magnet", "cylinder", "--magnet-size", "10e-3", "10e-3", "--remanence-T", "1.3",
