@@ -142,8 +142,8 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
             return ""
         a, b = lo_hi[key]
         return f" [{a:.4g}, {b:.4g}] ({what})"
-    what = describe(r, iv, float(gaps.max()))
-    for line in what:
+    words = describe(r, iv, float(gaps.max()))
+    for line in words:
         print(line)
     print(f"{'gap [m]':>10} {'tip deflection [m]':>19} {'tip gap [m]':>12} "
           f"{'contact force [N]':>18} {'nodes on face':>13} {'contact length [m]':>18}  branch")
@@ -158,7 +158,7 @@ def gap_sweep(args, strip, mat, M_of_H, phi, law_name, N) -> int:
         "kind": args.magnet, "size_m": list(args.magnet_size), "remanence_T": args.remanence_T,
         "axis_x_m": magnet.position_m[0], "axis_y_m": magnet.position_m[1]},
         "magnetization": law_name, "phi": phi, "demag_factor": N,
-        "pullin": r.to_dict(), "what_happens": what,
+        "pullin": r.to_dict(), "what_happens": words,
         "E_Pa": ends["mean"][0],
         "interval": {k: v for k, v in lo_hi.items()} or None, "interval_from": what,
         "interval_ends": {b: {"E_Pa": E, "M_eff": "low" if b == "low" else "high"}

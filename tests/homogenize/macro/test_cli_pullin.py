@@ -43,6 +43,10 @@ def test_sweep_reports_pull_in_and_release_with_a_figure(tmp_path, capsys):
     p = r["pullin"]
     assert "bottom face" in r["gap_definition"]
     assert 0.004 < p["pull_in_gap_m"] < p["release_gap_m"] < 0.014
+    # what the strip does, in words: it snaps into tip contact (no table: no interval)
+    assert p["pull_in_lands_on"] == "tip contact" and r["interval_from"] is None
+    assert any("snaps onto the magnet: its tip on the face" in x for x in r["what_happens"])
+    assert "snaps onto the magnet: its tip on the face" in out
     br = np.array(p["sweep_branch"])
     on = br == "contact"
     assert on.any() and (br == "free").any()
