@@ -39,7 +39,10 @@ def test_diguet(ex):
 def test_diguet_specimen_predicted_as_measured(ex):
     """The change of length through the specimen solver, nothing fitted (results/diagnose):
     the continuum model overshoots about 2x, the affine model cancels the end faces' mean;
-    the measured curve lies between; the relaxed model needs a relax table at E0 (none)."""
+    the measured curve lies between. The relaxed model (the relax table at E0) overshoots
+    further than the continuum: the restructuring relieves the affine model's contraction,
+    while the body keeps the zero-field modulus although the relaxed RVEs are ~2x stiffer
+    (stated in the account)."""
     sp = ex.diguet["specimen"]
     assert sp["available"]
     g = sp["groups"][0]
@@ -50,7 +53,11 @@ def test_diguet_specimen_predicted_as_measured(ex):
     assert a["predicted_end_mean"] < a["measured"] < c["predicted_end_mean"]
     # what still has to be fitted, named as such, with opposite signs for the two models
     assert c["fitted"]["kappa_extra"] < 0 < a["fitted"]["kappa_extra"]
-    assert sp["models"]["relaxed"]["available"] is False
+    r = sp["models"]["relaxed"]
+    assert r["available"] and r["predicted_end_mean"] > c["predicted_end_mean"] > r["measured"]
+    stf = g["relax_table"]["stiffening"]
+    assert 1.5 < stf["E_parallel_ratio_mean"][-1] < 2.5 and stf["E_parallel_ratio_mean"][0] == 1
+    assert any("overestimates" in e for e in sp["model_error"])
 
 
 def test_rtv615(ex):

@@ -81,20 +81,34 @@ needs_table = pytest.mark.skipif(not relax_tables(), reason="no relax table comm
 
 
 def _diguet_at_table_modulus():
-    """The Diguet data with the matrix modulus of the committed relax table (0.69 MPa, the
-    value Stewart & Anand fitted): the data set's TOML now says the independent E0 = 0.14 MPa,
-    whose relax table does not exist yet (data/relax_diguet2010_E0.toml); these tests check
-    the restructuring machinery on the table that exists."""
+    """The Diguet data with the matrix modulus of the 0.69 MPa relax table (the value Stewart &
+    Anand fitted; the data set's TOML says the independent E0 = 0.14 MPa, whose table
+    data/relax_diguet2010_E0.h5 is checked below): these tests check the restructuring
+    machinery on that table."""
     from dataclasses import replace
     exp = load_experiment(DIGUET)
     return replace(exp, matrix=replace(exp.matrix, E_Pa=0.69e6))
 
 
-def test_diguet_at_its_independent_modulus_has_no_relax_table_and_says_which():
+def test_diguet_at_its_independent_modulus_uses_the_E0_relax_table():
+    """The data set's own modulus E0 = 0.14 MPa finds the table made at E0 (not the 0.69 MPa
+    one); a modulus with no table is refused naming what exists and the command that makes
+    one."""
+    from dataclasses import replace
     exp = load_experiment(DIGUET)
     assert exp.matrix.E_Pa == 140e3
     ok, why = C.coupled_rve_available(exp)
-    assert not ok and "E = 140000 Pa" in why and "mapsim batch" in why
+    assert ok, why
+    tab = restructuring_table(0.261, 140e3)
+    assert tab.provenance["table"].endswith("homogenize/experiments/data/relax_diguet2010_E0.h5")
+    assert tab.E_Pa == pytest.approx(140e3)
+    # zero field: nothing moves; at the top field the restructuring relieves most of the affine
+    # RVE's contraction in both realizations
+    assert np.all(tab.d_eps_rve[0] == 0.0)
+    assert np.all(tab.d_eps_rve[-1] > 0.5 * np.abs(tab.eps_rve_affine[-1]))
+    other = replace(exp, matrix=replace(exp.matrix, E_Pa=0.3e6))
+    ok, why = C.coupled_rve_available(other)
+    assert not ok and "E = 300000 Pa" in why and "mapsim batch" in why
 
 
 @needs_table
