@@ -255,6 +255,13 @@ class PathBudgetError(PathFollowingError):
 #: sweep (no release within the sweep; ``release_gap_m`` nan)
 ON_FACE_AT_END = "still on the face at the largest gap"
 
+#: the scale of the contact force in the tip-only contact trace from the touch point, in units
+#: of the magnetic pull there: the force grows ~5x along that branch, and with the pull as its
+#: scale the arc length was mostly the force's (~100 steps of ds_max); x10: ~30 steps, the
+#: states and events the same (each corrected by Newton, events located by Brent's method)
+CONTACT_FORCE_SCALE = 10.0
+
+
 #: the default evaluation budget of one :func:`pullin_sweep` (evaluations of the strip's
 #: residual and Hessian, each one field evaluation of ~1.5k points: ~10-25 ms at 32
 #: segments, n_cross 3): a few times what the realistic sweeps need (module docstring)
@@ -1330,7 +1337,7 @@ def deep_contact_start(model, gap_m, *, lam_scale=None):
 def lying_contact_branch(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_segments=400,
                          through_folds=False, start=None, gap_min_m=None,
                          direction=1.0, max_steps=600,
-                         max_evaluations=600) -> LyingBranch:
+                         max_evaluations=1500) -> LyingBranch:
     """Follow the strip lying on the face's plane from deep contact at ``gap_start_m`` opening
     the gap (up to ``gap_max_m``) until every contact force vanishes (the release gap).
 
@@ -1339,7 +1346,8 @@ def lying_contact_branch(model, gap_start_m, gap_max_m, *, ds_max=0.05, max_segm
     plane joins it (event "add", on the smallest height of the free nodes); each active set is
     a branch of :meth:`MagnetElastica.system_lying` followed by :func:`trace_branch` (at most
     ``max_steps`` steps and ``max_evaluations`` evaluations each: past them
-    :class:`PathFollowingError`; the healthy pieces take < 150). The
+    :class:`PathFollowingError`; most pieces take < 150, a long one, the tip at the rim from a
+    jump to the release, ~700). The
     branch ends when the set is empty (release_by "contact force zero"; the last point is the
     free strip touching the plane with zero force) or at a fold (the contact state disappears:
     release_by "fold of the contact branch", a snap-off).
@@ -1693,7 +1701,8 @@ def _trace_sweep(model, strip, gaps, far_gap_m, ds_max, lying, round_trip):
         # there): the branch the strip lands on after the snap when it reaches below the
         # pull-in gap
         ls_t = max(model.EI / L**2, abs(model.magnetic_force_N(free.event.u, g_touch)[1]))
-        us_t = np.concatenate([np.full(model.N, math.sqrt(model.N)), [ls_t]])
+        us_t = np.concatenate([np.full(model.N, math.sqrt(model.N)),
+                               [CONTACT_FORCE_SCALE * ls_t]])
         budget.stage = "the tip-only contact branch from the touch point, closing"
         try:
             contact_top = trace_branch(

@@ -128,7 +128,7 @@ def test_tiny_budget_ends_in_convergence_error_naming_the_last_converged_state()
                      **kw)
     last2 = e2.value.last_converged
     assert last2["stage"] != "the free branch from the far gap"
-    assert gaps[-1] <= last2["gap_m"] and last2["tip_deflection_m"] > 0
+    assert last2["gap_m"] >= gaps[-1] * (1 - 1e-9) and last2["tip_deflection_m"] > 0
     with pytest.raises(InputError, match="max_evaluations"):
         pullin_sweep(STRIP, STIFF, mag, M_OF_H, gaps, max_evaluations=0, **kw)
 
