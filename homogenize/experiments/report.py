@@ -378,6 +378,13 @@ def _specimen_section(sp: dict) -> list:
             f"{r['rmse_nothing_fitted']:.4g} | {kx} | "
             f"{f.get('heldout_rmse', math.nan):.4g} | "
             f"{'-' if gain is None else f'{gain:.3g}'} |")
+    rs = sp["models"].get("relaxed", {}).get("with_relaxed_stiffening_linearized")
+    if rs:
+        lines += ["", f"Relaxed model with the relaxed RVEs' stiffening carried into the body by "
+                      f"linear scaling (an estimate, not a solve): E x "
+                      f"{rs['E_parallel_ratio']:.3g} gives {rs['predicted_end_mean']:.4g} "
+                      f"({100 * rs['fraction_explained']:.3g} % of the measured change of "
+                      f"length)."]
     lines += ["", "The held-out gain compares the diagnosis's final model (mean strain, its own "
               "fitted parameters) with the specimen prediction plus one fitted kappa_extra "
               "(leave-one-out), on the same rows. Model error: "
