@@ -39,9 +39,29 @@ def inprocess_client():
     return _inprocess_client
 
 
-def _synthetic_table(path: Path, study_text: str) -> Path:
+#: the synthetic study the macro tests read M_eff (and with fem, E_eff) from: phi 0.02 and 0.05,
+#: B_T up to 2 T, 4 realizations
+SYNTHETIC_STUDY = """
+[study]
+name = "syn"
+seed = 7
+realizations = 4
+n_particles = 20
+evaluator = "synthetic"
+{fem}[grid]
+phi = [0.02, 0.05]
+B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
+gradB_T_per_m = 1.78
+"""
+
+
+def _synthetic_table(path: Path, study_text: str | None = None, *, fem: bool = False) -> Path:
     """A finished table of the synthetic evaluator (known means and deviations), made
-    in-process: every part written directly, then aggregated by run_batch (no Dask)."""
+    in-process: every part written directly, then aggregated by run_batch (no Dask).
+    ``study_text`` None: :data:`SYNTHETIC_STUDY` (``fem``: with ``fem = true`` on 8^3, which
+    adds E_eff and its discretization error)."""
+    if study_text is None:
+        study_text = SYNTHETIC_STUDY.format(fem="fem = true\nvoxels = 8\n" if fem else "")
     from homogenize.tables._evaluate import get_evaluator
     from homogenize.tables._study import parse_study
     from homogenize.tables.batch import _part_path, _write_part, parts_dir_for, run_batch
@@ -57,5 +77,6 @@ def _synthetic_table(path: Path, study_text: str) -> Path:
 
 @pytest.fixture(scope="session")
 def synthetic_table():
-    """``synthetic_table(path, study_text)``: a finished synthetic-evaluator table at ``path``."""
+    """``synthetic_table(path[, study_text][, fem=True])``: a finished synthetic-evaluator table
+    at ``path`` (default study: :data:`SYNTHETIC_STUDY`)."""
     return _synthetic_table

@@ -448,25 +448,11 @@ def test_cli_magnet_options_need_the_magnet(cli, capsys):
     assert "--gap-sweep-m has no effect without --magnet" in capsys.readouterr().err
 
 
-_SYNTH = """
-[study]
-name = "syn-channel"
-seed = 7
-realizations = 4
-n_particles = 20
-evaluator = "synthetic"
-[grid]
-phi = [0.02, 0.05]
-B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
-gradB_T_per_m = 1.78
-"""
-
-
 def test_cli_table_interval(cli, tmp_path, capsys, synthetic_table):
     """With --table: the closure and hold gaps carry the table's M_eff interval (the weaker
     magnetization closes closer to the magnet), the mean inside it."""
     import json
-    table = synthetic_table(tmp_path / "t.h5", _SYNTH)
+    table = synthetic_table(tmp_path / "t.h5")
     out = tmp_path / "m.json"
     assert cli(["channel", *MAGNET, "--table", str(table), "--phi", "0.05",
                 "--gap-sweep-m", "0.008:0.0005:4", "--pressure-drop-Pa", "100",

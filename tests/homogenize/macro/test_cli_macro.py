@@ -7,9 +7,6 @@ from homogenize.cli import main
 from homogenize.macro.exporters import parse_abaqus, parse_elmer
 
 
-
-
-
 def test_beam_prints_models(capsys, tmp_path):
     out = tmp_path / "beam.json"
     rc = main(["beam", "--model", "eb", "timoshenko", "fem", "--nz", "1", "--json", str(out)])
@@ -81,23 +78,11 @@ def test_channel_flow_and_target_gap(tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------- issue 36
-_SYNTH = """
-[study]
-name = "syn"
-seed = 7
-realizations = 4
-n_particles = 20
-evaluator = "synthetic"
-[grid]
-phi = [0.02, 0.05]
-B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
-gradB_T_per_m = 1.78
-"""
 
 
 def test_channel_prints_what_was_asked_with_the_field_interval(tmp_path, capsys,
                                                                 synthetic_table):
-    table = synthetic_table(tmp_path / "t.h5", _SYNTH)
+    table = synthetic_table(tmp_path / "t.h5")
     out = tmp_path / "ch.json"
     assert main(["channel", "--flow-rate-m3-s", "1.6667e-10", "--target-gap-m", "30e-6",
                  "--table", str(table), "--phi", "0.05", "--gradB", "30", "--nc", "1",

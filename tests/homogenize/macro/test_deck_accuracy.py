@@ -200,20 +200,6 @@ def test_export_cli_magnet_deck(tmp_path, capsys):
     assert "linear step" in capsys.readouterr().out
 
 
-_SYNTH = """
-[study]
-name = "syn-deck"
-seed = 7
-realizations = 4
-n_particles = 20
-evaluator = "synthetic"
-[grid]
-phi = [0.02, 0.05]
-B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
-gradB_T_per_m = 1.78
-"""
-
-
 def test_export_magnet_deck_at_the_ends_of_the_table_interval(tmp_path, capsys,
                                                               synthetic_table):
     """With --table a magnet deck carries the table's M_eff interval (issue 35): --bound low /
@@ -222,7 +208,7 @@ def test_export_magnet_deck_at_the_ends_of_the_table_interval(tmp_path, capsys,
     without --table is refused (exit 2, no file)."""
     from homogenize.macro.effective import magnetization_from_table
     from homogenize.tables import read_table
-    table = synthetic_table(tmp_path / "t.h5", _SYNTH)
+    table = synthetic_table(tmp_path / "t.h5")
     base = ["export", "--to", "abaqus", "--deck", "cantilever", "--E-Pa", "2e6", "--nu",
             "0.45", "--density-kg-m3", "1210", "--magnet", "cylinder", "--magnet-size",
             "10e-3", "5e-3", "--remanence-T", "1.2", "--magnet-position", "0.017", "0.0025",
