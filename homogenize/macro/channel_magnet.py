@@ -169,6 +169,7 @@ from homogenize.macro.flow import CeilingModel
 from homogenize.macro.magnets import PermanentMagnet
 from homogenize.macro.pullin import (PathFollowingError, magnet_body_force, place_magnet_xy,
                                      trace_branch)
+from homogenize.macro.pullin import check_gap_sweep as _check_gaps
 from micro.common.validate import ConvergenceError, InputError, check_finite, check_positive, \
     check_range
 from micro.demag import prism_demag_factors
@@ -242,19 +243,10 @@ def place_channel_magnet(magnet: PermanentMagnet, geometry: ChannelGeometry, gap
 
 def check_gap_sweep(gap_sweep_m) -> np.ndarray:
     """The magnet gaps [m] of a sweep: finite, >= 0, strictly monotonic (InputError naming
-    ``gap_sweep_m`` otherwise)."""
-    g = np.atleast_1d(np.asarray(check_finite("gap_sweep_m", gap_sweep_m, "m"), float))
-    if g.ndim != 1 or g.size < 1:
-        raise InputError(f"gap_sweep_m must be a 1-D array of gaps [m], got shape {g.shape}")
-    if np.any(g < 0):
-        raise InputError(f"gap_sweep_m: a gap below zero ({g.min():g} m) puts the magnet into "
-                         f"the glass and the channel; gaps must be >= 0 m (magnet face to "
-                         f"channel floor)")
-    d = np.diff(g)
-    if g.size > 1 and not (np.all(d > 0) or np.all(d < 0)):
-        raise InputError("gap_sweep_m must be strictly monotonic (all increasing or all "
-                         "decreasing) [m]")
-    return g
+    ``gap_sweep_m`` otherwise; :func:`homogenize.macro.pullin.check_gap_sweep`)."""
+    return _check_gaps(gap_sweep_m, below_zero="puts the magnet into the glass and the channel; "
+                                               "gaps must be >= 0 m (magnet face to channel "
+                                               "floor)", round_trip_hint="")
 
 
 class ChannelMagnet:

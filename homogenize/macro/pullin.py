@@ -1081,18 +1081,24 @@ class PullInResult:
         return out
 
 
-def _check_sweep(gap_sweep_m):
+def check_gap_sweep(gap_sweep_m, below_zero: str = "puts the magnet inside the strip; gaps "
+                    "must be >= 0 m (strip face to magnet face)",
+                    round_trip_hint: str = "; run two sweeps for a round trip (or "
+                                           "round_trip=True)") -> np.ndarray:
+    """The magnet gaps [m] of a sweep: finite, 1-D, >= 0, strictly monotonic; one InputError
+    naming ``gap_sweep_m`` otherwise (``below_zero``: what a negative gap means for the device,
+    ``round_trip_hint``: appended to the monotonicity message)."""
     g = np.atleast_1d(np.asarray(check_finite("gap_sweep_m", gap_sweep_m, "m"), float))
     if g.ndim != 1 or g.size < 1:
         raise InputError(f"gap_sweep_m must be a 1-D array of gaps [m], got shape {g.shape}")
     if np.any(g < 0):
-        raise InputError(f"gap_sweep_m: a gap below zero ({g.min():g} m) puts the magnet inside "
-                         f"the strip; gaps must be >= 0 m (strip face to magnet face)")
+        raise InputError(f"gap_sweep_m: a gap below zero ({g.min():g} m) {below_zero}")
     d = np.diff(g)
     if g.size > 1 and not (np.all(d > 0) or np.all(d < 0)):
         raise InputError("gap_sweep_m must be strictly monotonic (all increasing or all "
-                         "decreasing) [m]; run two sweeps for a round trip (or round_trip=True)")
+                         "decreasing) [m]" + round_trip_hint)
     return g
+
 
 
 def _solve_at(system, u_guess, gap, tol, r_scale, max_newton=30):
@@ -1610,7 +1616,7 @@ def pullin_sweep(strip: Strip, material: ElasticMaterial, magnet: PermanentMagne
                              f"(its top face is {-g0:g} m above the strip's bottom face)")
         gaps = np.linspace(g0, 0.0, 33)
     else:
-        gaps = _check_sweep(gap_sweep_m)
+        gaps = check_gap_sweep(gap_sweep_m)
         _check_overlap(place_magnet_xy(magnet, gaps[0]), strip)
     model = MagnetElastica(strip, material, magnet, M_of_H, n_segments=n_segments,
                            n_cross=n_cross, demag_factor=demag_factor,

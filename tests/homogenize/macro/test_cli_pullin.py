@@ -89,22 +89,6 @@ def test_gap_needs_a_permanent_magnet(tmp_path, capsys):
     assert "permanent magnet" in capsys.readouterr().err
 
 
-_SYNTH_FEM = """
-[study]
-name = "syn-fem"
-seed = 7
-realizations = 4
-n_particles = 20
-evaluator = "synthetic"
-fem = true
-voxels = 8
-[grid]
-phi = [0.02, 0.05]
-B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
-gradB_T_per_m = 1.78
-"""
-
-
 def test_interval_ends_pair_the_weak_pull_with_the_stiff_strip():
     """The ends of a pull-in interval: (E high, M low) gives the smallest gap, (E low, M high)
     the largest; without any interval only the mean; E's ends are the table's widened by the
@@ -133,7 +117,7 @@ def test_table_intervals_reach_the_pull_in_gap(tmp_path, capsys, synthetic_table
         pytest.skip("full version: MAPSIM_FULL=1 (three follower-elastica sweeps with contact "
                     "and release; minutes, and more than 6 min on a loaded 2-core machine)")
     from homogenize.tables import modulus_from_table, read_table
-    table = synthetic_table(tmp_path / "t.h5", _SYNTH_FEM)
+    table = synthetic_table(tmp_path / "t.h5", fem=True)
     E = modulus_from_table(read_table(table), 0.05)
     assert E is not None and E.total_low < E.mean < E.total_high
     sweep = ["--table", str(table), "--phi", "0.05", "--gap-sweep-m", "0.016:0.004:7"]

@@ -21,21 +21,6 @@ NZ = prism_demag_factors(20e-3, 5e-3, 1e-3)[2]
 MAGNET = PermanentMagnet("cylinder", (10e-3, 10e-3), 1.3)
 STIFF = ElasticMaterial(20e6, 0.45, 1210.0)
 
-_SYNTH = """
-[study]
-name = "syn-fem"
-seed = 7
-realizations = 4
-n_particles = 20
-evaluator = "synthetic"
-fem = true
-voxels = 8
-[grid]
-phi = [0.02, 0.05]
-B_T = [0.05, 0.2, 0.5, 1.0, 2.0]
-gradB_T_per_m = 1.78
-"""
-
 
 @pytest.fixture(scope="module")
 def table_law(tmp_path_factory, synthetic_table):
@@ -43,7 +28,7 @@ def table_law(tmp_path_factory, synthetic_table):
     --table T --phi 0.05 --E-Pa 2.2496e6 --gap-sweep-m 0.016:0.004:7)."""
     from homogenize.macro.effective import magnetization_from_table
     from homogenize.tables.batch import read_table
-    t = synthetic_table(tmp_path_factory.mktemp("tab") / "t.h5", _SYNTH)
+    t = synthetic_table(tmp_path_factory.mktemp("tab") / "t.h5", fem=True)
     return magnetization_from_table(read_table(t), 0.05)
 
 
