@@ -173,6 +173,7 @@ from homogenize.macro.pullin import check_gap_sweep as _check_gaps
 from micro.common.validate import ConvergenceError, InputError, check_finite, check_positive, \
     check_range
 from micro.demag import prism_demag_factors
+from micro.materials import PDMS
 
 __all__ = ["channel_demag_factor", "place_channel_magnet", "check_gap_sweep", "ChannelMagnet",
            "ChannelMagnetResult", "channel_magnet_sweep", "REALISTIC_CASE",
@@ -186,7 +187,8 @@ FAR_DEFLECTION_FRACTION = 0.1
 #: CeilingModel.from_fem (nc 3, P2), coupled sections (plate rigidity of the 0.5 mm PDMS
 #: ceiling), 21 sections x 12 columns x 3 points, no liquid pressure unless said
 REALISTIC_CASE = {
-    "channel_m": {"a": 5e-3, "b": 50e-6, "c": 0.5e-3, "d": 10e-3}, "E_Pa": 2e6, "nu": 0.45,
+    "channel_m": {"a": 5e-3, "b": 50e-6, "c": 0.5e-3, "d": 10e-3}, "E_Pa": PDMS.E_Pa,
+    "nu": PDMS.nu,
     "magnetization": "soft spheres, phi = 0.0175 (SEED.c * SEED.d), Ms of the seed powder",
     "demag_factor": 0.8724,
     "magnet": "NdFeB cylinder 10 mm x 10 mm, B_r 1.3 T, axis z, under the middle (5, 2.5) mm",
