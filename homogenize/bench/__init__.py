@@ -13,14 +13,14 @@ import sys
 import time
 
 from homogenize.bench import (bench_cell, bench_dipoles, bench_macro, bench_particles,
-                              bench_relax, bench_specimen, bench_tables)
+                              bench_peer, bench_relax, bench_specimen, bench_tables)
 
 __all__ = ["PROVIDERS", "run"]
 
 #: Providers by name, in the order they run.
 PROVIDERS = {"particles": bench_particles, "dipoles": bench_dipoles, "cell": bench_cell,
              "macro": bench_macro, "tables": bench_tables, "relax": bench_relax,
-             "specimen": bench_specimen}
+             "specimen": bench_specimen, "peer": bench_peer}
 
 
 def run(quick: bool = False, only: str | None = None) -> list[dict]:

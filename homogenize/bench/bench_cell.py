@@ -330,13 +330,15 @@ def bench_records(quick: bool) -> list[dict]:
 PEER_TOL = 1e-8
 
 
-def _voxel_moduli(voxels: int, seed: int):
+def _voxel_moduli(voxels: int, seed: int, rve_voxels: int | None = None):
     """(E [Pa], nu) per voxel, shape (n, n, n) indexed [k, j, i], of the composite-voxel model
     mapsim solves: particle / matrix, and in cut voxels the Reuss average (isotropic: harmonic
-    bulk and shear moduli) -- exactly the stiffness field of ``method="composite"``."""
+    bulk and shear moduli) -- exactly the stiffness field of ``method="composite"``.
+    ``rve_voxels``: the grid the RVE is drawn for (:func:`bench_rve`; default ``voxels``), so
+    that neighbouring grids (64^3 and 65^3) voxelize the same particles."""
     from micro.materials import FE, PDMS, elastic
     from homogenize.cell._effective_media import bulk_shear
-    mesh = voxelize(bench_rve(voxels, seed), voxels, method="composite")
+    mesh = voxelize(bench_rve(rve_voxels or voxels, seed), voxels, method="composite")
     f = mesh.fraction
     Km, Gm = bulk_shear(*(elastic(PDMS).E_Pa, elastic(PDMS).nu))
     Kp, Gp = bulk_shear(*(elastic(FE).E_Pa, elastic(FE).nu))
@@ -371,7 +373,6 @@ def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
     """Run one tool on the shared microstructure (in a child process, for its peak memory)."""
     import json
     mesh, E, nu = _voxel_moduli(voxels, seed)
-    V = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
     t0 = time.perf_counter()
     extra = {}
     if tool.startswith("solver-"):               # 6 strains + magnetic load, given solver
@@ -418,40 +419,61 @@ def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
         C = r.C_eff_Pa
         extra = {"iterations": max(r.iterations.values())}
     else:
-        import muFFT
-        import muSpectre as msp
-        n = voxels
-        cell = msp.cell.CellData.make([n, n, n], [1.0, 1.0, 1.0])
-        cell.nb_quad_pts = 1
-        mat = msp.material.MaterialLinearElastic4_3d.make(cell, "voxels")
-        for i, px in cell.pixels.enumerate():       # px = (x, y, z); our arrays are [z, y, x]
-            mat.add_pixel(i, float(E[px[2], px[1], px[0]]), float(nu[px[2], px[1], px[0]]))
-        krylov = msp.solvers.KrylovSolverCG(PEER_TOL, 20000, msp.Verbosity.Silent)
-        grad = list(muFFT.Stencils3D.central) if tool == "muspectre-central" else None
-        args = (cell, krylov, msp.Verbosity.Silent, PEER_TOL, PEER_TOL, 20000)
-        solver = (msp.solvers.SolverNewtonCG(*args, grad, [1.0]) if grad
-                  else msp.solvers.SolverNewtonCG(*args))
-        solver.formulation = msp.Formulation.small_strain
-        solver.initialise_cell()
-        C = np.zeros((6, 6))
-        fev = 0
-        for b, (i, j) in enumerate(V):
-            eps = np.zeros((3, 3))
-            eps[i, j] = eps[j, i] = 1e-3 if i == j else 0.5e-3     # engineering shear 1e-3
-            res = solver.solve_load_increment(eps)
-            sig = np.asarray(res.stress).reshape(3, 3, -1).mean(axis=-1)
-            for a, (p, q) in enumerate(V):
-                C[a, b] = sig[p, q] / 1e-3
-            fev = int(res.nb_fev)
-        C = 0.5 * (C + C.T)
+        C, fev, _ = muspectre_stiffness(E, nu, tool.split("-")[1], PEER_TOL)
         extra = {"cg_matvecs_total": fev}
     sec = time.perf_counter() - t0
     with open(out, "w") as fh:
         json.dump({"C_eff_Pa": C.tolist(), "seconds": sec, **extra}, fh)
 
 
-def _run_peer(tool: str, voxels: int, seed: int, threads: int | None) -> dict:
-    """Run :func:`_peer_worker` under ``/usr/bin/time -v``: result, seconds, peak RSS [GB]."""
+def muspectre_stiffness(E, nu, gradient: str, tol: float, maxiter: int = 20000,
+                        cases: int = 6, timings: dict | None = None):
+    """muSpectre 0.27 on the voxel moduli ``E`` [Pa], ``nu`` (n, n, n; [k, j, i], odd n): small
+    strain, strain control, ``gradient`` "central" (finite-difference stencil) or "fourier"; the
+    first ``cases`` unit strains (e11, e22, e33, 2 e23, 2 e13, 2 e12) as successive load steps of
+    one Newton-CG solver, CG to the relative residual ``tol`` in at most ``maxiter`` iterations.
+    Returns (C [Pa] (6, 6), columns beyond ``cases`` zero; CG matrix-vector products in all;
+    seconds of the set-up (cell, material, solver)). ``timings``: a dict that gets "setup" [s]
+    before the solve starts (kept when a capped CG raises)."""
+    import muFFT
+    import muSpectre as msp
+    t0 = time.perf_counter()
+    n = E.shape[0]
+    cell = msp.cell.CellData.make([n, n, n], [1.0, 1.0, 1.0])
+    cell.nb_quad_pts = 1
+    mat = msp.material.MaterialLinearElastic4_3d.make(cell, "voxels")
+    for i, px in cell.pixels.enumerate():       # px = (x, y, z); our arrays are [z, y, x]
+        mat.add_pixel(i, float(E[px[2], px[1], px[0]]), float(nu[px[2], px[1], px[0]]))
+    krylov = msp.solvers.KrylovSolverCG(tol, maxiter, msp.Verbosity.Silent)
+    grad = list(muFFT.Stencils3D.central) if gradient == "central" else None
+    args = (cell, krylov, msp.Verbosity.Silent, tol, tol, maxiter)
+    solver = (msp.solvers.SolverNewtonCG(*args, grad, [1.0]) if grad
+              else msp.solvers.SolverNewtonCG(*args))
+    solver.formulation = msp.Formulation.small_strain
+    solver.initialise_cell()
+    setup = time.perf_counter() - t0
+    if timings is not None:
+        timings["setup"] = setup
+    V = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
+    C = np.zeros((6, 6))
+    fev = 0
+    for b, (i, j) in enumerate(V[:cases]):
+        eps = np.zeros((3, 3))
+        eps[i, j] = eps[j, i] = 1e-3 if i == j else 0.5e-3     # engineering shear 1e-3
+        res = solver.solve_load_increment(eps)
+        sig = np.asarray(res.stress).reshape(3, 3, -1).mean(axis=-1)
+        for a, (p, q) in enumerate(V):
+            C[a, b] = sig[p, q] / 1e-3
+        fev = int(res.nb_fev)
+    if cases == 6:
+        C = 0.5 * (C + C.T)
+    return C, fev, setup
+
+
+def _run_peer(tool: str, voxels: int, seed: int, threads: int | None,
+              worker: str = "homogenize.bench.bench_cell:_peer_worker") -> dict:
+    """Run ``worker`` (default :func:`_peer_worker`; "module:function" taking (tool, voxels,
+    seed, out)) under ``/usr/bin/time -v`` in a child process: result, seconds, peak RSS [GB]."""
     import json
     import subprocess
     import sys
@@ -462,8 +484,9 @@ def _run_peer(tool: str, voxels: int, seed: int, threads: int | None) -> dict:
                    OPENBLAS_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads))
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "peer.json")
-        code = (f"from homogenize.bench.bench_cell import _peer_worker; "
-                f"_peer_worker({tool!r}, {voxels}, {seed}, {out!r})")
+        module, func = worker.split(":")
+        code = (f"from {module} import {func}; "
+                f"{func}({tool!r}, {voxels}, {seed}, {out!r})")
         p = subprocess.run(["/usr/bin/time", "-v", sys.executable, "-c", code], env=env,
                            capture_output=True, text=True)
         if p.returncode != 0:

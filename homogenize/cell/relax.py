@@ -77,6 +77,7 @@ from micro.nearfield import MU_MAX, chord_permeability, near_field_correction_N
 from micro.box import PeriodicBox
 from micro.rve import RVE
 
+from homogenize.cell._pair_kernels import pair_sums
 from homogenize.cell._green import periodic_displaceability, rigid_sphere_displaceability
 from homogenize.cell.problem import SOLVERS, homogenize_mesh, tensor_to_voigt, voigt_to_tensor
 from homogenize.voxels.mesh import voxelize
@@ -337,48 +338,7 @@ def magnetic_stiffness_analytic(rve, state, law=DEFAULT_LAW, law_params=None, *,
     rc = float(cutoff_boxes) * L
     imgs = _lattice_vectors(L, rc)
     I3 = np.eye(3)
-    T = np.zeros((N, N, 3, 3))
-    Hx = np.zeros((N, N, 3, 3))          # dH_i/dx_k at frozen moments
-    Fx = np.zeros((N, N, 3, 3))          # dF_i/dx_k at frozen moments
-    Fm = np.zeros((N, N, 3, 3))          # dF_i/dm_k
-    for i in range(N):
-        d = (x[i] - x)[:, None, :] + imgs[None, :, :]           # x_i - x_j + n L
-        r2 = np.einsum("jnk,jnk->jn", d, d)
-        jj, nn = np.nonzero((r2 > 0) & (r2 < rc * rc))
-        dv = d[jj, nn]
-        r = np.sqrt(r2[jj, nn])
-        e = dv / r[:, None]
-        ee = e[:, :, None] * e[:, None, :]
-        T_p = (3.0 * ee - I3) / (4.0 * math.pi * r[:, None, None] ** 3)
-
-        def grad_field(mv):
-            # d/dd of the field (3 (m.e) e - m) / (4 pi r^3) of dipole mv at d
-            me = np.einsum("pk,pk->p", mv, e)[:, None, None]
-            return 3.0 / (4.0 * math.pi * r[:, None, None] ** 4) * (
-                e[:, :, None] * mv[:, None, :] + mv[:, :, None] * e[:, None, :] + me * I3
-                - 5.0 * me * ee)
-
-        mj = m[jj]
-        mi = np.broadcast_to(m[i], mj.shape)
-        Aj, Ai = grad_field(mj), grad_field(mi)
-        # Hessian of mu0 mi . T(d) mj (the force on i is its gradient)
-        ae = np.einsum("pk,pk->p", mi, e)[:, None, None]
-        be = np.einsum("pk,pk->p", mj, e)[:, None, None]
-        ab = np.einsum("pk,pk->p", mi, mj)[:, None, None]
-
-        def o(u, v):
-            return u[:, :, None] * v[:, None, :]
-
-        Hs = (3.0 * (o(mi, mj) + o(mj, mi) + ab * I3) - 15.0 * ab * ee
-              - 15.0 * (be * (o(mi, e) + o(e, mi)) + ae * (o(mj, e) + o(e, mj)) + ae * be * I3)
-              + 105.0 * ae * be * ee) * (MU0 / (4.0 * math.pi * r[:, None, None] ** 5))
-        np.add.at(T[i], jj, T_p)
-        Hx[i, i] += Aj.sum(axis=0)
-        np.add.at(Hx[i], jj, -Aj)
-        Fx[i, i] += Hs.sum(axis=0)
-        np.add.at(Fx[i], jj, -Hs)
-        Fm[i, i] += MU0 * Aj.sum(axis=0)
-        np.add.at(Fm[i], jj, MU0 * Ai)
+    T, Hx, Fx, Fm = pair_sums(x, m, imgs, rc, MU0)     # (N, N, 3, 3) blocks, numba
 
     def dense(A):
         return A.transpose(0, 2, 1, 3).reshape(3 * N, 3 * N)
