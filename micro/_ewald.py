@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 import scipy.fft
 
@@ -202,12 +203,16 @@ class PeriodicSum:
         q = np.zeros((kk, kk, kk, 3))
         K.pme_spread(self.gpos, mom, self.order, self.slab_order, self.slab_start, self._work,
                      self._iwork, self._row, q)
-        return scipy.fft.rfftn(q, axes=(0, 1, 2), workers=-1, overwrite_x=True)
+        # the FFT's threads follow numba's (NUMBA_NUM_THREADS / numba.set_num_threads), so that a
+        # one-thread run is one thread throughout; pocketfft splits the transform by lines, so
+        # the result is bitwise the same on any count (tested)
+        return scipy.fft.rfftn(q, axes=(0, 1, 2), workers=numba.get_num_threads(),
+                               overwrite_x=True)
 
     def _pme_back_gather(self, hg):
         kk = self.grid
-        grid = scipy.fft.irfftn(hg, s=(kk, kk, kk), axes=(0, 1, 2), workers=-1,
-                                overwrite_x=True)
+        grid = scipy.fft.irfftn(hg, s=(kk, kk, kk), axes=(0, 1, 2),
+                                workers=numba.get_num_threads(), overwrite_x=True)
         out = np.empty((self.n, grid.shape[3]))
         K.pme_gather(self.gpos, np.ascontiguousarray(grid), self.order, self._work[:64],
                      self._iwork[:64], self._row[:64], out)

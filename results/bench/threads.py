@@ -8,15 +8,17 @@ reads the solver's own stage timings (assembly, AMG/multigrid set-up, deflation,
 its JSON, so that the share of each stage and its own speed-up are on record. E_eff of the two
 thread counts must be equal (the kernels are bitwise thread-independent; checked).
 
-The dipole solve: ``mapsim rve --load RVE --B 0.1 --gradB 1.78`` on an RVE of 1e5 particles
-(phi 0.035, drawn once beforehand by ``mapsim rve --out``, not timed): the self-consistent
-moments and forces by particle-mesh Ewald, whole command under ``/usr/bin/time -v`` (reading
-the RVE file is part of it), M_eff of both thread counts compared bit for bit.
+The dipole solve: ``micro.dipoles.solve`` on an RVE of 1e5 particles (phi 0.035, drawn once
+beforehand by ``mapsim rve --out``, not timed), the self-consistent moments and forces by
+particle-mesh Ewald, timed in its process after a warm-up; the whole process under
+``/usr/bin/time -v``; the results of both thread counts compared bit for bit.
 
 Run:  .venv/bin/python results/bench/threads.py              (64^3 and 128^3, ~12 min)
       .venv/bin/python results/bench/threads.py --quick      (32^3 only, ~1 min)
       .venv/bin/python results/bench/threads.py --only dipoles   (re-measure one part, keep
-                                                                  the other from threads.json)
+                                                                  the others from threads.json)
+      .venv/bin/python results/bench/threads.py --only profile   (where the cell solve's time
+                     goes at 64^3 on 1 and 2 threads: cProfile's own time per kernel, ~1 min)
 Writes results/bench/threads.json and threads.md (--quick: a temporary directory).
 """
 from __future__ import annotations
@@ -87,18 +89,89 @@ def measure(grids: dict, work: Path) -> list:
     return rows
 
 
+DIPOLE_CODE = """
+import json, sys, time
+from micro import RVE, generate_rve
+from micro.dipoles import solve
+solve(generate_rve(0.035, 4000, 2), 0.1, 1.78)           # compile outside the timing (PME)
+rve = RVE.load(sys.argv[1])
+t0 = time.perf_counter()
+st = solve(rve, 0.1, 1.78)
+sec = time.perf_counter() - t0
+json.dump({"solve_s": sec, "iterations": int(st.iterations),
+           "M_eff_A_per_m": list(map(float, st.M_eff_A_per_m)),
+           "f_eff_N_m3": list(map(float, st.f_eff_N_m3)),
+           "moments_sum": float(abs(st.moments_Am2).sum()),
+           "forces_sum": float(abs(st.total_force_N).sum())}, open(sys.argv[2], "w"))
+"""
+
+
 def measure_dipoles(n_particles: int, work: Path) -> dict:
-    runs = _draw_and_run(
-        n_particles, f"dip{n_particles}",
-        lambda rve: [MAPSIM, "rve", "--load", str(rve), "--B", "0.1", "--gradB", "1.78"], work,
-        lambda d: {"magnetics": d["summary"]["magnetics"]})
+    """The self-consistent dipole solve (``micro.dipoles.solve``, default law and summation:
+    PME above 3000 particles) of an RVE of ``n_particles`` on 1 and 2 threads: the solve alone
+    timed in the process (after a warm-up that compiles the kernels), the whole process's wall
+    time and peak RSS by ``/usr/bin/time -v``; the moments' and forces' sums compared bit for
+    bit."""
+    rve = work / f"dip{n_particles}.h5"
+    subprocess.run([MAPSIM, "rve", "--phi", "0.035", "--n", str(n_particles), "--seed", "1",
+                    "--out", str(rve)], check=True, capture_output=True)
+    runs = {}
+    for k in (1, 2):
+        out = work / f"dip{n_particles}_{k}.json"
+        t = _run([sys.executable, "-c", DIPOLE_CODE, str(rve), str(out)], k, work)
+        runs[k] = {**t, **json.loads(out.read_text())}
     one, two = runs[1], runs[2]
+    keys = ("M_eff_A_per_m", "f_eff_N_m3", "moments_sum", "forces_sum", "iterations")
     return {"n_particles": n_particles, "threads_1": one, "threads_2": two,
+            "speedup_solve": one["solve_s"] / two["solve_s"],
             "speedup_wall": one["wall_s"] / two["wall_s"],
-            "results_equal": one["magnetics"] == two["magnetics"]}
+            "results_equal": all(one[q] == two[q] for q in keys)}
 
 
-def markdown(rows: list, dip: dict | None = None) -> str:
+PROFILE_CODE = """
+import cProfile, json, pstats, sys
+import numpy as np
+from micro import generate_rve
+from homogenize.cell.problem import homogenize_rve
+rve = generate_rve(0.035, {n_particles}, 1)
+F = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
+homogenize_rve(rve, 16, forces_N=F)                      # compile outside the profile
+pr = cProfile.Profile()
+pr.enable()
+r = homogenize_rve(rve, {n}, forces_N=F)
+pr.disable()
+st = pstats.Stats(pr).stats
+own = {{f"{{k[0].split('/')[-1]}}:{{k[2]}}": v[2] for k, v in st.items()}}
+json.dump({{"stages_s": r.timings_s, "own_s": own}}, open(sys.argv[1], "w"))
+"""
+
+
+def measure_profile(n: int, n_particles: int, work: Path) -> dict:
+    """cProfile of the cell solve (in-process ``homogenize_rve``, 7 load cases) on 1 and 2
+    threads: each function's own time, and the speed-up of the ones that take >= 1 % of the
+    1-thread solve; ``rest_of_solve`` is the solve minus the matrix-free stencil kernel."""
+    runs = {}
+    for k in (1, 2):
+        out = work / f"prof{k}.json"
+        env = dict(os.environ, NUMBA_NUM_THREADS=str(k))
+        subprocess.run([sys.executable, "-c", PROFILE_CODE.format(n=n, n_particles=n_particles),
+                        str(out)], env=env, check=True, capture_output=True)
+        runs[k] = json.loads(out.read_text())
+    solve1, solve2 = runs[1]["stages_s"]["solve"], runs[2]["stages_s"]["solve"]
+    o1, o2 = runs[1]["own_s"], runs[2]["own_s"]
+    big = sorted((f for f in o1 if o1[f] >= 0.01 * solve1), key=lambda f: -o1[f])
+    kern = "_matfree.py:_node_op"
+    return {"voxels": n, "n_particles": n_particles,
+            "stages_1_s": runs[1]["stages_s"], "stages_2_s": runs[2]["stages_s"],
+            "functions": [{"function": f, "own_1_thread_s": o1[f], "own_2_threads_s": o2.get(f),
+                           "share_of_1_thread_solve": o1[f] / solve1,
+                           "speedup": o1[f] / o2[f] if o2.get(f) else None} for f in big],
+            "stencil_kernel_speedup": o1[kern] / o2[kern] if o2.get(kern) else None,
+            "rest_of_solve_speedup": ((solve1 - o1.get(kern, 0.0))
+                                      / (solve2 - o2.get(kern, 0.0)))}
+
+
+def markdown(rows: list, dip: dict | None = None, prof: dict | None = None) -> str:
     lines = ["# The cell FEM on 1 and 2 threads (`results/bench/threads.py`)", "",
              "`mapsim homogenize RVE --voxels N --B 0.1 --gradB 1.78` (7 load cases, default "
              "solver), NUMBA_NUM_THREADS=1 then 2, wall time and peak RSS by `/usr/bin/time -v`; "
@@ -121,38 +194,63 @@ def markdown(rows: list, dip: dict | None = None) -> str:
         for r in rows), ""]
     if dip:
         lines += ["## The dipole solve (particle-mesh Ewald)", "",
-                  "`mapsim rve --load RVE --B 0.1 --gradB 1.78` (self-consistent moments and "
-                  "forces), NUMBA_NUM_THREADS=1 then 2, whole command by `/usr/bin/time -v`.", "",
-                  "| particles | wall 1 / 2 threads [s] | speed-up | peak RSS 1 / 2 [GB] | "
-                  "magnetics equal |", "|---|---|---|---|---|",
-                  f"| {dip['n_particles']} | {dip['threads_1']['wall_s']:.1f} / "
-                  f"{dip['threads_2']['wall_s']:.1f} | {dip['speedup_wall']:.2f}x | "
+                  "`micro.dipoles.solve(rve, 0.1 T, 1.78 T/m)` (self-consistent moments and "
+                  "forces, default law, PME), NUMBA_NUM_THREADS=1 then 2: the solve timed in the "
+                  "process after a warm-up; the whole process (reading the RVE, the warm-up) "
+                  "and its peak RSS by `/usr/bin/time -v`.", "",
+                  "| particles | solve 1 / 2 threads [s] | speed-up | whole process 1 / 2 [s] "
+                  "| peak RSS 1 / 2 [GB] | results equal |", "|---|---|---|---|---|---|",
+                  f"| {dip['n_particles']} | {dip['threads_1']['solve_s']:.1f} / "
+                  f"{dip['threads_2']['solve_s']:.1f} | {dip['speedup_solve']:.2f}x | "
+                  f"{dip['threads_1']['wall_s']:.1f} / {dip['threads_2']['wall_s']:.1f} | "
                   f"{dip['threads_1']['peak_rss_GB']:.2f} / {dip['threads_2']['peak_rss_GB']:.2f} "
                   f"| {dip['results_equal']} |", ""]
+    if prof:
+        s1, s2 = prof["stages_1_s"], prof["stages_2_s"]
+        lines += [f"## Where the cell solve's time goes ({prof['voxels']}^3, "
+                  f"{prof['n_particles']} particles, 7 load cases)", "",
+                  "`results/bench/threads.py --only profile`: cProfile, each function's own "
+                  f"time. Solve {s1['solve']:.1f} s on 1 thread, {s2['solve']:.1f} s on 2 "
+                  f"({s1['solve'] / s2['solve']:.2f}x); whole homogenization "
+                  f"{s1['total']:.1f} / {s2['total']:.1f} s "
+                  f"({s1['total'] / s2['total']:.2f}x). The matrix-free stencil kernel "
+                  f"(smoothing, residuals, products) {prof['stencil_kernel_speedup']:.2f}x; "
+                  f"the rest of the solve {prof['rest_of_solve_speedup']:.2f}x.", "",
+                  "| function | own time 1 / 2 threads [s] | own time / 1-thread solve time | "
+                  "speed-up |", "|---|---|---|---|"]
+        for f in prof["functions"]:
+            sp = f"{f['speedup']:.2f}x" if f["speedup"] else "-"
+            lines.append(f"| `{f['function']}` | {f['own_1_thread_s']:.2f} / "
+                         f"{(f['own_2_threads_s'] or 0.0):.2f} | "
+                         f"{100 * f['share_of_1_thread_solve']:.1f} % | {sp} |")
+        lines.append("")
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", choices=("cells", "dipoles"), default=None,
-                    help="re-measure this part only; the other is kept from threads.json")
+    ap.add_argument("--only", choices=("cells", "dipoles", "profile"), default=None,
+                    help="re-measure this part only; the others are kept from threads.json")
     a = ap.parse_args(argv)
     out = Path(tempfile.mkdtemp()) if a.quick else HERE
     old = (json.loads((HERE / "threads.json").read_text())
            if a.only and (HERE / "threads.json").exists() else {})
     with tempfile.TemporaryDirectory() as work:
-        rows = (measure(QUICK if a.quick else GRIDS, Path(work)) if a.only != "dipoles"
+        rows = (measure(QUICK if a.quick else GRIDS, Path(work)) if a.only in (None, "cells")
                 else old.get("rows", []))
         dip = (measure_dipoles(DIPOLES_QUICK if a.quick else DIPOLES, Path(work))
-               if a.only != "cells" else old.get("dipoles"))
+               if a.only in (None, "dipoles") else old.get("dipoles"))
+        n_prof, p_prof = next(iter((QUICK if a.quick else GRIDS).items()))
+        prof = (measure_profile(n_prof, p_prof, Path(work)) if a.only in (None, "profile")
+                else old.get("profile"))
     from importlib import metadata
-    doc = {"rows": rows, "dipoles": dip, "cpu_count": os.cpu_count(),
+    doc = {"rows": rows, "dipoles": dip, "profile": prof, "cpu_count": os.cpu_count(),
            "versions": {k: metadata.version(k) for k in ("numpy", "scipy", "numba", "pyamg")},
            "command": "results/bench/threads.py"}
     (out / "threads.json").write_text(json.dumps(doc, indent=1) + "\n")
-    (out / "threads.md").write_text(markdown(rows, dip))
-    print(markdown(rows, dip))
+    (out / "threads.md").write_text(markdown(rows, dip, prof))
+    print(markdown(rows, dip, prof))
     return 0
 
 

@@ -247,3 +247,23 @@ def test_pme_influence_grad_against_numpy():
     tot = acc.sum(axis=0)
     assert math.isclose(tot[0], u, rel_tol=1e-12)
     np.testing.assert_allclose(tot[1:].reshape(3, 3), p, rtol=1e-12, atol=1e-12 * np.abs(p).max())
+
+
+def test_pme_solve_bitwise_on_one_and_all_threads():
+    """The whole PME dipole solve (numba kernels and the FFT, whose workers follow numba's
+    thread count) gives the same moments and forces to the last bit on 1 thread and on all."""
+    import numba
+    from micro import generate_rve
+    from micro.dipoles import solve
+    rve = generate_rve(0.035, 3500, 4)
+    before = numba.get_num_threads()
+    out = []
+    try:
+        for nt in (1, numba.config.NUMBA_NUM_THREADS):
+            numba.set_num_threads(nt)
+            st = solve(rve, 0.1, 1.78, summation="pme")
+            out.append((st.moments_Am2.copy(), st.total_force_N.copy()))
+    finally:
+        numba.set_num_threads(before)
+    np.testing.assert_array_equal(out[0][0], out[1][0])
+    np.testing.assert_array_equal(out[0][1], out[1][1])
