@@ -94,7 +94,7 @@ import json, sys, time
 from micro import RVE, generate_rve
 from micro.dipoles import solve
 solve(generate_rve(0.035, 4000, 2), 0.1, 1.78)           # compile outside the timing (PME)
-rve = RVE.load(sys.argv[1])
+rve = RVE.load(sys.argv[1])                              # argv: RVE --json OUT
 t0 = time.perf_counter()
 st = solve(rve, 0.1, 1.78)
 sec = time.perf_counter() - t0
@@ -102,7 +102,7 @@ json.dump({"solve_s": sec, "iterations": int(st.iterations),
            "M_eff_A_per_m": list(map(float, st.M_eff_A_per_m)),
            "f_eff_N_m3": list(map(float, st.f_eff_N_m3)),
            "moments_sum": float(abs(st.moments_Am2).sum()),
-           "forces_sum": float(abs(st.total_force_N).sum())}, open(sys.argv[2], "w"))
+           "forces_sum": float(abs(st.total_force_N).sum())}, open(sys.argv[3], "w"))
 """
 
 
@@ -112,14 +112,9 @@ def measure_dipoles(n_particles: int, work: Path) -> dict:
     timed in the process (after a warm-up that compiles the kernels), the whole process's wall
     time and peak RSS by ``/usr/bin/time -v``; the moments' and forces' sums compared bit for
     bit."""
-    rve = work / f"dip{n_particles}.h5"
-    subprocess.run([MAPSIM, "rve", "--phi", "0.035", "--n", str(n_particles), "--seed", "1",
-                    "--out", str(rve)], check=True, capture_output=True)
-    runs = {}
-    for k in (1, 2):
-        out = work / f"dip{n_particles}_{k}.json"
-        t = _run([sys.executable, "-c", DIPOLE_CODE, str(rve), str(out)], k, work)
-        runs[k] = {**t, **json.loads(out.read_text())}
+    runs = _draw_and_run(n_particles, f"dip{n_particles}",
+                         lambda rve: [sys.executable, "-c", DIPOLE_CODE, str(rve)], work,
+                         lambda d: d)
     one, two = runs[1], runs[2]
     keys = ("M_eff_A_per_m", "f_eff_N_m3", "moments_sum", "forces_sum", "iterations")
     return {"n_particles": n_particles, "threads_1": one, "threads_2": two,
