@@ -252,14 +252,17 @@ CHOICE_DISPERSITIES = ("monodisperse", "lognormal")
 
 
 def _solver_choice_records(sizes=CHOICE_SIZES, phis=CHOICE_PHIS,
-                           dispersities=CHOICE_DISPERSITIES, matfree_only=()) -> list[dict]:
+                           dispersities=CHOICE_DISPERSITIES, matfree_only=(),
+                           patches: bool = False) -> list[dict]:
     """solver="matrix-free" against solver="fast" (the assembled BSR + pyamg SA) on the same RVE
     (:func:`choice_rve`; 6 strains + random particle forces, tol 1e-6), each run in its own
     process (peak RSS): what ``solver="auto"`` picks (homogenize.cell.problem._choose_solver) rests on
     these. ``ratio`` = fast seconds / matrix-free seconds; ``max_rel_error`` = the largest
     C_eff difference over max |C_eff|; ``stress_mag_rel_diff`` likewise for the magnetic stress
     (its column stops at sqrt(tol)). Grids in ``matfree_only`` run the matrix-free solver alone
-    (the assembled one may not fit)."""
+    (the assembled one may not fit). ``patches``: also the matrix-free solver with a particle
+    patch on every particle (keys ``patches_*``; ``patches_ratio`` = fast seconds / its
+    seconds)."""
     from homogenize.cell.problem import _choose_solver, _plain_particles, _options
     from micro import InputError
     out = []
@@ -308,6 +311,22 @@ def _solver_choice_records(sizes=CHOICE_SIZES, phis=CHOICE_PHIS,
                     "mean_radius_voxels": m["mean_radius_voxels"],
                     "patched_particles": m.get("patched_particles"),
                     **({"reference_skipped": a["error"]} if "error" in a else {})})
+                if patches:
+                    q = _run_peer(f"choice|matrix-free-patches|{phi!r}|{disp}", n, 1, None)
+                    if "error" in q:
+                        rec["patches_skipped"] = q["error"]
+                    else:
+                        Cq = np.array(q["C_eff_Pa"])
+                        rec.update({
+                            "patches_seconds": q["seconds"],
+                            "patches_ratio": (a["seconds"] / q["seconds"]
+                                              if "seconds" in a else None),
+                            "patches_peak_rss_GB": q["peak_rss_GB"],
+                            "patches_iterations": q["iterations"],
+                            "patches_patched_particles": q.get("patched_particles"),
+                            "patches_max_rel_error": (
+                                float(np.abs(Cq - Ca).max() / np.abs(Ca).max())
+                                if "C_eff_Pa" in a else None)})
                 out.append(rec)
     return out
 
@@ -396,8 +415,12 @@ def _peer_worker(tool: str, voxels: int, seed: int, out: str) -> None:
         _, solver, phi, dispersity = tool.split("|")
         rve = choice_rve(voxels, float(phi), dispersity, seed)
         forces = np.random.default_rng(2).normal(size=(rve.n, 3)) * 1e-15
+        opts = None
+        if solver == "matrix-free-patches":     # a particle patch on every particle
+            from homogenize.solvers import SolverOptions
+            solver, opts = "matrix-free", SolverOptions().replace(patch_min_particles=1)
         t0 = time.perf_counter()
-        r = homogenize_rve(rve, voxels, forces_N=forces, solver=solver)
+        r = homogenize_rve(rve, voxels, forces_N=forces, solver=solver, options=opts)
         C = r.C_eff_Pa
         extra = {"iterations": r.iterations, "E_eff_Pa": r.E_eff_Pa, "timings_s": r.timings_s,
                  "n_particles": r.n_particles, "phi_voxel": r.phi_voxel,

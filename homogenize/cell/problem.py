@@ -23,7 +23,8 @@ fixed by pinning one matrix node (the loads are balanced, so the pin carries no 
   is variational in the strain and magnetic solutions (error = the product of their errors),
   so the magnetic column stops at :func:`magnetic_tol` (sqrt(tol)) unless its field is kept.
 
-Solver (``solver="auto"``, the default, picks ``"matrix-free"`` on even grids of dilute RVEs and
+Solver (``solver="auto"``, the default, picks ``"matrix-free"`` on even grids of dilute RVEs, with
+a particle patch on every particle beyond them and for rigid particles up to phi 0.15, and
 ``"fast"`` otherwise: :func:`_auto_solver`). ``solver="fast"``: all load cases in one block
 (:mod:`homogenize.solvers`): lock-step CG
 preconditioned by a block V-cycle on a pyamg smoothed-aggregation hierarchy (rigid-body near-nullspace, built once),
@@ -57,7 +58,7 @@ from homogenize.voxels import _assembly as asm
 from homogenize.voxels import _budget
 from homogenize.voxels._assembly import isotropic_voigt, laminate_voigt   # public here: the phases' stiffness
 from homogenize.solvers import _matfree as mf
-from homogenize.solvers._patches import ParticlePatches
+from homogenize.solvers._patches import ParticlePatches, patch_nodes, select_patches
 from homogenize.cell._effective_media import (bulk_shear, eshelby_dilute, guth_gold, hashin_shtrikman_bounds,
                                isotropic_stiffness_voigt, lame, mori_tanaka, young_poisson)
 from homogenize.voxels.mesh import METHODS, VoxelMesh, voxelize
@@ -219,13 +220,18 @@ class _CellSolver:
 
     def __init__(self, mesh: VoxelMesh, lam, mu, *, deflate: bool, stiff_mask, tol: float,
                  maxiter: int, solver: str = "fast", composite: _Composite | None = None,
-                 options: SolverOptions | None = None):
+                 options: SolverOptions | None = None, rigid: bool = False,
+                 every_particle: bool = False):
         if solver not in SOLVERS:
             raise InputError(f"solver must be one of {SOLVERS}, got {solver!r}")
         if solver == "auto":
-            solver = _auto_solver(mesh.n, float(mesh.fraction.mean()),
-                                  _plain_particles(mesh, _options(options)))[0]
+            phi, plain = float(mesh.fraction.mean()), _plain_particles(mesh, _options(options), rigid)
+            solver = _auto_solver(mesh.n, phi, plain, rigid)[0]
+            every_particle = every_particle or (solver == "matrix-free"
+                                                and _auto_patches_every_particle(phi, plain, rigid))
         self.options = _options(options)
+        # a particle patch on every particle (rigid ones always), not only where use_patches says
+        self.every_particle = bool(rigid or every_particle)
         self.mesh, self.lam, self.mu = mesh, lam, mu
         self.n, self.h = mesh.n, mesh.h_m
         self.tol, self.maxiter = tol, maxiter
@@ -331,7 +337,8 @@ class _CellSolver:
         t["amg_setup"] += time.perf_counter() - t0
         if o.preconditioner is None:
             del field
-        if use_patches(self.mesh.n_particles, self.mesh.radii_m / self.h, o):
+        if use_patches(self.mesh.n_particles, self.mesh.radii_m / self.h, o,
+                       self.every_particle):
             # after the hierarchy: its setup's temporaries are gone before the factors come
             t0 = time.perf_counter()
             self.M.patches = ParticlePatches(op, self.mesh.centers_m / self.h,
@@ -506,6 +513,20 @@ AUTO_MAX_PHI = 0.06
 #: 100 lognormal 23 / 37 against 18 / 33 for "fast", 143 lognormal 55 / 130 against 39 / 40;
 #: 200 monodisperse with patches 25 / 40 against 37 / 40)
 AUTO_MAX_PLAIN_PARTICLES = 100
+#: ... and above those (phi > AUTO_MAX_PHI, or more particles without patches), and for rigid
+#: particles (``rigid=True``, the relaxed RVEs of :func:`homogenize.cell.relax.relax`) always,
+#: "auto" picks the matrix-free solver with a particle patch on EVERY particle (each particle
+#: and its shell of matrix solved exactly in the fine level) up to this particle volume
+#: fraction, "fast" above it (and for rigid particles where one gets no patch). Measured on the
+#: idle machine, fast / matrix-free with patches on every particle: the solver-choice records
+#: of results/bench/cell.json (Fe, 6 strains + random forces, each run in its own process) 64^3
+#: phi 0.05 lognormal (143 particles) 1.8x (25/37 iterations against 39/40; without patches
+#: 55/130), phi 0.1 2.5x / 1.4x, 32^3 phi 0.1 3.2x / 2.9x; results/cell/rigid_solver_choice.json
+#: (as-placed RVEs, dipole forces at 0.6 T, cold start) rigid 1.8-5.5x up to phi 0.1 (48^3 phi
+#: 0.1: 25/56 against 14/42 iterations), Fe 1.4-4x; at phi 0.2 0.97x rigid / 0.88x Fe; at
+#: phi 0.3 even or better in time but with 2-6x the iterations (32^3: 115/344 against 50/86
+#: rigid), so "fast" keeps phi > 0.15. C_eff of the solvers within 6e-6 (rigid) / 1e-6 (Fe).
+AUTO_MAX_PHI_PATCHED = 0.15
 #: the smoothed aggregation of ``solver="reference"``: pyamg's own hierarchy (default strength
 #: and candidate smoothing), the project's repeatable smoother, sparse LU on <= 300 unknowns
 _REFERENCE_AMG = AMGOptions(strength_theta=None, improve_candidates=True, coarse_solver="splu",
@@ -533,22 +554,33 @@ def magnetic_tol(tol: float) -> float:
     return float(min(np.sqrt(tol), 1e-2))
 
 
-def _plain_particles(mesh: VoxelMesh, options: SolverOptions) -> int:
+def _plain_particles(mesh: VoxelMesh, options: SolverOptions, rigid: bool = False) -> int:
     """The particles the matrix-free solver would face without patches: 0 where it builds
-    them (:func:`use_patches`), else all of the mesh's."""
-    return 0 if use_patches(mesh.n_particles, mesh.radii_m / mesh.h_m, options) \
-        else int(mesh.n_particles)
+    them (:func:`use_patches`), else all of the mesh's. ``rigid``: the particles left without
+    one where it builds them (too many nodes or beyond the factors' memory share,
+    :func:`homogenize.solvers._patches.select_patches`)."""
+    o = _options(options)
+    if not use_patches(mesh.n_particles, mesh.radii_m / mesh.h_m, o, rigid):
+        return int(mesh.n_particles)
+    if not rigid:
+        return 0
+    ptr, _ = patch_nodes(mesh.centers_m / mesh.h_m, mesh.radii_m / mesh.h_m, mesh.n,
+                         o.patch_shell_voxels)
+    return int(mesh.n_particles - select_patches(ptr, mesh.n ** 3).size)
 
 
-def use_patches(n_particles: int, radii_voxels, options: SolverOptions | None = None) -> bool:
+def use_patches(n_particles: int, radii_voxels, options: SolverOptions | None = None,
+                every_particle: bool = False) -> bool:
     """Whether the matrix-free solver builds particle patches for an RVE of ``n_particles``
     particles of radii ``radii_voxels`` [voxels] (``options``, default
     :class:`homogenize.solvers.SolverOptions`: ``patch_shell_voxels``, ``patch_min_particles``,
-    ``patch_small_radius_voxels``)."""
+    ``patch_small_radius_voxels``); ``every_particle`` (rigid particles, and "auto" beyond the
+    plain matrix-free range: :data:`AUTO_MAX_PHI_PATCHED`): always, while
+    ``patch_shell_voxels`` is set."""
     o = _options(options)
     if o.patch_shell_voxels is None or n_particles == 0:
         return False
-    return (n_particles >= o.patch_min_particles
+    return (every_particle or n_particles >= o.patch_min_particles
             or float(np.mean(radii_voxels)) < o.patch_small_radius_voxels)
 
 
@@ -557,30 +589,50 @@ def _matfree_grid(voxels: int) -> bool:
     return voxels % 2 == 0 and voxels >= 8
 
 
-def _auto_solver(voxels: int, phi: float, plain_particles: int = 0) -> tuple[str, str]:
+def _auto_patches_every_particle(phi: float, plain_particles: int, rigid: bool) -> bool:
+    """Whether "auto"'s matrix-free solver puts a particle patch on every particle (rather than
+    where :func:`use_patches` says): rigid particles always, and RVEs beyond the plain
+    matrix-free range (phi > :data:`AUTO_MAX_PHI` or more than
+    :data:`AUTO_MAX_PLAIN_PARTICLES` particles without patches)."""
+    return bool(rigid or phi > AUTO_MAX_PHI or plain_particles > AUTO_MAX_PLAIN_PARTICLES)
+
+
+def _auto_solver(voxels: int, phi: float, plain_particles: int = 0,
+                 rigid: bool = False) -> tuple[str, str]:
     """``solver="auto"``: (solver, reason) for a grid of ``voxels`` per edge whose particle
     volume fraction is ``phi``, with ``plain_particles`` particles the matrix-free solver would
-    face without patches (0 where it builds them), before memory (:data:`AUTO_SOLVER`,
-    :data:`AUTO_MAX_PHI`, :data:`AUTO_MAX_PLAIN_PARTICLES`)."""
+    face without patches (0 where it builds them; rigid particles: those too large for one),
+    before memory (:data:`AUTO_SOLVER`, :data:`AUTO_MAX_PHI`, :data:`AUTO_MAX_PLAIN_PARTICLES`,
+    :data:`AUTO_MAX_PHI_PATCHED`; :func:`_auto_patches_every_particle`)."""
     if not _matfree_grid(voxels):
         return "fast", (f"auto: fast, voxels={voxels} is odd or below 8 (the matrix-free "
                         f"geometric multigrid needs an even voxel count >= 8)")
-    if phi > AUTO_MAX_PHI:
-        return "fast", (f"auto: fast, particle volume fraction {phi:.3g} > {AUTO_MAX_PHI:g} "
-                        f"(dense stiff particles: the matrix-free multigrid needs many more "
-                        f"iterations, results/bench/cell.json, solver choice)")
-    if plain_particles > AUTO_MAX_PLAIN_PARTICLES:
-        return "fast", (f"auto: fast, {plain_particles} particles > {AUTO_MAX_PLAIN_PARTICLES} "
-                        f"without particle patches (the matrix-free multigrid needs many more "
-                        f"iterations, results/bench/cell.json, solver choice)")
-    return AUTO_SOLVER, (f"auto: matrix-free, even grid, particle volume fraction "
-                         f"{phi:.3g} <= {AUTO_MAX_PHI:g}, particles with patches or at most "
-                         f"{AUTO_MAX_PLAIN_PARTICLES} (measured as fast or faster than 'fast' "
-                         f"with less memory, results/bench/cell.json, solver choice)")
+    if rigid and plain_particles:
+        return "fast", (f"auto: fast, {plain_particles} rigid particles without a particle "
+                        f"patch (too large, or beyond the factors' memory share; the "
+                        f"matrix-free multigrid needs one on every rigid particle, "
+                        f"homogenize.cell.problem.AUTO_MAX_PHI_PATCHED)")
+    if not _auto_patches_every_particle(phi, plain_particles, rigid):
+        return AUTO_SOLVER, (f"auto: matrix-free, even grid, particle volume fraction "
+                             f"{phi:.3g} <= {AUTO_MAX_PHI:g}, particles with patches or at most "
+                             f"{AUTO_MAX_PLAIN_PARTICLES} (measured as fast or faster than "
+                             f"'fast' with less memory, results/bench/cell.json, solver choice)")
+    if phi > AUTO_MAX_PHI_PATCHED:
+        return "fast", (f"auto: fast, particle volume fraction {phi:.3g} > "
+                        f"{AUTO_MAX_PHI_PATCHED:g} (dense stiff particles: the matrix-free "
+                        f"multigrid needs many more iterations even with particle patches, "
+                        f"results/bench/cell.json, solver choice; "
+                        f"homogenize.cell.problem.AUTO_MAX_PHI_PATCHED)")
+    why = ("rigid particles" if rigid else
+           f"particle volume fraction {phi:.3g} > {AUTO_MAX_PHI:g}" if phi > AUTO_MAX_PHI else
+           f"{plain_particles} particles > {AUTO_MAX_PLAIN_PARTICLES} without patches")
+    return AUTO_SOLVER, (f"auto: matrix-free with a patch on every particle, {why}, volume "
+                         f"fraction <= {AUTO_MAX_PHI_PATCHED:g} (measured 1.4-5.5x faster than "
+                         f"'fast', homogenize.cell.problem.AUTO_MAX_PHI_PATCHED)")
 
 
 def _choose_solver(solver: str, voxels: int, n_cases: int, reason: bool = False,
-                   phi: float | None = None, plain_particles: int = 0):
+                   phi: float | None = None, plain_particles: int = 0, rigid: bool = False):
     """Validate ``solver``, resolve ``"auto"`` (:func:`_auto_solver`, with the mesh's particle
     volume fraction ``phi``) and refuse a grid whose memory estimate exceeds the machine (before
     allocating). ``"fast"`` falls back to ``"matrix-free"`` when the assembled matrix does not
@@ -603,7 +655,7 @@ def _choose_solver(solver: str, voxels: int, n_cases: int, reason: bool = False,
             else:
                 return ("auto", "auto: resolved on the mesh") if reason else "auto"
     if solver == "auto":
-        solver, why = _auto_solver(voxels, phi, plain_particles)
+        solver, why = _auto_solver(voxels, phi, plain_particles, rigid)
     share = _budget.MEMORY_SHARE * _budget.machine_memory_bytes()
     if (solver == "fast" and _matfree_grid(voxels)
             and _budget.cell_memory_bytes(voxels, "fast", n_cases) > share
@@ -762,9 +814,14 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
         CELL_RANGES["tol_magnetic"].check("tol_magnetic", tol_magnetic)
     options = _options(options)
     requested = solver
+    phi_mesh, plain = float(mesh.fraction.mean()), _plain_particles(mesh, options, rigid)
     solver, solver_reason = _choose_solver(solver, mesh.n, len(cases) + (forces_N is not None),
-                                           reason=True, phi=float(mesh.fraction.mean()),
-                                           plain_particles=_plain_particles(mesh, options))
+                                           reason=True, phi=phi_mesh, plain_particles=plain,
+                                           rigid=rigid)
+    # "auto" beyond the plain matrix-free range: a particle patch on every particle
+    every_particle = (requested == "auto" and solver == "matrix-free"
+                      and solver_reason.startswith("auto: matrix-free with a patch")
+                      and _auto_patches_every_particle(phi_mesh, plain, rigid))
     t_start = time.perf_counter()
     if rigid:
         # rigid particles as the stiff limit: 1e6 x the matrix modulus, same Poisson's ratio as
@@ -779,7 +836,8 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
     stiff = particle.E_Pa > 10.0 * matrix.E_Pa
     solver = _CellSolver(mesh, lam, mu, deflate=deflate and stiff,
                          stiff_mask=mesh.fraction >= 0.5, tol=tol, maxiter=maxiter,
-                         solver=solver, composite=composite, options=options)
+                         solver=solver, composite=composite, options=options, rigid=rigid,
+                         every_particle=every_particle)
     iters, resid, hist, fields = {}, {}, {}, {}
     t_solve = time.perf_counter()
     L = mesh.box_m
@@ -1016,8 +1074,10 @@ def homogenize_rve(rve, voxels: int, *, forces_N=None, virial_stress_Pa=None,
         even voxel counts >= 8 where the mesh's particle volume fraction is at most
         :data:`AUTO_MAX_PHI` (0.06) and the particles are at most
         :data:`AUTO_MAX_PLAIN_PARTICLES` (100) or get particle patches (:func:`use_patches`),
-        else "fast" (odd grids; dense stiff particles or many without patches, where the
-        geometric multigrid needs 2-5x the iterations); the solver that ran and why are in
+        beyond that (and always for ``rigid`` particles) "matrix-free" with a particle patch on
+        every particle up to :data:`AUTO_MAX_PHI_PATCHED` (0.15), else "fast" (odd grids; dense
+        stiff particles, where the geometric multigrid needs 2-6x the iterations even with the
+        patches; rigid particles too large for a patch); the solver that ran and why are in
         ``settings["solver"]``, ``["solver_reason"]`` (results/cell/README.md "Solver
         choice"). "fast": numba assembly, all load
         cases in one block (CG in lock-step, block V-cycle with parallel multicolour Gauss-Seidel

@@ -272,7 +272,8 @@ def register(sub, formatter):
                    choices=("auto", "fast", "reference", "matrix-free"),
                    help="cell solver: 'auto' (default: 'matrix-free' on even --voxels for "
                         "dilute RVEs: particle volume fraction <= 0.06 and <= 100 particles or "
-                        "particle patches; else 'fast'; the choice and its reason are in the "
+                        "particle patches; beyond them up to 0.15 with a patch on every "
+                        "particle; else 'fast'; the choice and its reason are in the "
                         "result's settings), 'fast' (assembled matrix, AMG; switches "
                         "to matrix-free when the assembled matrix does not fit in memory), "
                         "'reference' (assembled, one load case at a time), 'matrix-free' (no "

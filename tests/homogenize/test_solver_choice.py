@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from micro import InputError, Monodisperse, generate_rve
-from homogenize.cell.problem import (AUTO_MAX_PHI, SOLVERS, CellConfig, _choose_solver,
-                             homogenize_mesh, homogenize_rve)
+from homogenize.cell.problem import (AUTO_MAX_PHI, AUTO_MAX_PHI_PATCHED, SOLVERS, CellConfig,
+                                     _choose_solver, homogenize_mesh, homogenize_rve, use_patches)
 from homogenize.voxels.mesh import voxelize
 from homogenize.solvers import block_cg, coupled_block_cg
 
@@ -49,9 +49,10 @@ def test_choose_solver_rule():
     assert _choose_solver("auto", 16, 7, phi=0.3) == "fast"
     assert _choose_solver("auto", 17, 7, phi=0.05) == "fast"
     assert _choose_solver("auto", 6, 7, phi=0.05) == "fast"
-    # many particles without patches: fast; with patches (plain_particles 0): matrix-free
+    # many particles without patches: a patch on every particle; with patches (plain 0) or
+    # at most AUTO_MAX_PLAIN_PARTICLES: the plain rule
     solver, why = _choose_solver("auto", 16, 7, reason=True, phi=0.05, plain_particles=150)
-    assert solver == "fast" and "without particle patches" in why
+    assert solver == "matrix-free" and "150 particles > 100 without patches" in why
     assert _choose_solver("auto", 16, 7, phi=0.05, plain_particles=100) == "matrix-free"
     # before the mesh exists (the command line's memory check): resolved later, on the mesh
     assert _choose_solver("auto", 16, 7) == "auto"
@@ -60,6 +61,64 @@ def test_choose_solver_rule():
         assert _choose_solver(s, 16, 7, reason=True) == (s, "requested")
     with pytest.raises(InputError, match="solver must be one of"):
         _choose_solver("fastest", 16, 7)
+
+
+def test_choose_solver_rule_beyond_the_plain_range_and_for_rigid_particles():
+    """Beyond the plain matrix-free range (phi > AUTO_MAX_PHI or many particles without patches)
+    and for rigid particles: matrix-free with a patch on every particle up to
+    AUTO_MAX_PHI_PATCHED, "fast" above it, on odd grids and for rigid particles without one."""
+    assert AUTO_MAX_PHI < 0.1 < AUTO_MAX_PHI_PATCHED < 0.2
+    for kw in (dict(phi=0.1, rigid=True), dict(phi=0.03, rigid=True), dict(phi=0.1),
+               dict(phi=0.05, plain_particles=150)):
+        solver, why = _choose_solver("auto", 16, 7, reason=True, **kw)
+        assert solver == "matrix-free" and "patch on every particle" in why, kw
+    # dilute Fe particles: the plain rule (patches only where use_patches says)
+    solver, why = _choose_solver("auto", 16, 7, reason=True, phi=0.03)
+    assert solver == "matrix-free" and "patch on every particle" not in why
+    for kw in (dict(phi=0.2, rigid=True), dict(phi=0.2)):
+        solver, why = _choose_solver("auto", 16, 7, reason=True, **kw)
+        assert solver == "fast" and "volume fraction" in why, kw
+    assert _choose_solver("auto", 15, 7, phi=0.1, rigid=True) == "fast"
+    assert _choose_solver("fast", 16, 7, phi=0.1, rigid=True) == "fast"
+    solver, why = _choose_solver("auto", 16, 7, reason=True, phi=0.1, rigid=True,
+                                 plain_particles=2)
+    assert solver == "fast" and "without a particle patch" in why
+    # patches on every particle, however few and large; none when switched off
+    assert use_patches(3, [4.0] * 3, every_particle=True) and not use_patches(3, [4.0] * 3)
+    from homogenize.solvers import SolverOptions
+    assert not use_patches(3, [4.0] * 3, SolverOptions().replace(patch_shell_voxels=None),
+                           every_particle=True)
+
+
+@pytest.mark.parametrize("rigid", [True, False])
+def test_auto_beyond_the_plain_range_patches_every_particle_and_agrees_with_fast(rigid):
+    """phi 0.1 (above AUTO_MAX_PHI), rigid or Fe particles: "auto" runs the matrix-free solver
+    with a patch on each of the 6 particles and gives the C_eff and magnetic stress of "fast"
+    to the solver tolerance."""
+    rve = generate_rve(0.1, 6, 5, distribution=Monodisperse(25e-9))
+    mesh = voxelize(rve, 16)
+    F = _forces(rve.n)
+    auto = homogenize_mesh(mesh, forces_N=F, rigid=rigid)
+    fast = homogenize_mesh(mesh, forces_N=F, rigid=rigid, solver="fast")
+    assert auto.phi_voxel > AUTO_MAX_PHI
+    assert auto.settings["solver"] == "matrix-free" and auto.settings["patched_particles"] == 6
+    assert "patch on every particle" in auto.settings["solver_reason"]
+    rel = 2e-5 if rigid else 1e-6
+    assert np.abs(auto.C_eff_Pa - fast.C_eff_Pa).max() < rel * np.abs(fast.C_eff_Pa).max()
+    sa, sf = np.asarray(auto.stress_mag_Pa), np.asarray(fast.stress_mag_Pa)
+    assert np.abs(sa - sf).max() < rel * np.abs(sf).max()
+    # the same solver asked for by name keeps the plain patch rule (none for 6 large particles)
+    # unless the particles are rigid
+    mf = homogenize_mesh(mesh, rigid=rigid, solver="matrix-free", cases=("e11",))
+    assert mf.settings["patched_particles"] == (6 if rigid else 0)
+
+
+def test_rigid_particles_too_large_for_a_patch_go_to_fast():
+    """Rigid particles whose patches exceed MAX_NODES or the factors' memory share (radius
+    ~5.5 voxels at 24^3): "fast", with the reason."""
+    big = generate_rve(0.1, 2, 5, distribution=Monodisperse(25e-9))
+    r = homogenize_mesh(voxelize(big, 24), forces_N=_forces(2), rigid=True, cases=("e11",))
+    assert r.settings["solver"] == "fast" and "without a particle patch" in r.settings["solver_reason"]
 
 
 @pytest.mark.parametrize("solver", ["fast", "matrix-free", "reference"])
