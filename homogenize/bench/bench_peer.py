@@ -19,7 +19,7 @@ at the largest grid muSpectre runs ``CAPPED_ITERATIONS`` CG iterations of one lo
 peak memory is measured (the fields are allocated at set-up), its time is PROJECTED as set-up
 + (CG products of the full solve on the next grid down, 65^3) x (seconds per product measured
 at 129^3), and the record says so (``peer_seconds_projected``). The full mode runs about
-45 min; ``--quick`` runs 16^3 / 17^3 in full.
+35 min (33 min measured); ``--quick`` runs 16^3 / 17^3 in full.
 """
 from __future__ import annotations
 
