@@ -247,7 +247,7 @@ def choice_rve(voxels: int, phi: float, dispersity: str, seed: int = 1):
 
 
 #: the grids, volume fractions and radius distributions of the solver choice (issue 37)
-CHOICE_SIZES, CHOICE_PHIS = (16, 32, 64), (0.01, 0.05, 0.3)
+CHOICE_SIZES, CHOICE_PHIS = (16, 32, 64), (0.01, 0.05, 0.1, 0.3)
 CHOICE_DISPERSITIES = ("monodisperse", "lognormal")
 
 
@@ -338,7 +338,8 @@ def bench_records(quick: bool) -> list[dict]:
     recs += _method_records((12, 16) if quick else (32, 64))
     recs += _matfree_records((12, 16) if quick else (32, 64, 128))
     recs += _peer_records(15 if quick else 33)
-    recs += (_solver_choice_records((12, 16), (0.05,)) if quick else _solver_choice_records())
+    recs += (_solver_choice_records((12, 16), (0.05,), patches=True) if quick
+             else _solver_choice_records(patches=True))
     return recs
 
 

@@ -820,7 +820,6 @@ def homogenize_mesh(mesh: VoxelMesh, *, forces_N=None, virial_stress_Pa=None,
                                            rigid=rigid)
     # "auto" beyond the plain matrix-free range: a particle patch on every particle
     every_particle = (requested == "auto" and solver == "matrix-free"
-                      and solver_reason.startswith("auto: matrix-free with a patch")
                       and _auto_patches_every_particle(phi_mesh, plain, rigid))
     t_start = time.perf_counter()
     if rigid:
