@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from threadpoolctl import threadpool_limits
 from micro.common.progress import progress_bar
 
 from micro.common.validate import ConvergenceError, InputError, Range, check_finite
@@ -424,6 +425,12 @@ class _CellSolver:
         F[rows] = 0.0
         tols = [self.tol] * F.shape[1] if tols is None else list(tols)
         X0 = None if x0 is None else self.initial_guess(F, x0)
+        # one BLAS thread while the numba kernels run the iterations on all cores: the BLAS
+        # calls in the loop are small (the coarsest level's dense Cholesky solve, Gram matrices
+        # of the block), and OpenBLAS's threads keep spinning for a while after each, taking a
+        # core from numba's (64^3 bench RVE, 2 threads: V-cycle 1.63x over 1 thread with them,
+        # 1.89x without; results/bench/threads.md)
+        blas = threadpool_limits(limits=1, user_api="blas")
         try:
             if self.kind == "reference":
                 cols = [block_cg(self.matvec, self.M, F[:, [c]], tol=tols[c],
@@ -449,6 +456,7 @@ class _CellSolver:
                     W, hist = krylov(self.matvec, self.M, F, groups=groups, **kw)
         finally:
             F[rows] = pinned
+            blas.restore_original_limits()
         if self.kind == "matrix-free":
             self.M.release()
         W[3 * self.pin:3 * self.pin + 3] = 0.0

@@ -13,7 +13,9 @@ Scheichl, Numer. Math. 106, 2007). Measured in results/cell/README.md ("Particle
 
 Patches whose nodes are stencil neighbours of each other get different colours (greedy, in
 particle order); the patches of one colour touch disjoint rows and read disjoint unknowns, so they
-are solved in parallel and the result does not depend on the number of threads.
+are solved in parallel and the result does not depend on the number of threads. A colour's
+patches go to the threads in groups of about equal work (largest first to the least loaded
+group, :meth:`ParticlePatches._groups`): their costs span two orders of magnitude.
 """
 from __future__ import annotations
 
@@ -252,17 +254,13 @@ def _factorize(n, ptr, nodes, stype, S, pin, fptr, L):
                 L[base + bb] = C[a, bb]
 
 
-def _solve_colour(n, which, ptr, nodes, stype, S, pin, fptr, L, u, b):
-    """One colour of the multiplicative Schwarz sweep: for every patch q in ``which`` (patches that
-    do not couple), u[patch] += K_patch^-1 (b - K u)[patch], with the packed Cholesky factor.
-    Parallel over the patches."""
+@nb.njit(cache=True)
+def _solve_patch(n, q, ptr, nodes, stype, S, pin, fptr, L, u, b):
+    """u[patch q] += K_q^-1 (b - K u)[patch q], with its packed Cholesky factor."""
     k = u.shape[2]
-    for w in nb.prange(which.shape[0]):
-        q = which[w]
-        a0 = ptr[q]
-        m = ptr[q + 1] - a0
-        if m == 0:
-            continue
+    a0 = ptr[q]
+    m = ptr[q + 1] - a0
+    if m > 0:
         pn = nodes[a0:a0 + m]
         r = np.empty((m, 3, k))
         _patch_residual(n, pn, stype, S, pin, u, b, r)
@@ -329,6 +327,16 @@ def _solve_colour(n, which, ptr, nodes, stype, S, pin, fptr, L, u, b):
                     u[p, c, mm] += y[mm, 3 * t + c]
 
 
+def _solve_colour(n, which, bounds, ptr, nodes, stype, S, pin, fptr, L, u, b):
+    """One colour of the multiplicative Schwarz sweep: every patch q in ``which`` (patches that
+    do not couple) by :func:`_solve_patch`. Parallel over the groups ``which[bounds[g]:bounds[g +
+    1]]``, one per thread (:meth:`ParticlePatches._groups`): the patches of a colour are
+    independent, so the grouping does not change the numbers."""
+    for g in nb.prange(bounds.shape[0] - 1):
+        for w in range(bounds[g], bounds[g + 1]):
+            _solve_patch(n, which[w], ptr, nodes, stype, S, pin, fptr, L, u, b)
+
+
 factorize, factorize_serial = parallel_and_serial(_factorize)
 solve_colour, solve_colour_serial = parallel_and_serial(_solve_colour)
 
@@ -369,6 +377,7 @@ class ParticlePatches:
         big = op.n ** 3 >= 4096
         self._fact = factorize if big else factorize_serial
         self._solve = solve_colour if big else solve_colour_serial
+        self._grouped = {}
         # one BLAS thread per factorization: the patches are factorized in numba's parallel
         # loop, and OpenBLAS threads started inside each of its threads oversubscribe the cores
         # (48^3, 100 particles, on a loaded 2-core machine: 15-46 s without the limit, 0.7-1.2 s
@@ -385,12 +394,40 @@ class ParticlePatches:
         """Patch nodes over grid nodes (a node in two patches counts twice)."""
         return float(self.nodes.size / self.op.n ** 3)
 
+    def _groups(self, threads: int) -> list:
+        """Per colour ``(which, bounds)``: its patches split into ``threads`` groups of about
+        equal work, largest first to the least loaded group (LPT; work of a patch: its factor's
+        entries, read twice, and its residual's 27 blocks per node). numba splits a parallel
+        loop into equal contiguous ranges of iterations, so a loop over the patches themselves
+        gave one thread the large particles (the RVE places them first): 1.1x on 2 threads at
+        128^3 (800 particles), against ~2x over these groups (results/bench/threads.md)."""
+        got = self._grouped.get(threads)
+        if got is None:
+            m = np.diff(self.ptr)
+            work = (3 * m) * (3 * m + 1) + 243 * m
+            got = []
+            for col in self.colours:
+                load = np.zeros(threads)
+                members = [[] for _ in range(threads)]
+                for q in col[np.argsort(-work[col], kind="stable")]:
+                    g = int(np.argmin(load))
+                    members[g].append(q)
+                    load[g] += work[q]
+                bounds = np.zeros(threads + 1, dtype=np.int64)
+                bounds[1:] = np.cumsum([len(x) for x in members])
+                which = np.array([q for x in members for q in x], dtype=np.int64)
+                got.append((which, bounds))
+            self._grouped[threads] = got
+        return got
+
     def _sweep(self, X, B, order):
         op = self.op
         k = X.shape[1]
         u, b = X.reshape(-1, 3, k), B.reshape(-1, 3, k)
+        groups = self._groups(nb.get_num_threads() if self._solve is solve_colour else 1)
         for c in order:
-            self._solve(op.n, self.colours[c], self.ptr, self.nodes, op.stype, op.S, op.pin,
+            which, bounds = groups[c]
+            self._solve(op.n, which, bounds, self.ptr, self.nodes, op.stype, op.S, op.pin,
                         self.fptr, self.L, u, b)
 
     def forward(self, X, B):

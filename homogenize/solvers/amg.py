@@ -18,7 +18,9 @@ each matrix block is read once for all columns.
 from __future__ import annotations
 
 import types
+from concurrent.futures import ThreadPoolExecutor
 
+import numba
 import numpy as np
 import pyamg
 import scipy.sparse as sp
@@ -30,7 +32,7 @@ from scipy.sparse.linalg import splu
 
 from homogenize.solvers.options import AMGOptions
 
-__all__ = ["BSROp", "BlockVCycle", "grid_colours", "greedy_colours", "SA_SMOOTH",
+__all__ = ["BSROp", "BlockVCycle", "zeros_block", "grid_colours", "greedy_colours", "SA_SMOOTH",
            "smoothed_aggregation", "rigid_body_modes", "grid_node_coordinates"]
 
 #: the prolongation smoother of every pyamg smoothed-aggregation hierarchy of the project: damped
@@ -124,6 +126,18 @@ def rigid_body_modes(coords, components=None) -> np.ndarray:
         sel = comp == c
         B[sel, mode] = x[sel, coord] if sign > 0 else -x[sel, coord]
     return B
+
+
+def zeros_block(B) -> np.ndarray:
+    """``np.zeros_like(B)`` for a (n, k) float64 block, zeroed in parallel when large: the
+    V-cycle's new correction block is first touched there, and numpy's serial fill (page
+    faults included) took 8 s of a 277 s solve at 128^3 on one thread and 13 s on two
+    (cProfile; results/bench/threads.md)."""
+    if B.ndim != 2 or B.shape[0] < kn.PARALLEL_MIN_ROWS:
+        return np.zeros_like(B)
+    X = np.empty(B.shape)
+    kn.zero_rows(X)
+    return X
 
 
 def _bsr(A, blocksize=None):
@@ -229,11 +243,34 @@ def greedy_colours(op: BSROp) -> list[np.ndarray]:
     return [np.flatnonzero(colour == c).astype(np.int64) for c in range(colour.max() + 1)]
 
 
+#: blocks per task of :func:`_block_inverse` on several threads
+_INVERSE_CHUNK = 65536
+
+
 def _block_inverse(diag: np.ndarray) -> np.ndarray:
     """Inverses of the diagonal blocks (m, R, R) for Gauss-Seidel; a (nearly) singular block --
     a coarse direction no fine vector reaches, from a rank-deficient rigid-body fit on a small
     aggregate next to cut composite voxels -- gets its symmetric pseudo-inverse, so the sweep
-    leaves that null direction alone."""
+    leaves that null direction alone.
+
+    Many blocks: chunks of :data:`_INVERSE_CHUNK` on numba's number of threads (numpy's linalg
+    loops release the GIL; every block is inverted on its own, so the result is bitwise that of
+    one call: 2.1e6 blocks at 128^3, 2.1 s on one thread, 1.2 s on two)."""
+    m = diag.shape[0]
+    threads = numba.get_num_threads()
+    if m < 2 * _INVERSE_CHUNK or threads < 2:
+        return _block_inverse_serial(diag)
+    out = np.empty_like(diag)
+
+    def part(start):
+        sl = slice(start, min(m, start + _INVERSE_CHUNK))
+        out[sl] = _block_inverse_serial(diag[sl])
+    with ThreadPoolExecutor(threads) as ex:
+        list(ex.map(part, range(0, m, _INVERSE_CHUNK)))
+    return out
+
+
+def _block_inverse_serial(diag: np.ndarray) -> np.ndarray:
     ev = np.linalg.eigvalsh(diag)
     bad = ev[:, 0] <= 1e-12 * np.abs(ev[:, -1:]).max(axis=1)
     out = np.empty_like(diag)
@@ -257,9 +294,12 @@ class _Level:
         self.colours = colours if colours is not None else greedy_colours(self.A)
         self.R_blk = R
         # parallel sweeps when a colour holds enough work to pay for starting the threads
+        # (per colour: the greedy colours of a coarse level range from one row to hundreds, and
+        # the large ones pay: 128^3 bench RVE, the level below the 64^3 grid, 1.0x on 2 threads
+        # with every colour serial)
         blocks_per_row = ind.size / max(ip.size - 1, 1)
-        par = min(c.size for c in self.colours) * blocks_per_row * R * R >= 100_000
-        self._gs = kn.bsr_gauss_seidel_colour if par else kn.bsr_gauss_seidel_colour_serial
+        self._gs = [kn.bsr_gauss_seidel_colour if c.size * blocks_per_row * R * R >= 100_000
+                    else kn.bsr_gauss_seidel_colour_serial for c in self.colours]
         if P is not None:
             P = _bsr(P)
             self.P = BSROp(P)
@@ -293,7 +333,7 @@ class _Level:
         Xv, Bv = X.reshape(-1, self.R_blk, k), B.reshape(-1, self.R_blk, k)
         a = self.A
         for c in order:
-            self._gs(a.indptr, a.indices, a.data, self.dinv, self.colours[c], Xv, Bv, tmp)
+            self._gs[c](a.indptr, a.indices, a.data, self.dinv, self.colours[c], Xv, Bv, tmp)
 
 
 def _fix_null_rows(A):
@@ -353,7 +393,7 @@ class BlockVCycle:
         if i == len(self.levels):
             return self.coarse_solve(np.asarray(B))
         L = self.levels[i]
-        X = np.zeros_like(B)
+        X = zeros_block(B)
         nc = len(L.colours)
         fwd, bwd = list(range(nc)), list(range(nc - 1, -1, -1))
         L.smooth(X, B, fwd * self.sweeps, from_zero=True)

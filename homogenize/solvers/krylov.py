@@ -22,7 +22,9 @@ __all__ = ["Deflation", "block_cg", "coupled_block_cg", "CG_CHUNK", "RANK_TOL"]
 class Deflation:
     """The deflation space Z (n, m) of the stiff particles' rigid modes with ``KZ = K Z`` and the
     factorized ``E = Z^T K Z`` (``Esolve``); products touch only the rows where Z or KZ are
-    nonzero."""
+    nonzero, with the row-parallel CSR kernels of :mod:`homogenize.voxels._kernels` on (n, k)
+    blocks (each output row a sum in the order of its entries, as scipy's product, so the
+    same numbers for any number of threads; scipy's serial products for anything else)."""
 
     def __init__(self, Z, KZ, Esolve):
         Z, KZ = sp.csr_matrix(Z), sp.csr_matrix(KZ)
@@ -30,29 +32,55 @@ class Deflation:
         self.kr = np.flatnonzero(np.diff(KZ.indptr))
         self.Z, self.KZ = Z[self.zr], KZ[self.kr]          # the nonzero rows only
         self.ZT, self.KZT = self.Z.T.tocsr(), self.KZ.T.tocsr()
+        for A in (self.Z, self.KZ, self.ZT, self.KZT):
+            A.sort_indices()
         self.Es = Esolve
+        self._par = max(self.Z.nnz, self.KZ.nnz) >= 20 * kn.PARALLEL_MIN_ROWS
+
+    @staticmethod
+    def _block(Y) -> bool:
+        return (isinstance(Y, np.ndarray) and Y.ndim == 2 and Y.dtype == np.float64
+                and Y.flags.c_contiguous)
+
+    def _gather(self, A, rows, Y):
+        """A @ Y[rows] (A: Z^T or (KZ)^T)."""
+        if not self._block(Y):
+            return np.asarray(A @ Y[rows])
+        out = np.empty((A.shape[0], Y.shape[1]))
+        (kn.csr_gather_matmat if self._par else kn.csr_gather_matmat_serial)(
+            A.indptr, A.indices, A.data, rows, Y, out)
+        return out
+
+    def _scatter(self, A, c, rows, X, sign: float):
+        """X[rows] += sign A @ c, in place (A: Z or KZ)."""
+        c = np.ascontiguousarray(c, dtype=np.float64)
+        if not self._block(X) or c.ndim != 2:
+            X[rows] += sign * (A @ c)
+            return
+        (kn.csr_scatter_matmat if self._par else kn.csr_scatter_matmat_serial)(
+            A.indptr, A.indices, A.data, c, rows, X, sign)
 
     def coefficients(self, Y, on_K: bool):
         """E^-1 Z^T Y (``on_K=False``) or E^-1 (KZ)^T Y."""
         if on_K:
-            return self.Es(np.asarray(self.KZT @ Y[self.kr]))
-        return self.Es(np.asarray(self.ZT @ Y[self.zr]))
+            return self.Es(self._gather(self.KZT, self.kr, Y))
+        return self.Es(self._gather(self.ZT, self.zr, Y))
 
     def start(self, F):
         """The start ``Z E^-1 Z^T F`` (dense, the shape of F)."""
         X = np.zeros(F.shape)
-        X[self.zr] = self.Z @ self.coefficients(F, False)
+        self._scatter(self.Z, self.coefficients(F, False), self.zr, X, 1.0)
         return X
 
     def project(self, Y):
         """Y -= Z E^-1 (KZ)^T Y, in place: K-orthogonal to the deflation space."""
-        Y[self.zr] -= self.Z @ self.coefficients(Y, True)
+        self._scatter(self.Z, self.coefficients(Y, True), self.zr, Y, -1.0)
 
     def correct(self, X, R):
         """X += Z c, R -= K Z c with c = E^-1 Z^T R, in place."""
         c = self.coefficients(R, False)
-        X[self.zr] += self.Z @ c
-        R[self.kr] -= self.KZ @ c
+        self._scatter(self.Z, c, self.zr, X, 1.0)
+        self._scatter(self.KZ, c, self.kr, R, -1.0)
 
 
 def _own(Y, R):
@@ -76,7 +104,7 @@ def _cg_start(A, F, tol, deflation, x0=None):
     columns' load norms."""
     F = np.ascontiguousarray(F, dtype=np.float64)
     n, k = F.shape
-    fn = np.linalg.norm(F, axis=0)
+    fn = _colnorms(F)
     fn[fn == 0.0] = 1.0
     tols = np.broadcast_to(np.asarray(tol, dtype=np.float64), (k,))
     if x0 is not None:
@@ -93,7 +121,7 @@ def _cg_start(A, F, tol, deflation, x0=None):
         X = np.zeros((n, k))
         R = F.copy()
     del F
-    hist = [[float(v)] for v in np.linalg.norm(R, axis=0) / fn]
+    hist = [[float(v)] for v in _colnorms(R) / fn]
     idx = np.flatnonzero([h[0] > t for h, t in zip(hist, tols)])
     if 0 < idx.size < k:
         Xa = np.ascontiguousarray(X[:, idx])
@@ -158,7 +186,7 @@ def block_cg(A, M, F, *, tol, maxiter: int, deflation: Deflation | None = None,
         if deflation is not None:
             deflation.correct(Xa, R)
         it += 1
-        done = _record_step(hist, idx, np.linalg.norm(R, axis=0) / fa, tols, k, it, callback)
+        done = _record_step(hist, idx, _colnorms(R) / fa, tols, k, it, callback)
         if done.any():                  # converged columns leave the block
             X[:, idx[done]] = Xa[:, done]
             keep = ~done

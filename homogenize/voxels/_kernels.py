@@ -303,6 +303,44 @@ def _block_directions(P, Z, beta, chunk, out):
                     s += row[i] * beta[i, j]
                 out[r, j] = s
 
+
+def _zero_rows(X):
+    """X[:] = 0 (X (n, k) C-contiguous), parallel over rows: a new block's pages are first
+    touched, so faulted in, by every thread (numpy's zeros_like fills them on one)."""
+    n, k = X.shape
+    for i in nb.prange(n):
+        for j in range(k):
+            X[i, j] = 0.0
+
+
+def _csr_gather_matmat(indptr, indices, data, rows, Y, out):
+    """out = A Y[rows] for a CSR A (m x len(rows)) without the gathered copy: out[i, :] =
+    sum_s data[s] Y[rows[indices[s]], :] over row i's entries in order (out (m, k))."""
+    k = Y.shape[1]
+    for i in nb.prange(indptr.shape[0] - 1):
+        for j in range(k):
+            out[i, j] = 0.0
+        for s in range(indptr[i], indptr[i + 1]):
+            a = data[s]
+            q = rows[indices[s]]
+            for j in range(k):
+                out[i, j] += a * Y[q, j]
+
+
+def _csr_scatter_matmat(indptr, indices, data, C, rows, X, sign):
+    """X[rows[i], :] += sign (A C)[i, :] for a CSR A (len(rows) x m), C (m, k); ``rows``
+    distinct (each row of X written by one iteration). Row i's product summed over its entries
+    in order, then added."""
+    k = C.shape[1]
+    for i in nb.prange(indptr.shape[0] - 1):
+        p = rows[i]
+        for j in range(k):
+            acc = 0.0
+            for s in range(indptr[i], indptr[i + 1]):
+                acc += data[s] * C[indices[s], j]
+            X[p, j] += sign * acc
+
+
 bsr_matmat, bsr_matmat_serial = parallel_and_serial(_bsr_matmat)
 bsr_transposed_matmat, bsr_transposed_matmat_serial = parallel_and_serial(_bsr_transposed_matmat)
 bsr_residual, bsr_residual_serial = parallel_and_serial(_bsr_residual)
@@ -316,3 +354,6 @@ gram_parts, _ = parallel_and_serial(_gram_parts)
 colsq_parts, _ = parallel_and_serial(_colsq_parts)
 block_step, _ = parallel_and_serial(_block_step)
 block_directions, _ = parallel_and_serial(_block_directions)
+zero_rows, zero_rows_serial = parallel_and_serial(_zero_rows)
+csr_gather_matmat, csr_gather_matmat_serial = parallel_and_serial(_csr_gather_matmat)
+csr_scatter_matmat, csr_scatter_matmat_serial = parallel_and_serial(_csr_scatter_matmat)

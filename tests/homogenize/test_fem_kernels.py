@@ -205,3 +205,60 @@ def test_coupled_block_cg_kernels_equal_numpy_and_do_not_depend_on_threads():
     finally:
         numba.set_num_threads(threads)
     assert np.array_equal(one, parts)
+
+
+def test_zero_rows_and_deflation_csr_kernels_equal_numpy_scipy_and_do_not_depend_on_threads():
+    """The V-cycle's parallel zeroing and the deflation's row-parallel CSR products: the same
+    numbers as numpy/scipy (bit for bit: each row summed over its entries in order, as scipy
+    does), and the same on 1 and on all threads."""
+    import numba
+    from homogenize.solvers import Deflation
+    from homogenize.solvers.amg import zeros_block
+    rng = np.random.default_rng(8)
+    X = rng.normal(size=(K.PARALLEL_MIN_ROWS + 7, 3))
+    K.zero_rows(X)
+    assert not X.any()
+    Z0 = zeros_block(rng.normal(size=(K.PARALLEL_MIN_ROWS, 2)))
+    assert Z0.shape == (K.PARALLEL_MIN_ROWS, 2) and not Z0.any()
+    n, m, k = 3000, 40, 5
+    A = sp.random(m, 900, density=0.05, random_state=3, format="csr")
+    A.sort_indices()
+    rows = np.sort(rng.choice(n, size=900, replace=False)).astype(np.int64)
+    Y = rng.normal(size=(n, k))
+    out = np.empty((m, k))
+    results = []
+    threads = numba.get_num_threads()
+    try:
+        for t in sorted({1, threads}):
+            numba.set_num_threads(t)
+            K.csr_gather_matmat(A.indptr, A.indices, A.data, rows, Y, out)
+            assert np.array_equal(out, A @ Y[rows])
+            C = rng.normal(size=(m, k)) if t == 1 else C
+            X = Y.copy()
+            K.csr_scatter_matmat(A.T.tocsr().indptr, A.T.tocsr().indices, A.T.tocsr().data, C,
+                                 rows, X, -1.0)
+            want = Y.copy()
+            want[rows] -= A.T.tocsr() @ C
+            assert np.array_equal(X, want)
+            results.append((out.copy(), X))
+    finally:
+        numba.set_num_threads(threads)
+    assert all(np.array_equal(a, results[0][0]) and np.array_equal(b, results[0][1])
+               for a, b in results)
+    # the Deflation's kernel path (C-contiguous blocks) against its scipy path (a strided view)
+    Zs = sp.random(n, 6, density=0.2, random_state=4, format="csr")
+    KZ = sp.random(n, 6, density=0.3, random_state=5, format="csr")
+    E = (Zs.T @ KZ).toarray() + 10 * np.eye(6)
+    defl = Deflation(Zs, KZ, lambda y: np.linalg.solve(E, y))
+    R = rng.normal(size=(n, 2 * k))
+    blk, view = np.ascontiguousarray(R[:, ::2]), R[:, ::2].copy(order="F")
+    assert not defl._block(view) and defl._block(blk)
+    a, b = blk.copy(), blk.copy()
+    defl.correct(a, b)
+    c, d = view.copy(order="F"), view.copy(order="F")
+    defl.correct(c, d)
+    assert np.array_equal(a, c) and np.array_equal(b, d)
+    defl.project(a)
+    defl.project(c)
+    assert np.array_equal(a, c)
+    assert np.array_equal(defl.start(blk), defl.start(view))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import types
 
+import numba
 import numpy as np
 import pytest
 
@@ -99,6 +100,8 @@ def test_patch_solve_equals_dense_solve_of_assembled_submatrix(monkeypatch, dtyp
         X = X0.copy()
         single = types.SimpleNamespace(**vars(P))
         single.colours = [np.array([q], dtype=np.int64)]
+        single._grouped = {}
+        single._groups = types.MethodType(pt.ParticlePatches._groups, single)
         pt.ParticlePatches._sweep(single, X, B, [0])
         want = X0.copy()
         want[dof] += np.linalg.solve(K[np.ix_(dof, dof)], (B - K @ X0)[dof])
@@ -133,6 +136,52 @@ def test_parallel_sweep_equals_serial_and_columns_equal_one_at_a_time():
     P.forward(X, np.ascontiguousarray(B[:, :3]))
     P.backward(X, np.ascontiguousarray(B[:, :3]))
     assert np.abs(X - out["serial"][:, :3]).max() <= 1e-10 * np.abs(X).max()
+
+
+def test_thread_groups_cover_each_colour_once_balanced_and_bitwise_thread_independent():
+    """The sweep's groups (one per thread, :meth:`ParticlePatches._groups`): every patch of a
+    colour in exactly one group of it, the largest group's work at most the mean plus the
+    largest patch's (the greedy largest-first bound), and the sweep bitwise the same for 1 and
+    2 threads and any number of groups (the patches of a colour are independent)."""
+    mesh, lam, mu, comp, op, P = _setup(n=16, n_part=10, seed=6)
+    m = np.diff(P.ptr)
+    work = (3 * m) * (3 * m + 1) + 243 * m
+    for threads in (1, 2, 3, 5):
+        groups = P._groups(threads)
+        assert len(groups) == len(P.colours)
+        for col, (which, bounds) in zip(P.colours, groups):
+            assert bounds.shape == (threads + 1,) and bounds[0] == 0
+            assert np.array_equal(np.sort(which), np.sort(col))
+            loads = [work[which[bounds[g]:bounds[g + 1]]].sum() for g in range(threads)]
+            assert max(loads) <= work[col].sum() / threads + work[col].max()
+    rng = np.random.default_rng(3)
+    B = rng.normal(size=(3 * 16 ** 3, 7))
+    X0 = rng.normal(size=B.shape)
+    P._solve = pt.solve_colour
+    ref = None
+    for groups in (1, 2, 3):
+        P._groups = lambda t, g=groups: pt.ParticlePatches._groups(P, g)
+        X = X0.copy()
+        P.forward(X, B)
+        P.backward(X, B)
+        if ref is None:
+            ref = X
+        assert np.array_equal(X, ref)
+    del P._groups
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("bitwise 1 against 2 threads: numba has only one thread here")
+    out = []
+    before = numba.get_num_threads()
+    try:
+        for threads in (1, 2):
+            numba.set_num_threads(threads)
+            X = X0.copy()
+            P.forward(X, B)
+            P.backward(X, B)
+            out.append(X)
+    finally:
+        numba.set_num_threads(before)
+    assert np.array_equal(out[0], out[1]) and np.array_equal(out[0], ref)
 
 
 def test_patched_vcycle_symmetric_positive_definite_and_convergent():
