@@ -40,6 +40,7 @@ from scipy.constants import mu_0 as MU0
 
 from micro import _kernels as K
 from micro._ewald import PeriodicSum
+from micro.common.jit import one_blas_thread
 from micro.common.validate import ConvergenceError, InputError, Range, check_choice, check_finite, check_positive
 from micro.magnetization import DEFAULT_LAW, MagnetizationLaw, get_law
 from micro.materials import SEED
@@ -541,6 +542,7 @@ def _rve_arrays(rve):
     return box, c, ms, vol
 
 
+@one_blas_thread
 def solve(rve, B_T, gradB_T_per_m, law=DEFAULT_LAW, *, demag_factor=None, tol=1e-8,
           accuracy=1e-6, method="anderson", summation="auto", max_iter=500, damping=1.0,
           precondition=True,

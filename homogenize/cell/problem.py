@@ -427,9 +427,7 @@ class _CellSolver:
         X0 = None if x0 is None else self.initial_guess(F, x0)
         # one BLAS thread while the numba kernels run the iterations on all cores: the BLAS
         # calls in the loop are small (the coarsest level's dense Cholesky solve, Gram matrices
-        # of the block), and OpenBLAS's threads keep spinning for a while after each, taking a
-        # core from numba's (64^3 bench RVE, 2 threads: V-cycle 1.63x over 1 thread with them,
-        # 1.89x without; results/bench/threads.md)
+        # of the block) (micro.common.jit.one_blas_thread)
         blas = threadpool_limits(limits=1, user_api="blas")
         try:
             if self.kind == "reference":

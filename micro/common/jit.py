@@ -1,11 +1,27 @@
-"""The one helper that compiles a numba kernel as a parallel and a serial variant."""
+"""The one helper that compiles a numba kernel as a parallel and a serial variant, and the one
+that keeps BLAS on one thread while numba's kernels use the cores."""
 from __future__ import annotations
 
+import functools
 import types
 
 import numba as nb
+from threadpoolctl import threadpool_limits
 
-__all__ = ["parallel_and_serial"]
+__all__ = ["parallel_and_serial", "one_blas_thread"]
+
+
+def one_blas_thread(f):
+    """Run ``f`` with BLAS/LAPACK limited to one thread (restored after): for solvers whose
+    parallel work is in numba kernels and whose BLAS calls are small. OpenBLAS's threads keep
+    spinning for a while after each call and take a core from numba's: the PME dipole solve at
+    N = 1e5 on 2 numba threads took 23-25 s with them, 22-23 s without; the cell solve's
+    V-cycle 1.63x over one thread with them, 1.89x without (results/bench/threads.md)."""
+    @functools.wraps(f)
+    def run(*args, **kwargs):
+        with threadpool_limits(limits=1, user_api="blas"):
+            return f(*args, **kwargs)
+    return run
 
 
 def parallel_and_serial(f):

@@ -226,6 +226,7 @@ def test_zero_rows_and_deflation_csr_kernels_equal_numpy_scipy_and_do_not_depend
     rows = np.sort(rng.choice(n, size=900, replace=False)).astype(np.int64)
     Y = rng.normal(size=(n, k))
     out = np.empty((m, k))
+    C = rng.normal(size=(m, k))
     results = []
     threads = numba.get_num_threads()
     try:
@@ -233,7 +234,6 @@ def test_zero_rows_and_deflation_csr_kernels_equal_numpy_scipy_and_do_not_depend
             numba.set_num_threads(t)
             K.csr_gather_matmat(A.indptr, A.indices, A.data, rows, Y, out)
             assert np.array_equal(out, A @ Y[rows])
-            C = rng.normal(size=(m, k)) if t == 1 else C
             X = Y.copy()
             K.csr_scatter_matmat(A.T.tocsr().indptr, A.T.tocsr().indices, A.T.tocsr().data, C,
                                  rows, X, -1.0)
