@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from threadpoolctl import threadpool_limits
+from micro.common.jit import one_blas_thread
 from micro.common.progress import progress_bar
 
 from micro.common.validate import ConvergenceError, InputError, Range, check_finite
@@ -402,6 +402,10 @@ class _CellSolver:
                           shape=(3 * n ** 3, 6 * parts.size))
         return Z
 
+    # one BLAS thread while the numba kernels run the iterations on all cores: the BLAS calls
+    # in the loop are small (the coarsest level's dense Cholesky solve, the block's Gram
+    # matrices)
+    @one_blas_thread
     def solve(self, F: np.ndarray, callback=None, tols=None, magnetic: bool = False, x0=None):
         """Solve K W = F (pinned node) for the columns of F (n_dof, k), deflated AMG-CG.
 
@@ -425,10 +429,6 @@ class _CellSolver:
         F[rows] = 0.0
         tols = [self.tol] * F.shape[1] if tols is None else list(tols)
         X0 = None if x0 is None else self.initial_guess(F, x0)
-        # one BLAS thread while the numba kernels run the iterations on all cores: the BLAS
-        # calls in the loop are small (the coarsest level's dense Cholesky solve, Gram matrices
-        # of the block) (micro.common.jit.one_blas_thread)
-        blas = threadpool_limits(limits=1, user_api="blas")
         try:
             if self.kind == "reference":
                 cols = [block_cg(self.matvec, self.M, F[:, [c]], tol=tols[c],
@@ -454,7 +454,6 @@ class _CellSolver:
                     W, hist = krylov(self.matvec, self.M, F, groups=groups, **kw)
         finally:
             F[rows] = pinned
-            blas.restore_original_limits()
         if self.kind == "matrix-free":
             self.M.release()
         W[3 * self.pin:3 * self.pin + 3] = 0.0

@@ -15,7 +15,7 @@ def one_blas_thread(f):
     """Run ``f`` with BLAS/LAPACK limited to one thread (restored after): for solvers whose
     parallel work is in numba kernels and whose BLAS calls are small. OpenBLAS's threads keep
     spinning for a while after each call and take a core from numba's: the PME dipole solve at
-    N = 1e5 on 2 numba threads took 23-25 s with them, 22-23 s without; the cell solve's
+    N = 1e5 on 2 numba threads took 23-25 s with them, 21-23 s without; the cell solve's
     V-cycle 1.63x over one thread with them, 1.89x without (results/bench/threads.md)."""
     @functools.wraps(f)
     def run(*args, **kwargs):
