@@ -3,6 +3,7 @@ that keeps BLAS on one thread while numba's kernels use the cores."""
 from __future__ import annotations
 
 import functools
+import threading
 import types
 
 import numba as nb
@@ -16,9 +17,17 @@ def one_blas_thread(f):
     parallel work is in numba kernels and whose BLAS calls are small. OpenBLAS's threads keep
     spinning for a while after each call and take a core from numba's: the PME dipole solve at
     N = 1e5 on 2 numba threads took 23-25 s with them, 21-23 s without; the cell solve's
-    V-cycle 1.63x over one thread with them, 1.89x without (results/bench/threads.md)."""
+    V-cycle 1.63x over one thread with them, 1.89x without (results/bench/threads.md).
+
+    Only in the main thread: the limit is process-wide, so two threads (Dask's threaded workers)
+    would set and restore it under each other, and the BLAS thread count a solve sees -- which
+    can change the last bits of a multithreaded LAPACK result -- would depend on their timing
+    (a table of two threaded workers then differed from one worker's:
+    tests/homogenize/test_relax_batch.py). Other threads leave BLAS as it is."""
     @functools.wraps(f)
     def run(*args, **kwargs):
+        if threading.current_thread() is not threading.main_thread():
+            return f(*args, **kwargs)
         with threadpool_limits(limits=1, user_api="blas"):
             return f(*args, **kwargs)
     return run
