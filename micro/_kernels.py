@@ -433,6 +433,15 @@ def pme_stencil(g, p, kk, w, idx):
 
 
 @nb.njit(cache=True, parallel=True)
+def zero_planes(a):
+    """``a[...] = 0`` on all threads, plane by plane along the first axis (the PME spread grid,
+    reused between field evaluations: zeroing it in place keeps its pages resident, where a new
+    ``np.zeros`` grid is mapped afresh and page-faulted in at first touch every evaluation)."""
+    for i in nb.prange(a.shape[0]):
+        a[i] = 0.0
+
+
+@nb.njit(cache=True, parallel=True)
 def pme_spread(gpos, val, p, order, slab_start, work, iwork, row, out):
     """Spread per-particle values ``val`` (N, C) onto ``out`` (K, K, K, C) (component last,
     caller-zeroed) with order-p B-splines; ``gpos`` (N, 3) are grid coordinates in [0, K).
@@ -511,7 +520,8 @@ def pme_gather(gpos, grid, p, work, iwork, row, out):
 def pme_influence(qh, kv, kvz, g, scale, out):
     """k-space step of dipolar PME: ``out[..., a] = -scale g(k) k_a (k . qh(k))`` for the rfft
     grids ``qh`` (K, K, K/2+1, 3) (complex, component last); ``kv`` (K,) and ``kvz`` (K/2+1,)
-    are the wavenumbers."""
+    are the wavenumbers. ``out`` may be ``qh`` itself (each point's three values are read
+    before they are written)."""
     kk = qh.shape[0]
     kz = qh.shape[2]
     for a in nb.prange(kk):

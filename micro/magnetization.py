@@ -274,30 +274,52 @@ N_SPHERE = 1.0 / 3.0
 TAU0_S = 1e-9
 
 
-def _safe_newton(fun, lo, hi, x0, xtol, maxit=200):
+def _safe_newton(fun, lo, hi, x0, xtol, args=(), where=None, maxit=200):
     """Vectorised safeguarded Newton: the root of ``F`` in ``[lo, hi]`` with ``F(lo) <= 0 <=
-    F(hi)``; ``fun(x) -> (F, dF/dx)``. A Newton step that leaves the bracket is replaced by
-    bisection, so the iteration converges like bisection at worst and quadratically near a
-    smooth root. ``xtol`` (array or scalar) is the absolute tolerance on ``x``."""
-    lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
-    x = np.clip(np.asarray(x0, dtype=float), lo, hi)
-    xtol = np.broadcast_to(np.asarray(xtol, dtype=float), x.shape)
-    done = np.zeros(x.shape, dtype=bool)
+    F(hi)``; ``fun(x, *args) -> (F, dF/dx)``, elementwise, with ``args`` arrays that broadcast
+    against ``x``. ``xtol`` (array or scalar) is the absolute tolerance on ``x``.
+
+    A Newton step is replaced by bisection of the bracket when it leaves the bracket or is
+    more than half the previous step (the safeguard of ``rtsafe``, Press et al., Numerical
+    Recipes, 3rd ed. 2007, sect. 9.4). So at a double root (a Stoner-Wohlfarth minimum at its
+    switching field), where Newton converges linearly and round-off in ``F`` can send it back
+    and forth between two points a few ulps further apart than ``xtol``, the iteration still
+    ends. Quadratic near a simple root.
+
+    Each element iterates on its own and stops when its step or bracket is below its ``xtol``
+    (or ``F = 0``); only the elements still running are evaluated, so a few slow elements do
+    not keep the whole array iterating, and every element's result is the same as if it were
+    solved alone. ``where`` (boolean, broadcast against ``x``): only those elements are solved,
+    the others return ``x0`` clipped to the bracket (for elements whose root the caller knows,
+    or whose bracket holds none)."""
+    arrays = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (lo, hi, x0, xtol)
+                                   + tuple(args)))
+    shape = arrays[0].shape
+    lo, hi, x0, xtol = (a.ravel().copy() for a in arrays[:4])
+    args = [a.ravel() for a in arrays[4:]]
+    x = np.clip(x0, lo, hi)
+    step = hi - lo                                   # the previous step (first: the bracket)
+    act = (np.arange(x.size) if where is None
+           else np.flatnonzero(np.broadcast_to(np.asarray(where, dtype=bool), shape)))
     for _ in range(maxit):
-        F, dF = fun(x)
+        if act.size == 0:
+            return x.reshape(shape)
+        xa, la, ha, ta = x[act], lo[act], hi[act], xtol[act]
+        F, dF = fun(xa, *(a[act] for a in args))
         root = F == 0
         neg = F < 0
-        lo = np.where(neg, x, lo)
-        hi = np.where(neg | root, hi, x)
+        la = np.where(neg, xa, la)
+        ha = np.where(neg | root, ha, xa)
         with np.errstate(divide="ignore", invalid="ignore"):
-            xn = x - F / dF
-        bad = ~((xn >= lo) & (xn <= hi))
-        xn = np.where(bad, 0.5 * (lo + hi), xn)
-        xn = np.where(root | done, x, xn)        # a root found stays found
-        done = done | root | (np.abs(xn - x) <= xtol) | (hi - lo <= xtol)
-        x = xn
-        if np.all(done):
-            return x
+            xn = xa - F / dF
+        bad = ~((xn >= la) & (xn <= ha) & (np.abs(xn - xa) <= 0.5 * step[act]))
+        xn = np.where(bad, 0.5 * (la + ha), xn)
+        xn = np.where(root, xa, xn)              # a root found stays found
+        done = root | (np.abs(xn - xa) <= ta) | (ha - la <= ta)
+        x[act], lo[act], hi[act], step[act] = xn, la, ha, np.abs(xn - xa)
+        act = act[~done]
+    if act.size == 0:
+        return x.reshape(shape)
     raise ConvergenceError("intrinsic magnetization solve did not converge in "
                            f"{maxit} safeguarded Newton steps")
 
@@ -343,11 +365,12 @@ class _IntrinsicLaw(MagnetizationLaw):
         pinned = h / N <= self._f0(Ms)
         hi = np.minimum(np.minimum(Ms, h / N), self._f(h, Ms))
 
-        def fun(M):
+        def fun(M, h, Ms):
             u = np.maximum(h - N * M, 0.0)
             return M - self._f(u, Ms), 1.0 + N * self._df(u, Ms)
 
-        M = _safe_newton(fun, np.zeros_like(h), hi, 0.5 * hi, 1e-14 * np.maximum(Ms, 1e-300))
+        M = _safe_newton(fun, np.zeros_like(h), hi, 0.5 * hi, 1e-14 * np.maximum(Ms, 1e-300),
+                         args=(h, Ms), where=~pinned)
         M = np.where(pinned, h / N, M)
         return M, np.where(pinned, 0.0, np.maximum(h - N * M, 0.0))
 
@@ -523,11 +546,11 @@ class ApproachLaw(_IntrinsicLaw):
         if self.chi_i == math.inf:
             return np.zeros_like(Ms)
 
-        def fun(u):
+        def fun(u, Ms):
             return self.chi_i * u - self._rot(u, Ms), self.chi_i - self._drot(u, Ms)
 
         hi = Ms / self.chi_i
-        return _safe_newton(fun, np.zeros_like(Ms), hi, 0.8 * hi, 1e-15 * hi)
+        return _safe_newton(fun, np.zeros_like(Ms), hi, 0.8 * hi, 1e-15 * hi, args=(Ms,))
 
     def _f(self, u, Ms):
         rot = self._rot(u, Ms)
@@ -581,9 +604,10 @@ def switching_field(psi):
 
 def _sw_stable(h, psi):
     """Global minimum ``theta`` in [0, psi] (h >= 0, psi in [0, pi/2])."""
-    def fun(t):
+    def fun(t, h, psi):
         return np.sin(2 * t) + 2 * h * np.sin(t - psi), 2 * np.cos(2 * t) + 2 * h * np.cos(t - psi)
-    return _safe_newton(fun, np.zeros_like(psi + h), psi + 0.0 * h, 0.5 * (psi + 0 * h), 1e-13)
+    return _safe_newton(fun, np.zeros_like(psi + h), psi + 0.0 * h, 0.5 * (psi + 0 * h), 1e-13,
+                        args=(h, psi))
 
 
 def _sw_reversed(h, psi):
@@ -592,9 +616,11 @@ def _sw_reversed(h, psi):
     tc = -np.arctan(np.tan(psi) ** (1.0 / 3.0)) + 0.0 * h
     exists = h < switching_field(psi)
 
-    def fun(t):
+    def fun(t, h, psi):
         return np.sin(2 * t) - 2 * h * np.sin(t - psi), 2 * np.cos(2 * t) - 2 * h * np.cos(t - psi)
-    phi = _safe_newton(fun, tc, np.zeros_like(tc), 0.5 * tc, 1e-13)
+    # where the minimum does not exist the bracket holds no root: not solved (phi = tc / 2,
+    # never used: its population is 0)
+    phi = _safe_newton(fun, tc, np.zeros_like(tc), 0.5 * tc, 1e-13, args=(h, psi), where=exists)
     return phi, exists
 
 
