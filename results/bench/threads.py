@@ -30,6 +30,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -41,6 +42,30 @@ QUICK = {32: 25}
 DIPOLES, DIPOLES_QUICK = 100_000, 5_000
 #: pairs of dipole runs (1, 2 threads) in turn; the median of each kept
 DIPOLE_REPEATS = 3
+
+
+def _machine() -> dict:
+    """Where and when a part was measured (the parts of threads.json may come from different
+    runs, --only, and machines: round-off and speed differ between CPUs)."""
+    cpu = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cpu_count": os.cpu_count(),
+            "date_utc": time.strftime("%Y-%m-%d", time.gmtime()),
+            "load_avg_1min_at_start": os.getloadavg()[0]}
+
+
+def _measured_on(part: dict | None) -> str:
+    m = (part or {}).get("machine")
+    if not m:
+        return "Machine not recorded (measured before threads.py recorded it)."
+    return (f"Measured on {m['cpu']} ({m['cpu_count']} cores), {m['date_utc']}, load average "
+            f"{m['load_avg_1min_at_start']:.2f} at the start.")
 
 
 def _run(argv, env_threads: int, cwd: Path) -> dict:
@@ -83,6 +108,7 @@ def _draw_and_run(n_particles: int, name: str, argv, work: Path, read,
 def measure(grids: dict, work: Path) -> list:
     rows = []
     for n, n_particles in grids.items():
+        machine = _machine()
         runs = _draw_and_run(
             n_particles, f"h{n}",
             lambda rve: [MAPSIM, "homogenize", str(rve), "--voxels", str(n), "--B", "0.1",
@@ -92,7 +118,7 @@ def measure(grids: dict, work: Path) -> list:
         one, two = runs[1], runs[2]
         rows.append({
             "voxels": n, "n_particles": n_particles, "solver": one["solver"],
-            "threads_1": one, "threads_2": two,
+            "machine": machine, "threads_1": one, "threads_2": two,
             "speedup_wall": one["wall_s"] / two["wall_s"],
             "speedup_by_stage": {s: one["stages_s"][s] / two["stages_s"][s]
                                  for s in one["stages_s"] if two["stages_s"].get(s)},
@@ -128,13 +154,14 @@ def measure_dipoles(n_particles: int, work: Path, repeats: int = 1) -> dict:
     bit. ``repeats``: the pair of runs that many times in turn, the median solve of each thread
     count kept and every pair's speed-up recorded (the solve takes 20-40 s, and this machine's
     run-to-run spread is of the size of the gap to the 1.7x target)."""
+    machine = _machine()
     runs = _draw_and_run(n_particles, f"dip{n_particles}",
                          lambda rve: [sys.executable, "-c", DIPOLE_CODE, str(rve)], work,
                          lambda d: d, repeats=repeats)
     one, two = runs[1], runs[2]
     keys = ("M_eff_A_per_m", "f_eff_N_m3", "moments_sum", "forces_sum", "iterations")
     pairs = runs.get("pairs", [runs])
-    return {"n_particles": n_particles, "threads_1": one, "threads_2": two,
+    return {"n_particles": n_particles, "machine": machine, "threads_1": one, "threads_2": two,
             "speedup_solve": one["solve_s"] / two["solve_s"],
             "speedup_wall": one["wall_s"] / two["wall_s"],
             "repeats": len(pairs),
@@ -165,6 +192,7 @@ def measure_profile(n: int, n_particles: int, work: Path) -> dict:
     threads: each function's own time, and the speed-up of the ones that take >= 1 % of the
     1-thread solve; ``rest_of_solve`` is the solve minus the matrix-free stencil kernel."""
     runs = {}
+    machine = _machine()
     for k in (1, 2):
         out = work / f"prof{k}.json"
         env = dict(os.environ, NUMBA_NUM_THREADS=str(k))
@@ -175,7 +203,7 @@ def measure_profile(n: int, n_particles: int, work: Path) -> dict:
     o1, o2 = runs[1]["own_s"], runs[2]["own_s"]
     big = sorted((f for f in o1 if o1[f] >= 0.01 * solve1), key=lambda f: -o1[f])
     kern = "_matfree.py:_node_op"
-    return {"voxels": n, "n_particles": n_particles,
+    return {"voxels": n, "n_particles": n_particles, "machine": machine,
             "stages_1_s": runs[1]["stages_s"], "stages_2_s": runs[2]["stages_s"],
             "functions": [{"function": f, "own_1_thread_s": o1[f], "own_2_threads_s": o2.get(f),
                            "share_of_1_thread_solve": o1[f] / solve1,
@@ -206,6 +234,7 @@ def markdown(rows: list, dip: dict | None = None, prof: dict | None = None) -> s
         f"{r['voxels']}^3: " + ", ".join(f"{s} {100 * v:.0f} %"
                                          for s, v in r["share_1_thread"].items())
         for r in rows), ""]
+    lines += [" ".join(dict.fromkeys(_measured_on(r) for r in rows)), ""] if rows else []
     if dip:
         lines += ["## The dipole solve (particle-mesh Ewald)", "",
                   "`micro.dipoles.solve(rve, 0.1 T, 1.78 T/m)` (self-consistent moments and "
@@ -223,6 +252,7 @@ def markdown(rows: list, dip: dict | None = None, prof: dict | None = None) -> s
             lines += [f"The pair run {dip['repeats']} times in turn (1, 2, 1, 2, ...), the median "
                       "solve of each thread count in the table; the speed-up of every pair: "
                       + ", ".join(f"{v:.2f}x" for v in dip["speedup_solve_per_pair"]) + ".", ""]
+        lines += [_measured_on(dip), ""]
     if prof:
         s1, s2 = prof["stages_1_s"], prof["stages_2_s"]
         lines += [f"## Where the cell solve's time goes ({prof['voxels']}^3, "
@@ -241,7 +271,7 @@ def markdown(rows: list, dip: dict | None = None, prof: dict | None = None) -> s
             lines.append(f"| `{f['function']}` | {f['own_1_thread_s']:.2f} / "
                          f"{(f['own_2_threads_s'] or 0.0):.2f} | "
                          f"{100 * f['share_of_1_thread_solve']:.1f} % | {sp} |")
-        lines.append("")
+        lines += ["", _measured_on(prof), ""]
     return "\n".join(lines)
 
 
