@@ -318,7 +318,8 @@ class BranchTrace:
     """A traced branch of ``R(u, p) = 0``.
 
     u : (n, n_u) unknowns; p : (n,) parameter; dp_ds : (n,) parameter component of the unit
-    tangent (scaled variables; its sign is the direction of travel in p); stable : (n,) bool;
+    tangent (scaled variables; its sign is the direction of travel in p); stable : (n,) bool
+    (a limit point counts as stable when a neighbour on the trace is: the end of its segment);
     limit_points : tuple of :class:`LimitPoint` (also inserted in the arrays);
     event : the terminal :class:`EventPoint` (the last point of the arrays) or None;
     stop_reason : "event" | "max_steps".
@@ -569,6 +570,14 @@ def trace_branch(system, u0, p0, *, direction=-1.0, ds=0.05, ds_min=1e-7, ds_max
 
 
 def _pack(sc, zs, taus, stables, limits, event, reason):
+    # a fold is where an eigenvalue of the Jacobian crosses zero: its own stability test
+    # compares a round-off-sized eigenvalue with 0. It is the end of the stable part it
+    # bounds, so it is stable when a neighbour is (a segment's end, e.g. the snap-back gap,
+    # is then the located fold, not the step before it on one CPU and the fold on another)
+    stables = list(stables)
+    for lp in limits:
+        k = lp.index
+        stables[k] = (k > 0 and stables[k - 1]) or (k + 1 < len(stables) and stables[k + 1])
     Z = np.array(zs)
     u = Z[:, :-1] * sc.us[None, :]
     p = Z[:, -1] * sc.ps

@@ -60,6 +60,16 @@ def test_spring_pull_in_at_a_third_or_fifth_of_the_gap(n):
     # stable (k - n c / d^(n+1) > 0) before the fold, unstable after it
     assert tr.stable[:lp.index].all() and not tr.stable[lp.index + 1:].any()
     assert np.all(np.diff(tr.p[:lp.index + 1]) < 0) and np.all(np.diff(tr.p[lp.index:]) > 0)
+    # the fold itself ends the stable part, whichever side of 0 its eigenvalue's round-off
+    # falls: stability tests shifted by +-1e-9 k (far beyond the located fold's eigenvalue,
+    # far inside the steps') classify every point alike, the fold as stable
+    assert tr.stable[lp.index]
+    for margin in (1e-9 * k, -1e-9 * k):
+        tr_m = trace_branch(system, [0.0], 5 * gs, direction=-1.0, p_max=10 * gs, u_scale=gs,
+                            p_scale=gs, r_scale=k * gs,
+                            stability=lambda u, p, J, m=margin: bool(J[0, 0] > m))
+        assert [x.index for x in tr_m.limit_points] == [lp.index]
+        assert np.array_equal(tr_m.stable, tr.stable)
 
 
 # ------------------------------------------------------------------ far gaps: the dead load

@@ -57,6 +57,11 @@ def test_pull_in_into_a_free_bent_state_then_touch_then_lift_off(table_law):
     assert r.release_gap_m == pytest.approx(r.touch_gap_m, rel=1e-9)
     # the strip returns to the small deflection above the pull-in gap: the loop closes
     assert r.snap_back_gap_m > r.pull_in_gap_m
+    # ... at the second fold, located: the largest gap of the free branch past pull-in (not
+    # the continuation step before it, which is what round-off on the fold's stability gave)
+    free = np.flatnonzero(r.branch == "free")
+    k_pull = free[np.argmin(np.abs(r.gap_m[free] - r.pull_in_gap_m))]
+    assert r.snap_back_gap_m == pytest.approx(r.gap_m[free[free > k_pull]].max(), rel=1e-12)
     # the sweep follows it: at 13 mm (below pull-in, above the touch) bent and free; at 14 mm
     # closing small, opening still bent (between pull-in and snap back)
     n = len(gaps)
