@@ -2,6 +2,7 @@
 import math
 
 import numpy as np
+import pytest
 from scipy.interpolate import BSpline
 from scipy.special import erfc
 
@@ -148,16 +149,18 @@ def _slabs(gpos, kk, nslab):
 
 
 def _scratch(s, p):
-    return np.empty((s, 3, p)), np.empty((s, 3, p), dtype=np.int64), np.empty((s, 4))
+    return np.empty((s, 3, p)), np.empty((s, 3, p), dtype=np.int64), np.empty((s, 9))
 
 
-def test_spread_gather_adjoint_and_numpy():
+@pytest.mark.parametrize("nc", [2, 3, 9])
+def test_spread_gather_adjoint_and_numpy(nc):
+    """Every component count: 3 (the field) has its own unrolled loops, 9 is the gradient's."""
     p, kk = 4, 8
     gpos = RNG.random((6, 3)) * kk
     gpos[0, 0] = kk - 1e-9                   # a particle whose stencil wraps around the box
-    val = RNG.normal(size=(6, 2))
+    val = RNG.normal(size=(6, nc))
     order, start = _slabs(gpos, kk, 1)
-    grid = np.zeros((kk, kk, kk, 2))
+    grid = np.zeros((kk, kk, kk, nc))
     K.pme_spread(gpos, val, p, order, start, *_scratch(1, p), grid)
     ref = np.zeros_like(grid)
     card = BSpline.basis_element(np.arange(p + 1), extrapolate=False)
@@ -169,12 +172,12 @@ def test_spread_gather_adjoint_and_numpy():
                 w *= np.nan_to_num(card(x)) if x < p else 0.0
             ref[g[0], g[1], g[2], :] += w * val[i]
     np.testing.assert_allclose(grid, ref, atol=1e-13)
-    G = RNG.normal(size=(kk, kk, kk, 2))
-    out = np.full((6, 2), np.nan)               # gather overwrites, never accumulates
+    G = RNG.normal(size=(kk, kk, kk, nc))
+    out = np.full((6, nc), np.nan)              # gather overwrites, never accumulates
     K.pme_gather(gpos, G, p, *_scratch(4, p), out)
     # gather is the transpose of spread: <spread(v), G> = <v, gather(G)>
     assert math.isclose(np.sum(grid * G), np.sum(val * out), rel_tol=1e-12)
-    out1 = np.empty((6, 2))
+    out1 = np.empty((6, nc))
     K.pme_gather(gpos, G, p, *_scratch(1, p), out1)       # chunking changes nothing
     np.testing.assert_array_equal(out, out1)
 
