@@ -1,9 +1,26 @@
 """Shared fixtures of the test suite."""
 import contextlib
 import importlib.util
+import os
 from pathlib import Path
 
 import pytest
+
+
+def pytest_configure(config):
+    """Under pytest-xdist, each worker's share of the cores: ``make test`` runs two workers on
+    two cores, and with numba's and BLAS's default of a thread per core in each, four threads
+    compete for two cores (numba's parallel kernels then wait on descheduled threads: the
+    heaviest tests took 1.2x as long). The tests that compare one thread with several set
+    ``numba.config.NUMBA_NUM_THREADS`` (all the cores) themselves."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+    if workers < 2:
+        return
+    import numba
+    from threadpoolctl import threadpool_limits
+    share = max(1, (os.cpu_count() or 1) // workers)
+    numba.set_num_threads(min(share, numba.config.NUMBA_NUM_THREADS))
+    config._mapsim_blas_limit = threadpool_limits(limits=share, user_api="blas")
 
 
 def _load_script(path: Path):

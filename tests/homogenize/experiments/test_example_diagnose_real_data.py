@@ -1,14 +1,24 @@
-"""The real-data example: its numbers (what results/diagnose/ reports)."""
+"""The real-data example: its numbers (what results/diagnose/ reports).
+
+The committed reports use the specimen solver's "normal" mesh (2 min for the Diguet account);
+CI runs the "coarse" one (40 s), MAPSIM_FULL=1 the normal one. The assertions hold for both:
+the specimen's change of length moves by ~1 % between them (results/diagnose)."""
+import os
+import types
 from pathlib import Path
 
 import pytest
 
 EXAMPLE = Path(__file__).resolve().parents[3] / "examples" / "diagnose_real_data.py"
+FULL = os.environ.get("MAPSIM_FULL") == "1"
 
 
 @pytest.fixture(scope="module")
 def ex(load_script):
-    return load_script(EXAMPLE)
+    d = load_script(EXAMPLE).diagnose_all("normal" if FULL else "coarse")
+    return types.SimpleNamespace(seed_point=d["seed_paper_cantilever"].as_dict(),
+                                 diguet=d["diguet2010_magnetostriction"].as_dict(),
+                                 rtv615=d["rtv615_tensile"].as_dict())
 
 
 def test_seed_point(ex):
