@@ -19,6 +19,8 @@ Run:  .venv/bin/python results/bench/threads.py              (64^3 and 128^3, ~1
                                                                   the others from threads.json)
       .venv/bin/python results/bench/threads.py --only profile   (where the cell solve's time
                      goes at 64^3 on 1 and 2 threads: cProfile's own time per kernel, ~1 min)
+      .venv/bin/python results/bench/threads.py --only dipole-profile   (the same for the
+                     dipole solve at N = 1e5, and its serial share, ~3 min)
 Writes results/bench/threads.json and threads.md (--quick: a temporary directory).
 """
 from __future__ import annotations
@@ -213,7 +215,60 @@ def measure_profile(n: int, n_particles: int, work: Path) -> dict:
                                       / (solve2 - o2.get(kern, 0.0)))}
 
 
-def markdown(rows: list, dip: dict | None = None, prof: dict | None = None) -> str:
+DIPOLE_PROFILE_CODE = """
+import cProfile, json, pstats, sys, time
+from micro import RVE, generate_rve
+from micro.dipoles import solve
+solve(generate_rve(0.035, 4000, 2), 0.1, 1.78)           # compile outside the profile (PME)
+rve = RVE.load(sys.argv[1])
+pr = cProfile.Profile()
+t0 = time.perf_counter()
+pr.enable()
+solve(rve, 0.1, 1.78)
+pr.disable()
+sec = time.perf_counter() - t0
+st = pstats.Stats(pr).stats
+own = {}
+for k, v in st.items():
+    name = f"{k[0].split('/')[-1]}:{k[2]}"
+    own[name] = own.get(name, 0.0) + v[2]
+json.dump({"solve_s": sec, "own_s": own}, open(sys.argv[2], "w"))
+"""
+
+#: a function whose own time falls by less than this on 2 threads counts as serial
+SERIAL_BELOW = 1.25
+
+
+def measure_dipole_profile(n_particles: int, work: Path) -> dict:
+    """cProfile of the dipole solve (``micro.dipoles.solve``, default law, PME) on 1 and 2
+    threads: each function's own time and speed-up for those >= 1 % of the 1-thread solve, and
+    the share of the 1-thread solve in functions that do not scale (speed-up below
+    :data:`SERIAL_BELOW`): what bounds the solve's speed-up."""
+    machine = _machine()
+    rve = work / f"dipprof{n_particles}.h5"
+    subprocess.run([MAPSIM, "rve", "--phi", "0.035", "--n", str(n_particles), "--seed", "1",
+                    "--out", str(rve)], check=True, capture_output=True)
+    runs = {}
+    for k in (1, 2):
+        out = work / f"dipprof{k}.json"
+        env = dict(os.environ, NUMBA_NUM_THREADS=str(k))
+        subprocess.run([sys.executable, "-c", DIPOLE_PROFILE_CODE, str(rve), str(out)],
+                       env=env, check=True, capture_output=True)
+        runs[k] = json.loads(out.read_text())
+    solve1, solve2 = runs[1]["solve_s"], runs[2]["solve_s"]
+    o1, o2 = runs[1]["own_s"], runs[2]["own_s"]
+    big = sorted((f for f in o1 if o1[f] >= 0.01 * solve1), key=lambda f: -o1[f])
+    serial = [f for f in o1 if not (o2.get(f) and o1[f] / o2[f] >= SERIAL_BELOW)]
+    return {"n_particles": n_particles, "machine": machine, "solve_1_s": solve1,
+            "solve_2_s": solve2,
+            "functions": [{"function": f, "own_1_thread_s": o1[f], "own_2_threads_s": o2.get(f),
+                           "share_of_1_thread_solve": o1[f] / solve1,
+                           "speedup": o1[f] / o2[f] if o2.get(f) else None} for f in big],
+            "serial_share_of_1_thread_solve": sum(o1[f] for f in serial) / solve1}
+
+
+def markdown(rows: list, dip: dict | None = None, prof: dict | None = None,
+             dprof: dict | None = None) -> str:
     lines = ["# The cell FEM on 1 and 2 threads (`results/bench/threads.py`)", "",
              "`mapsim homogenize RVE --voxels N --B 0.1 --gradB 1.78` (7 load cases, default "
              "solver), NUMBA_NUM_THREADS=1 then 2, wall time and peak RSS by `/usr/bin/time -v`; "
@@ -272,13 +327,33 @@ def markdown(rows: list, dip: dict | None = None, prof: dict | None = None) -> s
                          f"{(f['own_2_threads_s'] or 0.0):.2f} | "
                          f"{100 * f['share_of_1_thread_solve']:.1f} % | {sp} |")
         lines += ["", _measured_on(prof), ""]
+    if dprof:
+        s1, s2 = dprof["solve_1_s"], dprof["solve_2_s"]
+        ser = dprof["serial_share_of_1_thread_solve"]
+        lines += [f"## Where the dipole solve's time goes (N = {dprof['n_particles']}, PME)", "",
+                  "`results/bench/threads.py --only dipole-profile`: cProfile of "
+                  "`micro.dipoles.solve(rve, 0.1 T, 1.78 T/m)`, each function's own time. "
+                  f"Solve {s1:.1f} s on 1 thread, {s2:.1f} s on 2 ({s1 / s2:.2f}x, under the "
+                  f"profiler). Functions whose own time falls by less than {SERIAL_BELOW}x on 2 "
+                  f"threads (serial numpy, scipy, Python) hold {100 * ser:.1f} % of the "
+                  f"1-thread solve: with the rest perfectly parallel the bound is "
+                  f"{1 / (ser + (1 - ser) / 2):.2f}x.", "",
+                  "| function | own time 1 / 2 threads [s] | own time / 1-thread solve time | "
+                  "speed-up |", "|---|---|---|---|"]
+        for f in dprof["functions"]:
+            sp = f"{f['speedup']:.2f}x" if f["speedup"] else "-"
+            lines.append(f"| `{f['function']}` | {f['own_1_thread_s']:.2f} / "
+                         f"{(f['own_2_threads_s'] or 0.0):.2f} | "
+                         f"{100 * f['share_of_1_thread_solve']:.1f} % | {sp} |")
+        lines += ["", _measured_on(dprof), ""]
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", choices=("cells", "dipoles", "profile"), default=None,
+    ap.add_argument("--only", choices=("cells", "dipoles", "profile", "dipole-profile"),
+                    default=None,
                     help="re-measure this part only; the others are kept from threads.json")
     a = ap.parse_args(argv)
     out = Path(tempfile.mkdtemp()) if a.quick else HERE
@@ -293,13 +368,16 @@ def main(argv=None) -> int:
         n_prof, p_prof = next(iter((QUICK if a.quick else GRIDS).items()))
         prof = (measure_profile(n_prof, p_prof, Path(work)) if a.only in (None, "profile")
                 else old.get("profile"))
+        dprof = (measure_dipole_profile(DIPOLES_QUICK if a.quick else DIPOLES, Path(work))
+                 if a.only in (None, "dipole-profile") else old.get("dipole_profile"))
     from importlib import metadata
-    doc = {"rows": rows, "dipoles": dip, "profile": prof, "cpu_count": os.cpu_count(),
+    doc = {"rows": rows, "dipoles": dip, "profile": prof, "dipole_profile": dprof,
+           "cpu_count": os.cpu_count(),
            "versions": {k: metadata.version(k) for k in ("numpy", "scipy", "numba", "pyamg")},
            "command": "results/bench/threads.py"}
     (out / "threads.json").write_text(json.dumps(doc, indent=1) + "\n")
-    (out / "threads.md").write_text(markdown(rows, dip, prof))
-    print(markdown(rows, dip, prof))
+    (out / "threads.md").write_text(markdown(rows, dip, prof, dprof))
+    print(markdown(rows, dip, prof, dprof))
     return 0
 
 
