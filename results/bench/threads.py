@@ -189,6 +189,15 @@ json.dump({{"stages_s": r.timings_s, "own_s": own}}, open(sys.argv[1], "w"))
 """
 
 
+def _functions(o1: dict, o2: dict, solve1: float) -> list:
+    """The functions of >= 1 % of the 1-thread solve (own times ``o1``, ``o2`` on 1 and 2
+    threads), largest first, with their share and speed-up."""
+    big = sorted((f for f in o1 if o1[f] >= 0.01 * solve1), key=lambda f: -o1[f])
+    return [{"function": f, "own_1_thread_s": o1[f], "own_2_threads_s": o2.get(f),
+             "share_of_1_thread_solve": o1[f] / solve1,
+             "speedup": o1[f] / o2[f] if o2.get(f) else None} for f in big]
+
+
 def measure_profile(n: int, n_particles: int, work: Path) -> dict:
     """cProfile of the cell solve (in-process ``homogenize_rve``, 7 load cases) on 1 and 2
     threads: each function's own time, and the speed-up of the ones that take >= 1 % of the
@@ -203,13 +212,10 @@ def measure_profile(n: int, n_particles: int, work: Path) -> dict:
         runs[k] = json.loads(out.read_text())
     solve1, solve2 = runs[1]["stages_s"]["solve"], runs[2]["stages_s"]["solve"]
     o1, o2 = runs[1]["own_s"], runs[2]["own_s"]
-    big = sorted((f for f in o1 if o1[f] >= 0.01 * solve1), key=lambda f: -o1[f])
     kern = "_matfree.py:_node_op"
     return {"voxels": n, "n_particles": n_particles, "machine": machine,
             "stages_1_s": runs[1]["stages_s"], "stages_2_s": runs[2]["stages_s"],
-            "functions": [{"function": f, "own_1_thread_s": o1[f], "own_2_threads_s": o2.get(f),
-                           "share_of_1_thread_solve": o1[f] / solve1,
-                           "speedup": o1[f] / o2[f] if o2.get(f) else None} for f in big],
+            "functions": _functions(o1, o2, solve1),
             "stencil_kernel_speedup": o1[kern] / o2[kern] if o2.get(kern) else None,
             "rest_of_solve_speedup": ((solve1 - o1.get(kern, 0.0))
                                       / (solve2 - o2.get(kern, 0.0)))}
@@ -257,14 +263,23 @@ def measure_dipole_profile(n_particles: int, work: Path) -> dict:
         runs[k] = json.loads(out.read_text())
     solve1, solve2 = runs[1]["solve_s"], runs[2]["solve_s"]
     o1, o2 = runs[1]["own_s"], runs[2]["own_s"]
-    big = sorted((f for f in o1 if o1[f] >= 0.01 * solve1), key=lambda f: -o1[f])
     serial = [f for f in o1 if not (o2.get(f) and o1[f] / o2[f] >= SERIAL_BELOW)]
     return {"n_particles": n_particles, "machine": machine, "solve_1_s": solve1,
-            "solve_2_s": solve2,
-            "functions": [{"function": f, "own_1_thread_s": o1[f], "own_2_threads_s": o2.get(f),
-                           "share_of_1_thread_solve": o1[f] / solve1,
-                           "speedup": o1[f] / o2[f] if o2.get(f) else None} for f in big],
+            "solve_2_s": solve2, "functions": _functions(o1, o2, solve1),
             "serial_share_of_1_thread_solve": sum(o1[f] for f in serial) / solve1}
+
+
+def _function_table(prof: dict) -> list:
+    """The lines of a profile's per-function table (own time on 1 and 2 threads, share of the
+    1-thread solve, speed-up) and where it was measured."""
+    lines = ["| function | own time 1 / 2 threads [s] | own time / 1-thread solve time | "
+             "speed-up |", "|---|---|---|---|"]
+    for f in prof["functions"]:
+        sp = f"{f['speedup']:.2f}x" if f["speedup"] else "-"
+        lines.append(f"| `{f['function']}` | {f['own_1_thread_s']:.2f} / "
+                     f"{(f['own_2_threads_s'] or 0.0):.2f} | "
+                     f"{100 * f['share_of_1_thread_solve']:.1f} % | {sp} |")
+    return lines + ["", _measured_on(prof), ""]
 
 
 def markdown(rows: list, dip: dict | None = None, prof: dict | None = None,
@@ -319,14 +334,8 @@ def markdown(rows: list, dip: dict | None = None, prof: dict | None = None,
                   f"({s1['total'] / s2['total']:.2f}x). The matrix-free stencil kernel "
                   f"(smoothing, residuals, products) {prof['stencil_kernel_speedup']:.2f}x; "
                   f"the rest of the solve {prof['rest_of_solve_speedup']:.2f}x.", "",
-                  "| function | own time 1 / 2 threads [s] | own time / 1-thread solve time | "
-                  "speed-up |", "|---|---|---|---|"]
-        for f in prof["functions"]:
-            sp = f"{f['speedup']:.2f}x" if f["speedup"] else "-"
-            lines.append(f"| `{f['function']}` | {f['own_1_thread_s']:.2f} / "
-                         f"{(f['own_2_threads_s'] or 0.0):.2f} | "
-                         f"{100 * f['share_of_1_thread_solve']:.1f} % | {sp} |")
-        lines += ["", _measured_on(prof), ""]
+                  ]
+        lines += _function_table(prof)
     if dprof:
         s1, s2 = dprof["solve_1_s"], dprof["solve_2_s"]
         ser = dprof["serial_share_of_1_thread_solve"]
@@ -338,14 +347,8 @@ def markdown(rows: list, dip: dict | None = None, prof: dict | None = None,
                   f"threads (serial numpy, scipy, Python) hold {100 * ser:.1f} % of the "
                   f"1-thread solve: with the rest perfectly parallel the bound is "
                   f"{1 / (ser + (1 - ser) / 2):.2f}x.", "",
-                  "| function | own time 1 / 2 threads [s] | own time / 1-thread solve time | "
-                  "speed-up |", "|---|---|---|---|"]
-        for f in dprof["functions"]:
-            sp = f"{f['speedup']:.2f}x" if f["speedup"] else "-"
-            lines.append(f"| `{f['function']}` | {f['own_1_thread_s']:.2f} / "
-                         f"{(f['own_2_threads_s'] or 0.0):.2f} | "
-                         f"{100 * f['share_of_1_thread_solve']:.1f} % | {sp} |")
-        lines += ["", _measured_on(dprof), ""]
+                  ]
+        lines += _function_table(dprof)
     return "\n".join(lines)
 
 
