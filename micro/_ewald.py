@@ -229,7 +229,7 @@ class PeriodicSum:
         grid = scipy.fft.irfft(hg, n=kk, axis=2, workers=nt)
         out = np.empty((self.n, grid.shape[3]))
         K.pme_gather(self.gpos, np.ascontiguousarray(grid), self.order, self._work[:64],
-                     self._iwork[:64], self._row[:64], out)
+                     self._iwork[:64], out)
         return out
 
     def _pme_recip(self, mom, want_force):

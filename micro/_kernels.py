@@ -500,12 +500,14 @@ def pme_spread(gpos, val, p, order, slab_start, work, iwork, row, out):
 
 
 @nb.njit(cache=True, parallel=True)
-def pme_gather(gpos, grid, p, work, iwork, row, out):
+def pme_gather(gpos, grid, p, work, iwork, out):
     """Interpolate ``grid`` (K, K, K, C) (component last) at grid coordinates ``gpos`` (N, 3)
     with order-p B-splines into ``out`` (N, C) (the transpose of :func:`pme_spread`).
-    ``work`` (S, 3, p), ``row`` (S, >= C) float64 and ``iwork`` (S, 3, p) int64: scratch of S
-    chunks of particles (each particle's sum runs in the same order whatever S or the thread
-    count). Accumulating in ``row`` rather than ``out`` is 2x faster (fewer stores)."""
+    ``work`` (S, 3, p) float64 and ``iwork`` (S, 3, p) int64: scratch of S chunks of particles
+    (each particle's sum runs in the same order whatever S or the thread count). One component
+    at a time, its sum in a register: the stencil's p^3 grid points stay in the L1 cache
+    between the components, and the sums no longer go through memory (with all C sums in a
+    scratch row it was 1.4x slower for C = 3 and C = 9; the same numbers)."""
     n = gpos.shape[0]
     nc = grid.shape[3]
     kk = grid.shape[0]
@@ -513,40 +515,20 @@ def pme_gather(gpos, grid, p, work, iwork, row, out):
     for ch in nb.prange(nchunk):
         wx, wy, wz = work[ch, 0], work[ch, 1], work[ch, 2]
         ix, iy, iz = iwork[ch, 0], iwork[ch, 1], iwork[ch, 2]
-        acc = row[ch]
         for i in range(ch * n // nchunk, (ch + 1) * n // nchunk):
             pme_stencil(gpos[i, 0], p, kk, wx, ix)
             pme_stencil(gpos[i, 1], p, kk, wy, iy)
             pme_stencil(gpos[i, 2], p, kk, wz, iz)
-            if nc == 3:
-                # three sums in registers: 2x faster than the loop over d below, which keeps
-                # them in memory (same operations in the same order: the same numbers)
-                a0 = a1 = a2 = 0.0
+            for d in range(nc):
+                acc = 0.0
                 for a in range(p):
                     xa = ix[a]
                     for b in range(p):
                         wab = wx[a] * wy[b]
                         yb = iy[b]
                         for c in range(p):
-                            w = wab * wz[c]
-                            zc = iz[c]
-                            a0 += w * grid[xa, yb, zc, 0]
-                            a1 += w * grid[xa, yb, zc, 1]
-                            a2 += w * grid[xa, yb, zc, 2]
-                out[i, 0], out[i, 1], out[i, 2] = a0, a1, a2
-                continue
-            for d in range(nc):
-                acc[d] = 0.0
-            for a in range(p):
-                for b in range(p):
-                    wab = wx[a] * wy[b]
-                    for c in range(p):
-                        w = wab * wz[c]
-                        g = grid[ix[a], iy[b], iz[c]]
-                        for d in range(nc):
-                            acc[d] += w * g[d]
-            for d in range(nc):
-                out[i, d] = acc[d]
+                            acc += wab * wz[c] * grid[xa, yb, iz[c], d]
+                out[i, d] = acc
 
 
 @nb.njit(cache=True, parallel=True)

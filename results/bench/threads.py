@@ -245,26 +245,35 @@ json.dump({"solve_s": sec, "own_s": own}, open(sys.argv[2], "w"))
 SERIAL_BELOW = 1.25
 
 
-def measure_dipole_profile(n_particles: int, work: Path) -> dict:
+def measure_dipole_profile(n_particles: int, work: Path, repeats: int = 1) -> dict:
     """cProfile of the dipole solve (``micro.dipoles.solve``, default law, PME) on 1 and 2
     threads: each function's own time and speed-up for those >= 1 % of the 1-thread solve, and
     the share of the 1-thread solve in functions that do not scale (speed-up below
-    :data:`SERIAL_BELOW`): what bounds the solve's speed-up."""
+    :data:`SERIAL_BELOW`): what bounds the solve's speed-up. ``repeats``: the pair run that
+    many times in turn, each time the median over the runs (one run's FFT once showed 1.07x
+    where the others show 1.8x: this machine's noise)."""
     machine = _machine()
     rve = work / f"dipprof{n_particles}.h5"
     subprocess.run([MAPSIM, "rve", "--phi", "0.035", "--n", str(n_particles), "--seed", "1",
                     "--out", str(rve)], check=True, capture_output=True)
-    runs = {}
-    for k in (1, 2):
-        out = work / f"dipprof{k}.json"
-        env = dict(os.environ, NUMBA_NUM_THREADS=str(k))
-        subprocess.run([sys.executable, "-c", DIPOLE_PROFILE_CODE, str(rve), str(out)],
-                       env=env, check=True, capture_output=True)
-        runs[k] = json.loads(out.read_text())
-    solve1, solve2 = runs[1]["solve_s"], runs[2]["solve_s"]
-    o1, o2 = runs[1]["own_s"], runs[2]["own_s"]
+    runs = {1: [], 2: []}
+    for _ in range(repeats):
+        for k in (1, 2):
+            out = work / f"dipprof{k}.json"
+            env = dict(os.environ, NUMBA_NUM_THREADS=str(k))
+            subprocess.run([sys.executable, "-c", DIPOLE_PROFILE_CODE, str(rve), str(out)],
+                           env=env, check=True, capture_output=True)
+            runs[k].append(json.loads(out.read_text()))
+
+    def median(k, get):
+        v = sorted(get(r) for r in runs[k])
+        return v[len(v) // 2]
+    solve1, solve2 = (median(k, lambda r: r["solve_s"]) for k in (1, 2))
+    o1, o2 = ({f: median(k, lambda r, f=f: r["own_s"].get(f, 0.0)) for f in runs[k][0]["own_s"]}
+              for k in (1, 2))
     serial = [f for f in o1 if not (o2.get(f) and o1[f] / o2[f] >= SERIAL_BELOW)]
-    return {"n_particles": n_particles, "machine": machine, "solve_1_s": solve1,
+    return {"n_particles": n_particles, "machine": machine, "repeats": repeats,
+            "solve_1_s": solve1,
             "solve_2_s": solve2, "functions": _functions(o1, o2, solve1),
             "serial_share_of_1_thread_solve": sum(o1[f] for f in serial) / solve1}
 
@@ -341,7 +350,8 @@ def markdown(rows: list, dip: dict | None = None, prof: dict | None = None,
         ser = dprof["serial_share_of_1_thread_solve"]
         lines += [f"## Where the dipole solve's time goes (N = {dprof['n_particles']}, PME)", "",
                   "`results/bench/threads.py --only dipole-profile`: cProfile of "
-                  "`micro.dipoles.solve(rve, 0.1 T, 1.78 T/m)`, each function's own time. "
+                  "`micro.dipoles.solve(rve, 0.1 T, 1.78 T/m)`, each function's own time "
+                  f"(median of {dprof.get('repeats', 1)} pairs of runs in turn). "
                   f"Solve {s1:.1f} s on 1 thread, {s2:.1f} s on 2 ({s1 / s2:.2f}x, under the "
                   f"profiler). Functions whose own time falls by less than {SERIAL_BELOW}x on 2 "
                   f"threads (serial numpy, scipy, Python) hold {100 * ser:.1f} % of the "
@@ -371,7 +381,8 @@ def main(argv=None) -> int:
         n_prof, p_prof = next(iter((QUICK if a.quick else GRIDS).items()))
         prof = (measure_profile(n_prof, p_prof, Path(work)) if a.only in (None, "profile")
                 else old.get("profile"))
-        dprof = (measure_dipole_profile(DIPOLES_QUICK if a.quick else DIPOLES, Path(work))
+        dprof = (measure_dipole_profile(DIPOLES_QUICK if a.quick else DIPOLES, Path(work),
+                                        repeats=1 if a.quick else DIPOLE_REPEATS)
                  if a.only in (None, "dipole-profile") else old.get("dipole_profile"))
     from importlib import metadata
     doc = {"rows": rows, "dipoles": dip, "profile": prof, "dipole_profile": dprof,
