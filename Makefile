@@ -7,9 +7,10 @@ STAMP  := $(VENV)/.installed
 LOCK   := .ci/constraints.txt
 # newest versions that pyproject.toml allows, without the lock (for `make lock`, `make test-latest`)
 LATEST := .venv-latest
-# pytest workers (pytest-xdist): both cores. Fresh clones, new venv, cold numba cache (as on a
-# fresh machine), 2 cores, CalculiX installed: one process 7 min 45 s, two workers 5 min 54 s
-# (with a warm cache one process took 6 min 08 s). PYTEST_WORKERS=0: one process.
+# pytest workers (pytest-xdist): both cores, numba and BLAS on one thread in each worker
+# (tests/conftest.py). Fresh clone, new venv, cold numba cache, 2 cores (AMD EPYC, session 25):
+# two workers 16.5 min; with two threads in each worker it had taken 25 min.
+# PYTEST_WORKERS=0: one process.
 PYTEST_WORKERS ?= 2
 
 .PHONY: run test venv bench clean peers lock latest test-latest

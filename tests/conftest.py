@@ -39,13 +39,6 @@ def load_script():
     return _load_script
 
 
-def pytest_collection_modifyitems(config, items):
-    """The modules marked ``long`` first (in their own order, the rest after them in theirs):
-    with two workers, a minute-long test that starts last keeps one worker busy while the other
-    has nothing left to do."""
-    items.sort(key=lambda it: it.get_closest_marker("long") is None)
-
-
 @contextlib.contextmanager
 def _inprocess_client(n_workers: int):
     """A Dask client on an in-process (threads) cluster of ``n_workers`` single-thread workers,

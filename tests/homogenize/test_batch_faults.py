@@ -23,8 +23,6 @@ from homogenize.tables._study import parse_study
 from homogenize.cli import main
 from homogenize.tables.batch import (BatchError, StorageError, parts_dir_for, run_batch)
 
-pytestmark = pytest.mark.long       # over a minute on CI: run first (conftest)
-
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "results" / "reliability" / "fault_tolerance.py"
 FULL = os.environ.get("MAPSIM_FULL") == "1"

@@ -7,8 +7,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.long       # over a minute on CI: run first (conftest)
-
 SCRIPT = Path(__file__).resolve().parents[2] / "results" / "cell" / "dilute_rate.py"
 
 

@@ -9,8 +9,6 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.long       # over a minute on CI: run first (conftest)
-
 EXAMPLE = Path(__file__).resolve().parents[3] / "examples" / "diagnose_real_data.py"
 FULL = os.environ.get("MAPSIM_FULL") == "1"
 

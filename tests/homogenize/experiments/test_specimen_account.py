@@ -11,8 +11,6 @@ from homogenize.experiments.specimen_account import (composite_law, loo_fitted_k
 from homogenize.experiments.rve_tables import Restructuring, affine_kappa
 from micro.common.validate import InputError
 
-pytestmark = pytest.mark.long       # over a minute on CI: run first (conftest)
-
 ROOT = Path(__file__).resolve().parents[3]
 DIGUET = ROOT / "examples" / "data" / "diguet2010_magnetostriction.toml"
 
