@@ -26,8 +26,6 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.long       # over a minute on CI: run first (conftest)
-
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 NUMBER = r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?"
