@@ -7,6 +7,8 @@ units and allocate.
 """
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -175,7 +177,6 @@ def placement_relax_step(centers, radii, gap, push_scale, box, ncell, head, nxt,
 # ---------------------------------------------------------------------------------------------
 # Dipoles (direct sums, Ewald real space, forces) -- owned by dipoles.py
 # ---------------------------------------------------------------------------------------------
-import math  # noqa: E402  (dipole kernels use math.erfc/exp/sqrt)
 
 # Conventions: fields are returned WITHOUT the 1/(4 pi) of H = (3 r (m.r)/r^5 - m/r^3) / (4 pi)
 # and forces without mu0/(4 pi); the Python wrappers in dipoles.py apply them. Ewald kernels
@@ -593,3 +594,93 @@ def pme_influence_grad(qh, kv, kvz, g, wz, scale, inv4a2, out, acc):
                     for y in range(3):
                         cq = s.real * qs[y].real + s.imag * qs[y].imag    # Re(conj(s) q_y)
                         acc[a, 1 + 3 * x + y] += w * ks[x] * ks[y] - wg * ks[x] * cq
+
+
+# ---------------------------------------------------------------------------------------------
+# Stoner-Wohlfarth random-axis average -- owned by magnetization.py
+# ---------------------------------------------------------------------------------------------
+# Reduced energy e(theta) = sin^2 theta - 2 s h cos(theta - psi) (s = +1: the field along the
+# axis' positive side, s = -1: reversed); a minimum solves F = sin 2t + 2 s h sin(t - psi) = 0.
+
+
+@nb.njit(cache=True, error_model="numpy")
+def sw_root(h, psi, s, lo, hi, x0, xtol, maxit):
+    """Root of ``F(t) = sin 2t + 2 s h sin(t - psi)`` in ``[lo, hi]`` (F(lo) <= 0 <= F(hi)) by
+    safeguarded Newton (rtsafe; the scalar form of ``magnetization._safe_newton``); returns the
+    root and the number of steps (``maxit + 1``: not converged)."""
+    x = min(max(x0, lo), hi)
+    step = hi - lo
+    for it in range(maxit):
+        F = math.sin(2.0 * x) + 2.0 * s * h * math.sin(x - psi)
+        dF = 2.0 * math.cos(2.0 * x) + 2.0 * s * h * math.cos(x - psi)
+        if F == 0.0:
+            return x, it + 1
+        if F < 0.0:
+            lo = x
+        else:
+            hi = x
+        xn = x - F / dF
+        if not ((xn >= lo) and (xn <= hi) and (abs(xn - x) <= 0.5 * step)):
+            xn = 0.5 * (lo + hi)
+        step = abs(xn - x)
+        x = xn
+        if step <= xtol or hi - lo <= xtol:
+            return x, it + 1
+    return x, maxit + 1
+
+
+def _sw_average_impl(hr, kappa, psi, w, tc, hsw, with_slope, maxit, out_m, out_dm, out_it):
+    """Random-axis average of the two-state equilibrium ``M/Ms`` (``out_m``) and its slope
+    ``d(M/Ms)/dhr`` (``out_dm``, if ``with_slope``) at reduced fields ``hr`` (>= 0) and barrier
+    parameters ``kappa`` (inf: T = 0), on the axes ``psi`` with weights ``w``; ``tc`` bounds
+    each axis' reversed minimum, ``hsw`` its switching field. ``out_it``: the most Newton steps
+    any root of the element took (> maxit: not converged). Each element is independent."""
+    for i in nb.prange(hr.shape[0]):
+        h = hr[i]
+        kap = kappa[i]
+        m = 0.0
+        dm = 0.0
+        worst = 0
+        for k in range(psi.shape[0]):
+            p = psi[k]
+            tp, it = sw_root(h, p, 1.0, 0.0, p, 0.5 * p, 1e-13, maxit)
+            worst = max(worst, it)
+            ex = h < hsw[k]
+            if ex:
+                phi, it = sw_root(h, p, -1.0, tc[k], 0.0, 0.5 * tc[k], 1e-13, maxit)
+                worst = max(worst, it)
+            else:
+                phi = 0.5 * tc[k]            # no reversed minimum: its population is 0
+            cp = math.cos(tp - p)
+            cm = -math.cos(phi - p)
+            sphi = math.sin(phi)
+            stp = math.sin(tp)
+            de = (sphi * sphi + 2.0 * h * math.cos(phi - p)) - (stp * stp - 2.0 * h * cp)
+            if not ex:
+                pp = 1.0
+            elif math.isinf(kap):
+                pp = 1.0 if de > 0.0 else 0.5
+            else:
+                beta = kap * de
+                e = math.exp(-abs(beta))
+                pp = 1.0 / (1.0 + e) if beta >= 0.0 else e / (1.0 + e)
+            m += w[k] * (pp * cp + (1.0 - pp) * cm)
+            if with_slope:
+                epp = 2.0 * math.cos(2.0 * tp) + 2.0 * h * cp
+                dcp = 2.0 * math.sin(tp - p) ** 2 / epp
+                dpp = 0.0
+                dcm = 0.0
+                if ex:
+                    epm = 2.0 * math.cos(2.0 * phi) - 2.0 * h * math.cos(phi - p)
+                    if epm > 0.0:
+                        dcm = 2.0 * math.sin(phi - p) ** 2 / epm
+                    if not math.isinf(kap):
+                        dpp = pp * (1.0 - pp) * kap * 2.0 * (cp - cm)
+                pm = 1.0 - pp
+                dm += w[k] * (pp * dcp + (pm * dcm if pm > 0.0 else 0.0) + (cp - cm) * dpp)
+        out_m[i] = m
+        out_dm[i] = dm
+        out_it[i] = worst
+
+
+sw_average = nb.njit(cache=True, parallel=True, error_model="numpy")(_sw_average_impl)

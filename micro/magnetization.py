@@ -53,6 +53,7 @@ from scipy.constants import mu_0 as MU0
 
 from micro.common.validate import (ConvergenceError, InputError, check_choice, check_finite, check_positive,
                         check_range)
+from micro import _kernels as K
 from micro.materials import FE, FE3O4, Constituent
 
 __all__ = ["MagnetizationLaw", "SaturatedLaw", "LinearLaw", "FrohlichKennellyLaw", "LangevinLaw",
@@ -640,37 +641,29 @@ def _sw_anhysteretic(hr, kappa, with_slope=False):
     Two-state thermal equilibrium between the two energy minima (valid for blocked particles,
     kappa >> 1, the regime where Stoner-Wohlfarth applies): populations ``p+- ~ exp(-kappa e+-)``;
     where only one minimum exists ``p+ = 1``. At ``kappa = inf`` the global minimum (p+ = 1 for
-    h > 0, 1/2 at h = 0): the energy-minimum anhysteretic, which jumps to Ms/2 at h = 0+."""
+    h > 0, 1/2 at h = 0): the energy-minimum anhysteretic, which jumps to Ms/2 at h = 0+.
+
+    Each element's minima (the roots :func:`_sw_stable` and :func:`_sw_reversed` find) are
+    solved by the same safeguarded Newton iteration in a numba kernel, parallel over elements:
+    the dipole solve calls this on every particle at every step, and a numpy version was
+    serial (results/bench/threads.md)."""
+    h, kap = np.broadcast_arrays(np.asarray(hr, dtype=float), np.asarray(kappa, dtype=float))
+    shape = h.shape
+    h = np.ascontiguousarray(h).ravel()
+    kap = np.ascontiguousarray(kap).ravel()
     psi, w = _axes()
-    h = np.asarray(hr, dtype=float)[..., None]
-    kap = np.asarray(kappa, dtype=float)[..., None]
-    tp = _sw_stable(h, psi)
-    phi, ex = _sw_reversed(h, psi)
-    cp = np.cos(tp - psi)
-    cm = -np.cos(phi - psi)
-    de = (np.sin(phi) ** 2 + 2 * h * np.cos(phi - psi)) - (np.sin(tp) ** 2 - 2 * h * cp)
-    with np.errstate(invalid="ignore", over="ignore"):
-        beta = np.where(np.isinf(kap), np.where(de > 0, np.inf, 0.0), kap * de)
-    pp = np.where(ex, _expit(beta), 1.0)
-    m = (w * (pp * cp + (1 - pp) * cm)).sum(axis=-1)
+    tc = -np.arctan(np.tan(psi) ** (1.0 / 3.0))
+    m, dm = np.empty_like(h), np.empty_like(h)
+    steps = np.empty(h.shape, dtype=np.int64)
+    maxit = 200
+    K.sw_average(h, kap, psi, w, tc, switching_field(psi), bool(with_slope), maxit,
+                        m, dm, steps)
+    if steps.size and steps.max() > maxit:
+        raise ConvergenceError("intrinsic magnetization solve did not converge in "
+                               f"{maxit} safeguarded Newton steps")
     if not with_slope:
-        return m
-    epp = 2 * np.cos(2 * tp) + 2 * h * cp
-    epm = 2 * np.cos(2 * phi) - 2 * h * np.cos(phi - psi)
-    dcp = 2 * np.sin(tp - psi) ** 2 / epp
-    with np.errstate(divide="ignore", invalid="ignore"):
-        dcm = np.where(ex & (epm > 0), 2 * np.sin(phi - psi) ** 2 / epm, 0.0)
-        dbeta = np.where(np.isinf(kap), 0.0, kap * 2 * (cp - cm))
-    dpp = np.where(ex, pp * (1 - pp) * dbeta, 0.0)
-    pm = 1 - pp
-    dm = (w * (pp * dcp + np.where(pm > 0, pm * dcm, 0.0) + (cp - cm) * dpp)).sum(axis=-1)
-    return m, dm
-
-
-def _expit(x):
-    with np.errstate(over="ignore"):
-        return np.where(x >= 0, 1.0 / (1.0 + np.exp(-np.abs(x))),
-                        np.exp(-np.abs(x)) / (1.0 + np.exp(-np.abs(x))))
+        return m.reshape(shape)
+    return m.reshape(shape), dm.reshape(shape)
 
 
 def _segments(a):

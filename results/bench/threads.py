@@ -43,7 +43,7 @@ QUICK = {32: 25}
 #: particles of the dipole-solve RVE (quick: fewer)
 DIPOLES, DIPOLES_QUICK = 100_000, 5_000
 #: pairs of dipole runs (1, 2 threads) in turn; the median of each kept
-DIPOLE_REPEATS = 3
+DIPOLE_REPEATS = 5
 
 
 def _machine() -> dict:
