@@ -12,7 +12,8 @@ last digits move with a CPU's vector units; a README number rounded coarser than
 fails. The batch is deterministic whatever the number of workers.
 
 The commands run in ``tmp_path`` (with a copy of examples/your_composite.toml), each in its own
-process as a user would run them: about 1 min on 2 free cores, ~3 min on a heavily loaded one.
+process as a user would run them: about 2 min on 2 free cores (the beam 1.5 min of it), ~3.5 min
+on a heavily loaded one.
 """
 from __future__ import annotations
 

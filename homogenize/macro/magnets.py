@@ -356,22 +356,48 @@ def _call_M(M_of_H, H):
 
 
 def _internal_field(M_of_H, Ha, N, n_iter=200):
-    """Solve ``h + N M(h) = Ha`` per point by bisection on ``[0, Ha]`` [A/m]."""
+    """Solve ``h + N M(h) = Ha`` per point for the internal field ``h`` in ``[0, Ha]`` [A/m].
+
+    ``g(h) = h + N M(h) - Ha`` has ``g(0) <= 0 <= g(Ha) = N M(Ha)``. A bracketing secant step
+    (regula falsi with the Illinois modification: the end kept twice in a row has its ``g``
+    halved; Dowell and Jarratt, BIT 11, 1971) replaced by bisection when it leaves the bracket
+    or when the bracket has not halved in two steps, and kept ``2 eps Ha`` inside the bracket,
+    so it never needs more steps than twice bisection's, and about 5-10 on a smooth or piecewise-linear (table) ``M``, where bisection
+    took 50. Ends when the bracket is narrower than ``4 eps Ha`` or ``g`` is exactly 0;
+    returns the root found, else the bracket's midpoint."""
     if N == 0.0:
         return Ha.copy()
     lo, hi = np.zeros_like(Ha), Ha.copy()
-    g0 = N * _call_M(M_of_H, lo) - Ha
-    if np.any(g0 > 0):
+    glo = N * _call_M(M_of_H, lo) - Ha
+    if np.any(glo > 0):
         raise InputError("M_of_H(0) must be 0 A/m (no remanence) when demag_factor > 0")
-    for _ in range(n_iter):
-        mid = 0.5 * (lo + hi)
-        g = mid + N * _call_M(M_of_H, mid) - Ha
-        below = g < 0
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-        if np.all(hi - lo <= 4 * np.finfo(float).eps * np.maximum(Ha, 1e-300)):
+    ghi = N * _call_M(M_of_H, hi)
+    tol = 4 * np.finfo(float).eps * np.maximum(Ha, 1e-300)
+    root = np.where(glo == 0, lo, np.where(ghi == 0, hi, np.nan))
+    kept = np.zeros(Ha.shape, dtype=np.int8)        # end kept in the last step: -1 lo, +1 hi
+    ref = hi - lo                                   # the bracket's width two steps back
+    for it in range(n_iter):
+        act = np.isnan(root) & (hi - lo > tol)
+        if not act.any():
             break
-    return 0.5 * (lo + hi)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            x = lo - glo * ((hi - lo) / (ghi - glo))
+        bisect = ~np.isfinite(x)
+        if it % 2 == 1:
+            bisect |= (hi - lo) > 0.5 * ref
+            ref = hi - lo
+        # at least tol/2 inside the bracket: a secant point on the root's round-off lands on
+        # an end, and the next step then closes the bracket from the other side
+        x = np.where(bisect | ~act, 0.5 * (lo + hi), np.clip(x, lo + 0.5 * tol, hi - 0.5 * tol))
+        g = x + N * _call_M(M_of_H, x) - Ha
+        below, above = act & (g < 0), act & (g > 0)
+        root = np.where(act & (g == 0), x, root)
+        ghi = np.where(below & (kept == 1), 0.5 * ghi, ghi)
+        glo = np.where(above & (kept == -1), 0.5 * glo, glo)
+        lo, glo = np.where(below, x, lo), np.where(below, g, glo)
+        hi, ghi = np.where(above, x, hi), np.where(above, g, ghi)
+        kept = np.where(below, 1, np.where(above, -1, kept)).astype(np.int8)
+    return np.where(np.isnan(root), 0.5 * (lo + hi), root)
 
 
 @dataclass(frozen=True, eq=False)
