@@ -313,7 +313,10 @@ def markdown(rows: list, dip: dict | None = None, prof: dict | None = None,
         f"{r['voxels']}^3: " + ", ".join(f"{s} {100 * v:.0f} %"
                                          for s, v in r["share_1_thread"].items())
         for r in rows), ""]
-    lines += [" ".join(dict.fromkeys(_measured_on(r) for r in rows)), ""] if rows else []
+    where = list(dict.fromkeys(_measured_on(r) for r in rows))
+    if len(where) > 1:            # each grid's run has its own start (load average)
+        where = [f"{r['voxels']}^3: {_measured_on(r)}" for r in rows]
+    lines += [" ".join(where), ""] if rows else []
     if dip:
         lines += ["## The dipole solve (particle-mesh Ewald)", "",
                   "`micro.dipoles.solve(rve, 0.1 T, 1.78 T/m)` (self-consistent moments and "
