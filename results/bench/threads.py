@@ -18,7 +18,8 @@ Run:  .venv/bin/python results/bench/threads.py              (64^3 and 128^3, ~1
       .venv/bin/python results/bench/threads.py --only dipoles   (re-measure one part, keep
                                                                   the others from threads.json)
       .venv/bin/python results/bench/threads.py --only profile   (where the cell solve's time
-                     goes at 64^3 on 1 and 2 threads: cProfile's own time per kernel, ~1 min)
+                     goes at 64^3 and 128^3 on 1 and 2 threads: cProfile's own time per
+                     kernel, ~20 min on a slow machine)
       .venv/bin/python results/bench/threads.py --only dipole-profile   (the same for the
                      dipole solve at N = 1e5, and its serial share, ~3 min)
 Writes results/bench/threads.json and threads.md (--quick: a temporary directory).
@@ -291,8 +292,11 @@ def _function_table(prof: dict) -> list:
     return lines + ["", _measured_on(prof), ""]
 
 
-def markdown(rows: list, dip: dict | None = None, prof: dict | None = None,
+def markdown(rows: list, dip: dict | None = None, prof: list | dict | None = None,
              dprof: dict | None = None) -> str:
+    """threads.md from the parts; ``prof``: the cell profiles, one per grid (a single dict:
+    threads.json before the profile covered every grid)."""
+    prof = [prof] if isinstance(prof, dict) else list(prof or [])
     lines = ["# The cell FEM on 1 and 2 threads (`results/bench/threads.py`)", "",
              "`mapsim homogenize RVE --voxels N --B 0.1 --gradB 1.78` (7 load cases, default "
              "solver), NUMBA_NUM_THREADS=1 then 2, wall time and peak RSS by `/usr/bin/time -v`; "
@@ -335,19 +339,19 @@ def markdown(rows: list, dip: dict | None = None, prof: dict | None = None,
                       "solve of each thread count in the table; the speed-up of every pair: "
                       + ", ".join(f"{v:.2f}x" for v in dip["speedup_solve_per_pair"]) + ".", ""]
         lines += [_measured_on(dip), ""]
-    if prof:
-        s1, s2 = prof["stages_1_s"], prof["stages_2_s"]
-        lines += [f"## Where the cell solve's time goes ({prof['voxels']}^3, "
-                  f"{prof['n_particles']} particles, 7 load cases)", "",
+    for pr in prof:
+        s1, s2 = pr["stages_1_s"], pr["stages_2_s"]
+        lines += [f"## Where the cell solve's time goes ({pr['voxels']}^3, "
+                  f"{pr['n_particles']} particles, 7 load cases)", "",
                   "`results/bench/threads.py --only profile`: cProfile, each function's own "
                   f"time. Solve {s1['solve']:.1f} s on 1 thread, {s2['solve']:.1f} s on 2 "
                   f"({s1['solve'] / s2['solve']:.2f}x); whole homogenization "
                   f"{s1['total']:.1f} / {s2['total']:.1f} s "
                   f"({s1['total'] / s2['total']:.2f}x). The matrix-free stencil kernel "
-                  f"(smoothing, residuals, products) {prof['stencil_kernel_speedup']:.2f}x; "
-                  f"the rest of the solve {prof['rest_of_solve_speedup']:.2f}x.", "",
+                  f"(smoothing, residuals, products) {pr['stencil_kernel_speedup']:.2f}x; "
+                  f"the rest of the solve {pr['rest_of_solve_speedup']:.2f}x.", "",
                   ]
-        lines += _function_table(prof)
+        lines += _function_table(pr)
     if dprof:
         s1, s2 = dprof["solve_1_s"], dprof["solve_2_s"]
         ser = dprof["serial_share_of_1_thread_solve"]
@@ -381,8 +385,8 @@ def main(argv=None) -> int:
         dip = (measure_dipoles(DIPOLES_QUICK if a.quick else DIPOLES, Path(work),
                                repeats=1 if a.quick else DIPOLE_REPEATS)
                if a.only in (None, "dipoles") else old.get("dipoles"))
-        n_prof, p_prof = next(iter((QUICK if a.quick else GRIDS).items()))
-        prof = (measure_profile(n_prof, p_prof, Path(work)) if a.only in (None, "profile")
+        prof = ([measure_profile(n, p, Path(work)) for n, p in
+                 (QUICK if a.quick else GRIDS).items()] if a.only in (None, "profile")
                 else old.get("profile"))
         dprof = (measure_dipole_profile(DIPOLES_QUICK if a.quick else DIPOLES, Path(work),
                                         repeats=1 if a.quick else DIPOLE_REPEATS)
