@@ -13,7 +13,8 @@ beforehand by ``mapsim rve --out``, not timed), the self-consistent moments and 
 particle-mesh Ewald, timed in its process after a warm-up; the whole process under
 ``/usr/bin/time -v``; the results of both thread counts compared bit for bit.
 
-Run:  .venv/bin/python results/bench/threads.py              (64^3 and 128^3, ~12 min)
+Run:  .venv/bin/python results/bench/threads.py              (64^3 and 128^3, 3 pairs each,
+                                                              ~1 h on a slow machine)
       .venv/bin/python results/bench/threads.py --quick      (32^3 only, ~1 min)
       .venv/bin/python results/bench/threads.py --only dipoles   (re-measure one part, keep
                                                                   the others from threads.json)
@@ -45,6 +46,9 @@ QUICK = {32: 25}
 DIPOLES, DIPOLES_QUICK = 100_000, 5_000
 #: pairs of dipole runs (1, 2 threads) in turn; the median of each kept
 DIPOLE_REPEATS = 5
+#: pairs of cell runs per grid in turn (a 128^3 pair takes ~16 min on a slow 2-core machine;
+#: single pairs there swing by ~20 %)
+CELL_REPEATS = 3
 
 
 def _machine() -> dict:
@@ -108,7 +112,10 @@ def _draw_and_run(n_particles: int, name: str, argv, work: Path, read,
     return {**med, "pairs": pairs}
 
 
-def measure(grids: dict, work: Path) -> list:
+def measure(grids: dict, work: Path, repeats: int = 1) -> list:
+    """Each grid's homogenization on 1 and 2 threads, ``repeats`` pairs in turn: the run of
+    median solve time of each thread count in the row, every pair's solve and wall speed-up
+    listed."""
     rows = []
     for n, n_particles in grids.items():
         machine = _machine()
@@ -116,10 +123,16 @@ def measure(grids: dict, work: Path) -> list:
             n_particles, f"h{n}",
             lambda rve: [MAPSIM, "homogenize", str(rve), "--voxels", str(n), "--B", "0.1",
                          "--gradB", "1.78", "--quiet"], work,
-            lambda d: {"stages_s": d["timings_s"], "solver": d["settings"]["solver"],
-                       "E_eff_Pa": d["E_eff_Pa"], "iterations": d["iterations"]})
+            lambda d: {"stages_s": d["timings_s"], "solve_s": d["timings_s"]["solve"],
+                       "solver": d["settings"]["solver"],
+                       "E_eff_Pa": d["E_eff_Pa"], "iterations": d["iterations"]},
+            repeats=repeats)
         one, two = runs[1], runs[2]
+        pairs = runs.get("pairs", [runs])
         rows.append({
+            "repeats": len(pairs),
+            "speedup_solve_per_pair": [p[1]["solve_s"] / p[2]["solve_s"] for p in pairs],
+            "speedup_wall_per_pair": [p[1]["wall_s"] / p[2]["wall_s"] for p in pairs],
             "voxels": n, "n_particles": n_particles, "solver": one["solver"],
             "machine": machine, "threads_1": one, "threads_2": two,
             "speedup_wall": one["wall_s"] / two["wall_s"],
@@ -127,7 +140,8 @@ def measure(grids: dict, work: Path) -> list:
                                  for s in one["stages_s"] if two["stages_s"].get(s)},
             "share_1_thread": {s: one["stages_s"][s] / one["wall_s"] for s in one["stages_s"]
                                if s != "total"},
-            "E_eff_equal": one["E_eff_Pa"] == two["E_eff_Pa"],
+            "E_eff_equal": all(p[1]["E_eff_Pa"] == p[2]["E_eff_Pa"] == one["E_eff_Pa"]
+                               for p in pairs),
             "peak_bytes_per_voxel_2_threads": two["peak_rss_GB"] * 1e9 / n ** 3})
     return rows
 
@@ -317,6 +331,14 @@ def markdown(rows: list, dip: dict | None = None, prof: list | dict | None = Non
         f"{r['voxels']}^3: " + ", ".join(f"{s} {100 * v:.0f} %"
                                          for s, v in r["share_1_thread"].items())
         for r in rows), ""]
+    many = [r for r in rows if r.get("repeats", 1) > 1]
+    if many:
+        lines += ["Each grid's pair run " + " and ".join(
+            sorted({f"{r['repeats']} times" for r in many})) + " in turn (1, 2, 1, 2, ...), "
+            "the run of median solve time of each thread count in the table; the solve's "
+            "speed-up of every pair: " + "; ".join(
+                f"{r['voxels']}^3: " + ", ".join(f"{v:.2f}x" for v in r["speedup_solve_per_pair"])
+                for r in many) + ".", ""]
     where = list(dict.fromkeys(_measured_on(r) for r in rows))
     if len(where) > 1:            # each grid's run has its own start (load average)
         where = [f"{r['voxels']}^3: {_measured_on(r)}" for r in rows]
@@ -380,7 +402,8 @@ def main(argv=None) -> int:
     old = (json.loads((HERE / "threads.json").read_text())
            if a.only and (HERE / "threads.json").exists() else {})
     with tempfile.TemporaryDirectory() as work:
-        rows = (measure(QUICK if a.quick else GRIDS, Path(work)) if a.only in (None, "cells")
+        rows = (measure(QUICK if a.quick else GRIDS, Path(work),
+                        repeats=1 if a.quick else CELL_REPEATS) if a.only in (None, "cells")
                 else old.get("rows", []))
         dip = (measure_dipoles(DIPOLES_QUICK if a.quick else DIPOLES, Path(work),
                                repeats=1 if a.quick else DIPOLE_REPEATS)
