@@ -634,6 +634,15 @@ def _axes(n=_GL_AXES):
     return np.arccos(u), 0.5 * w
 
 
+@functools.lru_cache(maxsize=None)
+def _axis_table(n=_GL_AXES):
+    """The fixed easy axes of the random-axis average, computed once: angles ``psi``, weights,
+    the bound ``-atan(tan(psi)^(1/3))`` of each reversed minimum's bracket and the switching
+    fields ``h_sw(psi)``. Private: the kernel only reads them."""
+    psi, w = _axes(n)
+    return psi, w, -np.arctan(np.tan(psi) ** (1.0 / 3.0)), switching_field(psi)
+
+
 def _sw_anhysteretic(hr, kappa, with_slope=False):
     """Random-axis average of the equilibrium ``M/Ms`` at reduced field ``hr`` (>= 0) and
     barrier parameter ``kappa = K V / (k_B T)`` (inf: T = 0), and ``d(M/Ms)/dhr``.
@@ -651,13 +660,11 @@ def _sw_anhysteretic(hr, kappa, with_slope=False):
     shape = h.shape
     h = np.ascontiguousarray(h).ravel()
     kap = np.ascontiguousarray(kap).ravel()
-    psi, w = _axes()
-    tc = -np.arctan(np.tan(psi) ** (1.0 / 3.0))
+    psi, w, tc, h_sw = _axis_table()
     m, dm = np.empty_like(h), np.empty_like(h)
     steps = np.empty(h.shape, dtype=np.int64)
     maxit = 200
-    K.sw_average(h, kap, psi, w, tc, switching_field(psi), bool(with_slope), maxit,
-                        m, dm, steps)
+    K.sw_average(h, kap, psi, w, tc, h_sw, bool(with_slope), maxit, m, dm, steps)
     if steps.size and steps.max() > maxit:
         raise ConvergenceError("intrinsic magnetization solve did not converge in "
                                f"{maxit} safeguarded Newton steps")
