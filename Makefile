@@ -9,9 +9,14 @@ LOCK   := .ci/constraints.txt
 LATEST := .venv-latest
 # pytest workers (pytest-xdist): both cores, numba and BLAS on one thread in each worker
 # (tests/conftest.py). Fresh clone, new venv, cold numba cache, 2 cores (AMD EPYC, session 25):
-# two workers 16.5 min; with two threads in each worker it had taken 25 min.
+# two workers 16.5 min (17.6-19.4 min in session 26); with two threads in each worker it had
+# taken 25 min.
 # PYTEST_WORKERS=0: one process.
 PYTEST_WORKERS ?= 2
+# each test module whole on one worker, its fixtures built once (the default split had built
+# the heaviest module fixtures on both workers), the longest modules first (tests/conftest.py:
+# LONG_MODULES); the 15 slowest tests listed at the end
+PYTEST_FLAGS := -q -n $(PYTEST_WORKERS) --dist loadscope --no-loadscope-reorder --durations=15
 
 .PHONY: run test venv bench clean peers lock latest test-latest
 
@@ -32,7 +37,7 @@ run: $(STAMP)
 	$(RUNLOG) $(BIN)/mapsim chain --out results/chain
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS)
+	$(BIN)/python -m pytest $(PYTEST_FLAGS)
 
 bench: $(STAMP)
 	$(BIN)/mapsim bench --json results/bench/bench.json
@@ -55,7 +60,7 @@ latest: $(LATEST)/.installed
 
 # The suite against the newest allowed versions (what a user without the lock gets today).
 test-latest: $(LATEST)/.installed
-	$(LATEST)/bin/python -m pytest -q -n $(PYTEST_WORKERS)
+	$(LATEST)/bin/python -m pytest $(PYTEST_FLAGS)
 
 # Refresh the lock from the newest allowed versions; run `make test-latest` first.
 lock: $(LATEST)/.installed
