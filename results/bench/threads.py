@@ -13,11 +13,12 @@ beforehand by ``mapsim rve --out``, not timed), the self-consistent moments and 
 particle-mesh Ewald, timed in its process after a warm-up; the whole process under
 ``/usr/bin/time -v``; the results of both thread counts compared bit for bit.
 
-Run:  .venv/bin/python results/bench/threads.py              (64^3 and 128^3, 3 pairs each,
-                                                              ~1 h on a slow machine)
+Run:  .venv/bin/python results/bench/threads.py              (every part below, the cells at
+                                           64^3 and 128^3 in 3 pairs each; ~1.5 h on a slow machine)
       .venv/bin/python results/bench/threads.py --quick      (32^3 only, ~1 min)
-      .venv/bin/python results/bench/threads.py --only dipoles   (re-measure one part, keep
-                                                                  the others from threads.json)
+      .venv/bin/python results/bench/threads.py --only cells     (~1 h; re-measure one part,
+      .venv/bin/python results/bench/threads.py --only dipoles   (~8 min; keep the others
+                                                                  from threads.json)
       .venv/bin/python results/bench/threads.py --only profile   (where the cell solve's time
                      goes at 64^3 and 128^3 on 1 and 2 threads: cProfile's own time per
                      kernel, ~20 min on a slow machine)
