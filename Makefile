@@ -9,8 +9,8 @@ LOCK   := .ci/constraints.txt
 LATEST := .venv-latest
 # pytest workers (pytest-xdist): both cores, numba and BLAS on one thread in each worker
 # (tests/conftest.py). Fresh clone, new venv, cold numba cache, 2 cores (AMD EPYC, session 25):
-# two workers 16.5 min (17.6-19.4 min in session 26); with two threads in each worker it had
-# taken 25 min.
+# two workers 16.5 min (17.6-19.4 min in session 26, 17.4 min with whole modules per worker in
+# session 27); with two threads in each worker it had taken 25 min.
 # PYTEST_WORKERS=0: one process.
 PYTEST_WORKERS ?= 2
 # each test module whole on one worker, its fixtures built once (the default split had built

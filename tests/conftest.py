@@ -40,15 +40,8 @@ def pytest_collection_modifyitems(config, items):
     hands whole modules to the workers (``--dist loadscope``: a module's fixtures are built
     once, not once per worker), in this order (``--no-loadscope-reorder``): a long module
     handed out last would leave the other worker idle to the end."""
-    rank = {m: i for i, m in enumerate(LONG_MODULES)}
-
-    def key(item):
-        try:
-            return rank.get(Path(str(item.path)).resolve().relative_to(ROOT).as_posix(),
-                            len(rank))
-        except ValueError:                   # a test file outside the repository
-            return len(rank)
-    items.sort(key=key)                      # stable: each module's items stay in order
+    rank = {ROOT / m: i for i, m in enumerate(LONG_MODULES)}
+    items.sort(key=lambda item: rank.get(Path(item.path).resolve(), len(rank)))   # stable
 
 
 def _load_script(path: Path):

@@ -16,9 +16,10 @@ particle-mesh Ewald, timed in its process after a warm-up; the whole process und
 Run:  .venv/bin/python results/bench/threads.py              (every part below, the cells at
                                            64^3 and 128^3 in 3 pairs each; ~1.5 h on a slow machine)
       .venv/bin/python results/bench/threads.py --quick      (32^3 only, ~1 min)
-      .venv/bin/python results/bench/threads.py --only cells     (~1 h; re-measure one part,
-      .venv/bin/python results/bench/threads.py --only dipoles   (~8 min; keep the others
-                                                                  from threads.json)
+      .venv/bin/python results/bench/threads.py --only cells     (~1 h: re-measure one part,
+                                                                  keep the others from
+                                                                  threads.json)
+      .venv/bin/python results/bench/threads.py --only dipoles   (the same, ~8 min)
       .venv/bin/python results/bench/threads.py --only profile   (where the cell solve's time
                      goes at 64^3 and 128^3 on 1 and 2 threads: cProfile's own time per
                      kernel, ~20 min on a slow machine)
@@ -90,10 +91,9 @@ def _run(argv, env_threads: int, cwd: Path) -> dict:
 def _draw_and_run(n_particles: int, name: str, argv, work: Path, read,
                   repeats: int = 1) -> dict:
     """Draw the RVE (phi 0.035, seed 1; not timed), then run ``argv + [RVE, "--json", OUT]``
-    on 1 and 2 threads: {1: run, 2: run}, each ``_run``'s figures plus ``read(json)``.
-    ``repeats`` > 1: the pair that many times in turn (1, 2, 1, 2, ...); each thread count's
-    run is then the one of median solve time (wall time without one), and ``runs["pairs"]``
-    lists every pair."""
+    on 1 and 2 threads, the pair ``repeats`` times in turn (1, 2, 1, 2, ...): {1: run, 2: run}
+    of median solve time (wall time without one), each ``_run``'s figures plus ``read(json)``;
+    ``"pairs"`` every pair, ``"speedup_solve_per_pair"`` and ``"speedup_wall_per_pair"``."""
     rve = work / f"{name}.h5"
     subprocess.run([MAPSIM, "rve", "--phi", "0.035", "--n", str(n_particles), "--seed", "1",
                     "--out", str(rve)], check=True, capture_output=True)
@@ -105,12 +105,13 @@ def _draw_and_run(n_particles: int, name: str, argv, work: Path, read,
             t = _run([*argv(rve), "--json", str(out)], k, work)
             runs[k] = {**t, **read(json.loads(out.read_text()))}
         pairs.append(runs)
-    if len(pairs) == 1:
-        return pairs[0]
     med = {k: sorted((p[k] for p in pairs),
                      key=lambda r: r.get("solve_s", r["wall_s"]))[len(pairs) // 2]
            for k in (1, 2)}
-    return {**med, "pairs": pairs}
+    return {**med, "pairs": pairs,
+            "speedup_solve_per_pair": [p[1]["solve_s"] / p[2]["solve_s"] for p in pairs
+                                       if "solve_s" in p[1]],
+            "speedup_wall_per_pair": [p[1]["wall_s"] / p[2]["wall_s"] for p in pairs]}
 
 
 def measure(grids: dict, work: Path, repeats: int = 1) -> list:
@@ -128,12 +129,11 @@ def measure(grids: dict, work: Path, repeats: int = 1) -> list:
                        "solver": d["settings"]["solver"],
                        "E_eff_Pa": d["E_eff_Pa"], "iterations": d["iterations"]},
             repeats=repeats)
-        one, two = runs[1], runs[2]
-        pairs = runs.get("pairs", [runs])
+        one, two, pairs = runs[1], runs[2], runs["pairs"]
         rows.append({
             "repeats": len(pairs),
-            "speedup_solve_per_pair": [p[1]["solve_s"] / p[2]["solve_s"] for p in pairs],
-            "speedup_wall_per_pair": [p[1]["wall_s"] / p[2]["wall_s"] for p in pairs],
+            "speedup_solve_per_pair": runs["speedup_solve_per_pair"],
+            "speedup_wall_per_pair": runs["speedup_wall_per_pair"],
             "voxels": n, "n_particles": n_particles, "solver": one["solver"],
             "machine": machine, "threads_1": one, "threads_2": two,
             "speedup_wall": one["wall_s"] / two["wall_s"],
@@ -176,14 +176,13 @@ def measure_dipoles(n_particles: int, work: Path, repeats: int = 1) -> dict:
     runs = _draw_and_run(n_particles, f"dip{n_particles}",
                          lambda rve: [sys.executable, "-c", DIPOLE_CODE, str(rve)], work,
                          lambda d: d, repeats=repeats)
-    one, two = runs[1], runs[2]
+    one, two, pairs = runs[1], runs[2], runs["pairs"]
     keys = ("M_eff_A_per_m", "f_eff_N_m3", "moments_sum", "forces_sum", "iterations")
-    pairs = runs.get("pairs", [runs])
     return {"n_particles": n_particles, "machine": machine, "threads_1": one, "threads_2": two,
             "speedup_solve": one["solve_s"] / two["solve_s"],
             "speedup_wall": one["wall_s"] / two["wall_s"],
             "repeats": len(pairs),
-            "speedup_solve_per_pair": [p[1]["solve_s"] / p[2]["solve_s"] for p in pairs],
+            "speedup_solve_per_pair": runs["speedup_solve_per_pair"],
             "results_equal": all(p[1][q] == p[2][q] == one[q] for p in pairs for q in keys)}
 
 
@@ -334,8 +333,7 @@ def markdown(rows: list, dip: dict | None = None, prof: list | dict | None = Non
         for r in rows), ""]
     many = [r for r in rows if r.get("repeats", 1) > 1]
     if many:
-        lines += ["Each grid's pair run " + " and ".join(
-            sorted({f"{r['repeats']} times" for r in many})) + " in turn (1, 2, 1, 2, ...), "
+        lines += [f"Each grid's pair run {many[0]['repeats']} times in turn (1, 2, 1, 2, ...), "
             "the run of median solve time of each thread count in the table; the solve's "
             "speed-up of every pair: " + "; ".join(
                 f"{r['voxels']}^3: " + ", ".join(f"{v:.2f}x" for v in r["speedup_solve_per_pair"])
